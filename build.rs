@@ -1,0 +1,2 @@
+//! Generates Rust for every molecule in `molecules/`.
+fn main() {}

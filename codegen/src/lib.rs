@@ -1,0 +1,1 @@
+//! rovib's build-time code generator.

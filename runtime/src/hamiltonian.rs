@@ -1,0 +1,1 @@
+//! The seed's Hamiltonian: W, the G matrices, H and Hamilton's equations.

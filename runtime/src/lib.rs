@@ -1,0 +1,18 @@
+//! rovib's run-time numerics: what the generated molecule code plugs into.
+//!
+//! The pipeline at run time reads, in module order:
+//! [`molecule`] (the trait generated code implements) → [`hamiltonian`] (W, the G matrices,
+//! H and Hamilton's equations) → [`integrate`] (ODE methods).
+//!
+//! # Units
+//!
+//! Atomic units throughout: lengths in bohr, angles in radians, masses in electron masses,
+//! energies in hartree, time in ħ/E_h (≈ 0.024 188 fs). See [`units`] for the conversions.
+
+pub mod hamiltonian;
+pub mod integrate;
+pub mod molecule;
+pub mod units;
+
+pub use molecule::{Atom, Coordinate, KineticMatrices, Molecule};
+pub use nalgebra;

@@ -1,0 +1,131 @@
+//! The contract between generated code and the runtime: the [`Molecule`] trait.
+//!
+//! `rovib-codegen` turns each `molecules/NAME.toml` into a unit struct that implements
+//! [`Molecule<N, NA>`] with `N` internal coordinates and `NA` atoms. Everything else in the
+//! runtime (G matrices, Hamilton's equations, integrators, frames) is generic over this trait,
+//! so a hand-written implementation works just as well as a generated one.
+//!
+//! # Conventions
+//!
+//! * Atomic units: q in bohr or radians, positions in bohr, masses in electron masses,
+//!   energies in hartree.
+//! * Positions are body-frame Cartesian positions `R_i(q)` with the centre of mass at the origin:
+//!   `Σ m_i R_i = 0` for every q. Column `i` of a `3 × NA` matrix is atom `i`.
+//! * The kinetic matrices follow `shared/seed/hamiltonian.md`, eq. (3):
+//!   `a_jk = Σ m_i ∂R_i/∂q_j · ∂R_i/∂q_k`, `A_jk = Σ m_i [R_i × ∂R_i/∂q_k]_j`,
+//!   `I = Σ m_i (|R_i|² 1 − R_i R_iᵀ)`, so that the kinetic energy is
+//!   `T = ½ (ω, q̇)ᵀ [[I, A], [Aᵀ, a]] (ω, q̇)` with ω the body-frame angular velocity.
+//! * Every method overwrites its outputs completely; callers need not clear them.
+//! * Value and derivative entry points are separate so a caller pays only for what it uses.
+
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+
+use crate::units::CoordinateUnit;
+
+/// One atom of a molecule.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Atom {
+    /// The label from the definition file (unique within the molecule), e.g. `"H1"`.
+    pub label: &'static str,
+    /// The chemical element symbol, e.g. `"H"`.
+    pub element: &'static str,
+    /// The mass in daltons.
+    pub mass_da: f64,
+    /// The mass in electron masses (atomic units), used by all numerics.
+    pub mass: f64,
+}
+
+/// One internal coordinate of a molecule.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Coordinate {
+    /// The name from the definition file, e.g. `"r1"`.
+    pub name: &'static str,
+    /// The unit the definition file writes this coordinate in. Values passed to and returned by
+    /// the runtime are always in the matching atomic unit (bohr or rad).
+    pub unit: CoordinateUnit,
+    /// The reference geometry from the definition file, in atomic units, if it gave one.
+    pub reference: Option<f64>,
+}
+
+/// The kinetic matrices `a` (n × n), `A` (3 × n) and `I` (3 × 3) of the seed's eq. (3), or one
+/// q-derivative of all three.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct KineticMatrices<const N: usize> {
+    /// The vibrational kinetic matrix `a` (symmetric).
+    pub a: SMatrix<f64, N, N>,
+    /// The Coriolis matrix `A`.
+    pub coriolis: SMatrix<f64, 3, N>,
+    /// The inertia tensor `I` (symmetric).
+    pub inertia: Matrix3<f64>,
+}
+
+impl<const N: usize> Default for KineticMatrices<N> {
+    fn default() -> Self {
+        Self { a: SMatrix::zeros(), coriolis: SMatrix::zeros(), inertia: Matrix3::zeros() }
+    }
+}
+
+/// A molecule: atoms, internal coordinates, body-frame positions, kinetic matrices and
+/// potential, with `N` internal coordinates and `NA` atoms.
+///
+/// Implemented by the types that `rovib-codegen` generates from `molecules/*.toml`.
+pub trait Molecule<const N: usize, const NA: usize> {
+    /// The molecule's name, as in its definition file.
+    fn name(&self) -> &'static str;
+
+    /// The definition file this molecule was generated from, relative to the workspace root.
+    fn source(&self) -> &'static str;
+
+    /// The atoms, in definition order.
+    fn atoms(&self) -> [Atom; NA];
+
+    /// The internal coordinates, in definition order (the order of q and p).
+    fn coordinates(&self) -> [Coordinate; N];
+
+    /// Body-frame positions `R_i(q)` (column `i` is atom `i`), centre of mass at the origin.
+    fn positions(&self, q: &SVector<f64, N>, r: &mut SMatrix<f64, 3, NA>);
+
+    /// `∂R_i/∂q_k`: element `k` of `dr` is the 3 × NA matrix of derivatives along `q_k`.
+    fn positions_jacobian(&self, q: &SVector<f64, N>, dr: &mut [SMatrix<f64, 3, NA>; N]);
+
+    /// The kinetic matrices `a`, `A`, `I` at `q`.
+    fn kinetic(&self, q: &SVector<f64, N>, k: &mut KineticMatrices<N>);
+
+    /// Their q-derivatives: element `k` of `dk` holds `∂a/∂q_k`, `∂A/∂q_k`, `∂I/∂q_k`.
+    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]);
+
+    /// The gradient in q of the kinetic energy `T = ½ Σ m_i |ω × R_i + Σ_j ∂R_i/∂q_j q̇_j|²`
+    /// at fixed body-frame angular velocity `omega` and fixed `qdot`; returns `T` as well.
+    ///
+    /// This equals `½ vᵀ (∂M/∂q_k) v` with `v = (ω, q̇)` and `M = [[I, A], [Aᵀ, a]]`, computed
+    /// directly from the positions and their first and second derivatives.
+    fn kinetic_energy_gradient(
+        &self,
+        q: &SVector<f64, N>,
+        omega: &Vector3<f64>,
+        qdot: &SVector<f64, N>,
+        grad: &mut SVector<f64, N>,
+    ) -> f64;
+
+    /// The potential energy `U(q)` in hartree.
+    fn potential(&self, q: &SVector<f64, N>) -> f64;
+
+    /// `∂U/∂q` into `grad`; returns `U(q)` as well.
+    fn potential_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64;
+
+    /// The reference geometry in atomic units, or `None` if the definition gave none for some
+    /// coordinate.
+    fn reference_geometry(&self) -> Option<SVector<f64, N>> {
+        let coords = self.coordinates();
+        let mut q = SVector::zeros();
+        for (k, c) in coords.iter().enumerate() {
+            q[k] = c.reference?;
+        }
+        Some(q)
+    }
+
+    /// The atomic masses in electron masses, in atom order.
+    fn masses(&self) -> [f64; NA] {
+        self.atoms().map(|a| a.mass)
+    }
+}

@@ -1,0 +1,2 @@
+//! The `rovib` command line.
+fn main() {}
