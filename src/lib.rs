@@ -1,2 +1,10 @@
 //! rovib: classical rotation-vibration dynamics of polyatomic molecules.
+//!
+//! A molecule is defined in `molecules/NAME.toml` (atoms, internal coordinates, body-frame
+//! positions as expressions, potential); `cargo build` generates straight-line Rust for its
+//! kinetic matrices and their derivatives ([`molecules`]), and the [`runtime`] turns them into
+//! Hamilton's equations and trajectories.
+
+pub mod molecules;
+
 pub use rovib_runtime as runtime;

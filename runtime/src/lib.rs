@@ -14,5 +14,6 @@ pub mod integrate;
 pub mod molecule;
 pub mod units;
 
-pub use molecule::{Atom, Coordinate, KineticMatrices, Molecule};
+pub use hamiltonian::{HamiltonianError, HamiltonianSystem, PhaseState};
+pub use molecule::{Atom, Coordinate, KineticMatrices, Molecule, MoleculeVisitor};
 pub use nalgebra;

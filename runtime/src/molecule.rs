@@ -129,3 +129,17 @@ pub trait Molecule<const N: usize, const NA: usize> {
         self.atoms().map(|a| a.mass)
     }
 }
+
+/// Something to do with a molecule chosen at run time by name, for code that is generic over
+/// [`Molecule<N, NA>`]: the generated `molecules::visit(name, visitor)` calls
+/// [`MoleculeVisitor::visit`] with the matching generated type, so each molecule gets its own
+/// monomorphised, fixed-size code path.
+pub trait MoleculeVisitor {
+    /// The result of the visit.
+    type Output;
+
+    /// Called with the molecule.
+    fn visit<M, const N: usize, const NA: usize>(self, molecule: M) -> Self::Output
+    where
+        M: Molecule<N, NA> + Copy + Send + Sync + 'static;
+}

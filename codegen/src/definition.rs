@@ -1,0 +1,644 @@
+//! The molecule definition file (TOML) and its validation into expressions.
+//!
+//! A definition names the atoms, the internal coordinates, each atom's body-frame position as
+//! expressions of the coordinates, and the potential. The full format, with an example, is in
+//! the README ("Molecule definitions"); in short:
+//!
+//! ```toml
+//! name = "h2o"                     # must match the file name: molecules/h2o.toml
+//! description = "Water in valence coordinates"
+//! length_unit = "angstrom"         # unit of the position expressions: "bohr" (default) or "angstrom"
+//!
+//! [constants]                      # optional named numbers usable in positions and potential
+//! half = 0.5
+//!
+//! [[coordinates]]                  # in order: this is the order of q and p
+//! name = "r1"
+//! unit = "angstrom"                # bohr | angstrom | rad | deg
+//! reference = 0.9578               # optional, in `unit`
+//!
+//! [[atoms]]
+//! label = "H1"                     # unique; the element is read from its leading letters
+//! position = ["r1 * sin(alpha * half)", 0, "r1 * cos(alpha * half)"]
+//! # element = "H", isotope = 2, mass = 2.014   (optional; mass in Da overrides the table)
+//!
+//! [potential]
+//! energy_unit = "cm-1"             # hartree | cm-1 | eV | kcal/mol
+//! expression = "D * pow(1 - exp(-a * (r1 - re)), 2)"
+//! parameters = { D = 44000, a = 2.2, re = 0.9578 }
+//! ```
+//!
+//! In every expression a coordinate's name stands for its value in the coordinate's declared
+//! unit; trigonometric functions take radians, so a coordinate declared in degrees is used as
+//! `cos(theta * pi / 180)`. The generator converts everything to atomic units: the generated
+//! code takes q in bohr and radians, and returns positions in bohr and energies in hartree.
+//!
+//! Every problem is reported as a [`DefinitionError`] naming the file, line and column, what is
+//! wrong and what to change.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt;
+use std::ops::Range;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::elements;
+use crate::expr::{ExprId, Func, Graph};
+use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
+use crate::units::{CoordinateUnit, EnergyUnit, LengthUnit};
+
+/// A problem in a definition file, with its place and a suggested fix.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DefinitionError {
+    /// The file, as given to the generator (e.g. `molecules/h2o.toml`).
+    pub path: String,
+    /// 1-based line, or 0 if the problem concerns the whole file.
+    pub line: usize,
+    /// 1-based column (in characters), or 0.
+    pub column: usize,
+    /// What is wrong.
+    pub message: String,
+    /// What to change.
+    pub help: String,
+    /// The text of the offending line, for display.
+    pub source_line: Option<String>,
+}
+
+impl fmt::Display for DefinitionError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "error: {}", self.message)?;
+        if self.line == 0 {
+            writeln!(f, "  --> {}", self.path)?;
+        } else {
+            writeln!(f, "  --> {}:{}:{}", self.path, self.line, self.column)?;
+        }
+        if let Some(src) = &self.source_line {
+            let gutter = self.line.to_string();
+            let pad = " ".repeat(gutter.len());
+            writeln!(f, "{pad} |")?;
+            writeln!(f, "{gutter} | {src}")?;
+            let caret_pad: String =
+                src.chars().take(self.column.saturating_sub(1)).map(|c| if c == '\t' { '\t' } else { ' ' }).collect();
+            writeln!(f, "{pad} | {caret_pad}^")?;
+        }
+        write!(f, "  = help: {}", self.help)
+    }
+}
+
+impl std::error::Error for DefinitionError {}
+
+/// An atom after validation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtomDef {
+    /// Unique label.
+    pub label: String,
+    /// Element symbol.
+    pub element: String,
+    /// Mass in daltons.
+    pub mass_da: f64,
+}
+
+/// An internal coordinate after validation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoordinateDef {
+    /// Name (a valid identifier).
+    pub name: String,
+    /// Declared unit.
+    pub unit: CoordinateUnit,
+    /// Reference value in the declared unit.
+    pub reference: Option<f64>,
+}
+
+/// A validated molecule: metadata plus its positions and potential as expressions in one graph.
+///
+/// Graph variable `k` (for `k < coordinates.len()`) is coordinate `k` in atomic units; the
+/// positions are in bohr, not yet centred; the potential is in hartree.
+#[derive(Clone, Debug)]
+pub struct Definition {
+    /// The file it came from, as given to the generator.
+    pub path: String,
+    /// Molecule name (file stem), a lowercase identifier.
+    pub name: String,
+    /// One-line description.
+    pub description: String,
+    /// Atoms in file order.
+    pub atoms: Vec<AtomDef>,
+    /// Coordinates in file order.
+    pub coordinates: Vec<CoordinateDef>,
+    /// The expression graph.
+    pub graph: Graph,
+    /// Uncentred body-frame positions, in bohr, one `[x, y, z]` per atom.
+    pub positions: Vec<[ExprId; 3]>,
+    /// The potential in hartree.
+    pub potential: ExprId,
+    /// The energy unit the file used for the potential.
+    pub energy_unit: EnergyUnit,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDefinition {
+    name: Spanned<String>,
+    #[serde(default)]
+    description: Option<String>,
+    #[serde(default)]
+    length_unit: Option<Spanned<String>>,
+    #[serde(default)]
+    constants: BTreeMap<Spanned<String>, Spanned<RawValue>>,
+    #[serde(default)]
+    coordinates: Vec<RawCoordinate>,
+    atoms: Vec<RawAtom>,
+    potential: Spanned<RawPotential>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCoordinate {
+    name: Spanned<String>,
+    unit: Spanned<String>,
+    #[serde(default)]
+    reference: Option<Spanned<f64>>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    description: Option<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAtom {
+    label: Spanned<String>,
+    #[serde(default)]
+    element: Option<Spanned<String>>,
+    #[serde(default)]
+    isotope: Option<Spanned<u32>>,
+    #[serde(default)]
+    mass: Option<Spanned<f64>>,
+    #[serde(default)]
+    position: Option<Spanned<Vec<Spanned<RawValue>>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPotential {
+    expression: Spanned<String>,
+    energy_unit: Spanned<String>,
+    #[serde(default)]
+    parameters: BTreeMap<Spanned<String>, Spanned<f64>>,
+}
+
+/// A number or an expression, as a position component or constant.
+#[derive(Deserialize, Clone)]
+#[serde(untagged)]
+enum RawValue {
+    Int(i64),
+    Float(f64),
+    Expr(String),
+}
+
+/// The text of a definition file, for turning byte spans into places.
+struct Source<'a> {
+    path: &'a str,
+    text: &'a str,
+}
+
+impl Source<'_> {
+    fn place(&self, offset: usize) -> (usize, usize) {
+        let offset = offset.min(self.text.len());
+        let before = &self.text[..offset];
+        let line = before.matches('\n').count() + 1;
+        let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+        let column = self.text[line_start..offset].chars().count() + 1;
+        (line, column)
+    }
+
+    fn line_text(&self, line: usize) -> Option<String> {
+        self.text.lines().nth(line.checked_sub(1)?).map(str::to_owned)
+    }
+
+    fn error_at_offset(&self, offset: usize, message: impl Into<String>, help: impl Into<String>) -> DefinitionError {
+        let (line, column) = self.place(offset);
+        DefinitionError {
+            path: self.path.to_owned(),
+            line,
+            column,
+            message: message.into(),
+            help: help.into(),
+            source_line: self.line_text(line),
+        }
+    }
+
+    fn error(&self, span: Range<usize>, message: impl Into<String>, help: impl Into<String>) -> DefinitionError {
+        self.error_at_offset(span.start, message, help)
+    }
+
+    fn whole_file(&self, message: impl Into<String>, help: impl Into<String>) -> DefinitionError {
+        DefinitionError {
+            path: self.path.to_owned(),
+            line: 0,
+            column: 0,
+            message: message.into(),
+            help: help.into(),
+            source_line: None,
+        }
+    }
+
+    /// Turns an error inside the string value at `span` into an error at its place in the file.
+    ///
+    /// Where the string has no escapes, the place is exact; otherwise it is the start of the
+    /// string.
+    fn expression_error(&self, span: Range<usize>, value: &str, e: ExprError) -> DefinitionError {
+        let raw = &self.text[span.clone()];
+        let delimiter = ["\"\"\"", "'''", "\"", "'"].into_iter().find(|d| raw.starts_with(d)).unwrap_or("");
+        let mut content_start = span.start + delimiter.len();
+        let mut content = &raw[delimiter.len()..raw.len().saturating_sub(delimiter.len())];
+        if delimiter.len() == 3 {
+            // TOML drops a newline right after the opening delimiter of a multi-line string.
+            for nl in ["\r\n", "\n"] {
+                if let Some(rest) = content.strip_prefix(nl) {
+                    content = rest;
+                    content_start += nl.len();
+                    break;
+                }
+            }
+        }
+        let offset = if content == value {
+            let line_start: usize = content.split_inclusive('\n').take(e.line - 1).map(str::len).sum();
+            let in_line: usize =
+                content[line_start..].chars().take(e.column).map(char::len_utf8).sum();
+            content_start + line_start + in_line
+        } else {
+            span.start
+        };
+        self.error_at_offset(offset, e.message, e.help)
+    }
+}
+
+fn is_identifier(name: &str) -> bool {
+    let mut chars = name.chars();
+    matches!(chars.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && syn::parse_str::<syn::Ident>(name).is_ok()
+}
+
+fn unit_help<T>(spellings: &[(&str, T)]) -> String {
+    let names: Vec<String> = spellings.iter().map(|(n, _)| format!("\"{n}\"")).collect();
+    format!("use one of {}", names.join(", "))
+}
+
+/// Reads and validates one definition. `path` is used in messages only.
+pub fn parse_definition(path: &str, text: &str) -> Result<Definition, DefinitionError> {
+    let src = Source { path, text };
+    let raw: RawDefinition = toml::from_str(text).map_err(|e| {
+        let message = e.message().trim_end().trim_end_matches('.').to_owned();
+        let help = if message.starts_with("unknown field") {
+            "check the spelling; the README lists every key of a molecule definition".to_owned()
+        } else if message.starts_with("missing field") {
+            "add it; the README lists every key of a molecule definition".to_owned()
+        } else if message.contains("did not match any variant of untagged enum RawValue") {
+            "a position component or constant is a number or a string holding an expression".to_owned()
+        } else {
+            "see the TOML syntax at https://toml.io and the README's example definition".to_owned()
+        };
+        let message = message.replace("data did not match any variant of untagged enum RawValue", "invalid value");
+        match e.span() {
+            Some(span) => src.error(span, message, help),
+            None => src.whole_file(message, help),
+        }
+    })?;
+    Validator { src: &src, graph: Graph::new(), names: HashMap::new(), declared: HashMap::new() }.run(raw)
+}
+
+/// State of one validation: the graph being built and the names declared so far.
+struct Validator<'s> {
+    src: &'s Source<'s>,
+    graph: Graph,
+    /// Name → expression, for coordinates, constants and parameters.
+    names: HashMap<String, ExprId>,
+    /// Name → (what it is, where it was declared), to report duplicates.
+    declared: HashMap<String, (&'static str, Range<usize>)>,
+}
+
+impl Validator<'_> {
+    fn declare(&mut self, name: &Spanned<String>, what: &'static str) -> Result<(), DefinitionError> {
+        let n = name.get_ref();
+        if !is_identifier(n) {
+            return Err(self.src.error(
+                name.span(),
+                format!("`{n}` is not a valid {what} name"),
+                "names start with a letter and contain only letters, digits and `_` (and are not Rust keywords)",
+            ));
+        }
+        if n == "pi" || Func::from_name(n).is_some() || BINARY_FUNCTIONS.contains(&n.as_str()) {
+            return Err(self.src.error(
+                name.span(),
+                format!("the {what} name `{n}` is reserved"),
+                "`pi` and the function names (sin, cos, pow, ...) cannot be redefined; choose another name",
+            ));
+        }
+        if let Some((other, span)) = self.declared.get(n) {
+            let (line, _) = self.src.place(span.start);
+            return Err(self.src.error(
+                name.span(),
+                format!("duplicate name `{n}`: already declared as a {other} on line {line}"),
+                format!("rename this {what} or the {other}; every coordinate, constant and parameter needs its own name"),
+            ));
+        }
+        self.declared.insert(n.clone(), (what, name.span()));
+        Ok(())
+    }
+
+    fn expression(&mut self, value: &Spanned<String>, context: &str) -> Result<ExprId, DefinitionError> {
+        let scope = Scope { names: &self.names, context };
+        parse::parse_expression(&mut self.graph, value.get_ref(), &scope)
+            .map_err(|e| self.src.expression_error(value.span(), value.get_ref(), e))
+    }
+
+    fn value(&mut self, value: &Spanned<RawValue>, context: &str) -> Result<ExprId, DefinitionError> {
+        match value.get_ref() {
+            RawValue::Int(i) => Ok(self.graph.constant(*i as f64)),
+            RawValue::Float(x) if x.is_finite() => Ok(self.graph.constant(*x)),
+            RawValue::Float(_) => {
+                Err(self.src.error(value.span(), format!("non-finite number in {context}"), "write a finite number"))
+            }
+            RawValue::Expr(s) => self.expression(&Spanned::new(value.span(), s.clone()), context),
+        }
+    }
+
+    fn run(mut self, raw: RawDefinition) -> Result<Definition, DefinitionError> {
+        let src = self.src;
+        // The name becomes a module and a type, and `--molecule NAME` finds it by file name.
+        let name = raw.name.get_ref().clone();
+        let stem = std::path::Path::new(src.path).file_stem().and_then(|s| s.to_str()).unwrap_or_default();
+        let valid_name = name.chars().next().is_some_and(|c| c.is_ascii_lowercase())
+            && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+        if !valid_name {
+            return Err(src.error(
+                raw.name.span(),
+                format!("molecule name `{name}` is not a lowercase identifier"),
+                "use lowercase letters, digits and `_`, starting with a letter, e.g. \"h2o\"",
+            ));
+        }
+        if name != stem {
+            return Err(src.error(
+                raw.name.span(),
+                format!("molecule name `{name}` does not match the file name `{stem}.toml`"),
+                format!("rename the file to `{name}.toml` or set name = \"{stem}\""),
+            ));
+        }
+
+        let length_unit = match &raw.length_unit {
+            None => LengthUnit::Bohr,
+            Some(u) => LengthUnit::parse(u.get_ref()).ok_or_else(|| {
+                src.error(
+                    u.span(),
+                    format!("unknown length unit `{}`", u.get_ref()),
+                    unit_help(LengthUnit::SPELLINGS),
+                )
+            })?,
+        };
+
+        // Coordinates first: graph variable k is coordinate k, in atomic units.
+        let mut coordinates = Vec::new();
+        let mut coordinate_spans = Vec::new();
+        for c in &raw.coordinates {
+            self.declare(&c.name, "coordinate")?;
+            let unit = CoordinateUnit::parse(c.unit.get_ref()).ok_or_else(|| {
+                let mut spellings: Vec<(&str, ())> = LengthUnit::SPELLINGS.iter().map(|(n, _)| (*n, ())).collect();
+                spellings.extend(crate::units::AngleUnit::SPELLINGS.iter().map(|(n, _)| (*n, ())));
+                src.error(
+                    c.unit.span(),
+                    format!("unknown unit `{}` for coordinate `{}`", c.unit.get_ref(), c.name.get_ref()),
+                    unit_help(&spellings),
+                )
+            })?;
+            let reference = match &c.reference {
+                Some(r) if !r.get_ref().is_finite() => {
+                    return Err(src.error(r.span(), "non-finite reference value", "write a finite number"));
+                }
+                r => r.as_ref().map(|r| *r.get_ref()),
+            };
+            let var = self.graph.var(c.name.get_ref());
+            // The name in expressions is the value in the declared unit: q_au / (au per unit).
+            let symbol = if unit.in_atomic_units() == 1.0 {
+                var
+            } else {
+                let factor = self.graph.constant(1.0 / unit.in_atomic_units());
+                self.graph.mul(factor, var)
+            };
+            self.names.insert(c.name.get_ref().clone(), symbol);
+            coordinates.push(CoordinateDef { name: c.name.get_ref().clone(), unit, reference });
+            coordinate_spans.push(c.name.span());
+        }
+
+        // Constants may refer to each other (in any order) but not to coordinates.
+        let constants: Vec<(Spanned<String>, Spanned<RawValue>)> =
+            raw.constants.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+        for (k, _) in &constants {
+            self.declare(k, "constant")?;
+        }
+        let coordinate_names: HashMap<String, ExprId> = std::mem::take(&mut self.names);
+        self.resolve_constants(&constants)?;
+        self.names.extend(coordinate_names);
+
+        // Atoms and their positions.
+        if raw.atoms.len() < 2 {
+            return Err(src.whole_file(
+                format!("a molecule needs at least 2 atoms, this one has {}", raw.atoms.len()),
+                "add [[atoms]] entries, each with a label and a position",
+            ));
+        }
+        let mut atoms = Vec::new();
+        let mut positions = Vec::new();
+        let mut labels: HashMap<String, Range<usize>> = HashMap::new();
+        for a in &raw.atoms {
+            let label = a.label.get_ref();
+            if label.trim().is_empty() {
+                return Err(src.error(a.label.span(), "empty atom label", "give every atom a label such as \"H1\""));
+            }
+            if let Some(first) = labels.get(label) {
+                let (line, _) = src.place(first.start);
+                return Err(src.error(
+                    a.label.span(),
+                    format!("duplicate atom `{label}`: another atom on line {line} has the same label"),
+                    "give each atom its own label, e.g. \"H1\" and \"H2\"",
+                ));
+            }
+            labels.insert(label.clone(), a.label.span());
+            let (element, mass_da) = self.atom_mass(a)?;
+            let context = format!("the position of atom {label}");
+            let Some(position) = &a.position else {
+                return Err(src.error(
+                    a.label.span(),
+                    format!("missing position for atom `{label}`"),
+                    "add position = [x, y, z], each a number or an expression in quotes",
+                ));
+            };
+            if position.get_ref().len() != 3 {
+                return Err(src.error(
+                    position.span(),
+                    format!("the position of atom `{label}` has {} components instead of 3", position.get_ref().len()),
+                    "write position = [x, y, z]",
+                ));
+            }
+            let mut xyz = [self.graph.zero(); 3];
+            for (axis, component) in position.get_ref().iter().enumerate() {
+                let e = self.value(component, &context)?;
+                let scale = self.graph.constant(length_unit.in_bohr());
+                xyz[axis] = self.graph.mul(scale, e);
+            }
+            atoms.push(AtomDef { label: label.clone(), element, mass_da });
+            positions.push(xyz);
+        }
+
+        // Every coordinate must move some atom, or the kinetic metric is singular.
+        let roots: Vec<ExprId> = positions.iter().flatten().copied().collect();
+        let reachable = self.graph.reachable(&roots);
+        for (k, c) in coordinates.iter().enumerate() {
+            let used = self
+                .graph
+                .nodes()
+                .iter()
+                .enumerate()
+                .any(|(i, n)| reachable[i] && *n == crate::expr::Node::Var(k as u32));
+            if !used {
+                return Err(src.error(
+                    coordinate_spans[k].clone(),
+                    format!("no atom position depends on coordinate `{}`", c.name),
+                    "use the coordinate in some atom's position, or remove it (a coordinate that moves no atom makes the kinetic metric singular)",
+                ));
+            }
+        }
+
+        // The potential sees coordinates, constants and its own parameters.
+        let pot = raw.potential.get_ref();
+        let energy_unit = EnergyUnit::parse(pot.energy_unit.get_ref()).ok_or_else(|| {
+            src.error(
+                pot.energy_unit.span(),
+                format!("unknown energy unit `{}`", pot.energy_unit.get_ref()),
+                unit_help(EnergyUnit::SPELLINGS),
+            )
+        })?;
+        for (k, v) in &pot.parameters {
+            self.declare(k, "parameter")?;
+            if !v.get_ref().is_finite() {
+                return Err(src.error(v.span(), format!("non-finite value of parameter `{}`", k.get_ref()), "write a finite number"));
+            }
+            let c = self.graph.constant(*v.get_ref());
+            self.names.insert(k.get_ref().clone(), c);
+        }
+        let u = self.expression(&pot.expression, "the potential")?;
+        let scale = self.graph.constant(energy_unit.in_hartree());
+        let potential = self.graph.mul(scale, u);
+
+        Ok(Definition {
+            path: src.path.to_owned(),
+            name,
+            description: raw.description.unwrap_or_default().trim().to_owned(),
+            atoms,
+            coordinates,
+            graph: self.graph,
+            positions,
+            potential,
+            energy_unit,
+        })
+    }
+
+    /// Evaluates the constants, each of which may use `pi` and other constants.
+    fn resolve_constants(&mut self, constants: &[(Spanned<String>, Spanned<RawValue>)]) -> Result<(), DefinitionError> {
+        let mut pending: Vec<&(Spanned<String>, Spanned<RawValue>)> = constants.iter().collect();
+        while !pending.is_empty() {
+            let before = pending.len();
+            let mut still = Vec::new();
+            for entry in pending {
+                let (k, v) = entry;
+                let uses_unresolved = match v.get_ref() {
+                    RawValue::Expr(s) => constants.iter().any(|(other, _)| {
+                        !self.names.contains_key(other.get_ref())
+                            && other.get_ref() != k.get_ref()
+                            && mentions(s, other.get_ref())
+                    }),
+                    _ => false,
+                };
+                if uses_unresolved {
+                    still.push(entry);
+                    continue;
+                }
+                let e = self.value(v, &format!("constant `{}`", k.get_ref()))?;
+                let Some(value) = self.graph.as_const(e) else {
+                    return Err(self.src.error(
+                        v.span(),
+                        format!("constant `{}` is not a finite number", k.get_ref()),
+                        "a constant must evaluate to a finite number from numbers, pi and other constants",
+                    ));
+                };
+                let c = self.graph.constant(value);
+                self.names.insert(k.get_ref().clone(), c);
+            }
+            if still.len() == before {
+                let (k, v) = still[0];
+                return Err(self.src.error(
+                    v.span(),
+                    format!("constant `{}` is defined in terms of itself (a cycle of constants)", k.get_ref()),
+                    "define each constant from numbers, pi and constants that do not refer back to it",
+                ));
+            }
+            pending = still;
+        }
+        Ok(())
+    }
+
+    fn atom_mass(&self, a: &RawAtom) -> Result<(String, f64), DefinitionError> {
+        let src = self.src;
+        let label = a.label.get_ref();
+        let element = match &a.element {
+            Some(e) => elements::element(e.get_ref()).map(|el| el.symbol).ok_or_else(|| {
+                src.error(
+                    e.span(),
+                    format!("unknown element `{}`", e.get_ref()),
+                    "write the chemical symbol with its usual capitalisation (e.g. \"Cl\"), or give `mass` in Da explicitly",
+                )
+            }),
+            None => elements::element_of_label(label).map(|el| el.symbol).ok_or_else(|| {
+                src.error(
+                    a.label.span(),
+                    format!("cannot tell the element of atom `{label}` from its label"),
+                    "add element = \"X\" with the chemical symbol",
+                )
+            }),
+        };
+        if a.element.is_some() {
+            // An element the user named must exist, even where an explicit mass makes it unneeded.
+            element.clone()?;
+        }
+        if let Some(m) = &a.mass {
+            let mass = *m.get_ref();
+            if !(mass.is_finite() && mass > 0.0) {
+                return Err(src.error(
+                    m.span(),
+                    format!("the mass of atom `{label}` must be positive and finite, got {mass}"),
+                    "give the mass in daltons, e.g. mass = 1.00782503223",
+                ));
+            }
+            // An explicit mass needs no table, but the element is still needed for output files.
+            return Ok((element.unwrap_or("X").to_owned(), mass));
+        }
+        let symbol = element?;
+        let el = elements::element(symbol).expect("found above");
+        let isotope = a.isotope.as_ref().map(|i| *i.get_ref());
+        let mass = el.mass(isotope).ok_or_else(|| {
+            let known: Vec<String> = el.isotopes.iter().map(|(n, _)| n.to_string()).collect();
+            src.error(
+                a.isotope.as_ref().map_or(a.label.span(), |i| i.span()),
+                format!("no mass for isotope {} of {symbol} in rovib's table", isotope.unwrap_or(0)),
+                format!("known isotopes of {symbol}: {}; or give `mass` in Da explicitly", known.join(", ")),
+            )
+        })?;
+        Ok((symbol.to_owned(), mass))
+    }
+}
+
+/// Whether `text` mentions `name` as a whole identifier.
+fn mentions(text: &str, name: &str) -> bool {
+    text.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).any(|w| w == name)
+}

@@ -1,0 +1,430 @@
+//! Emission: expression graphs to straight-line Rust, via quote and prettyplease.
+//!
+//! One generated function evaluates many outputs (all entries of `a`, `A` and `I`, say). The
+//! emitter takes every node those outputs reach, in id order (children before parents), and
+//! decides for each whether it becomes a `let` temporary or is written inline into its single
+//! user. Because the graph is hash-consed, a node used by several outputs is one temporary: this
+//! is common-subexpression elimination across everything the function emits. Before that, the
+//! function's nodes are lowered into a fresh graph where integer powers become multiplications
+//! (`x⁴ = (x·x)·(x·x)`, sharing `x·x` with any `x²` or `x³`). Where both `sin(x)` and `cos(x)` are
+//! needed they come from one `x.sin_cos()`. Outputs that are structural zeros produce no code:
+//! the output matrix is cleared once with `fill(0.0)` and only its non-zero entries are stored.
+//!
+//! Expressions are printed with the fewest parentheses that keep the graph's evaluation order,
+//! so the generated code computes exactly what [`Graph::eval`] computes, bit for bit.
+
+use std::collections::HashMap;
+
+use proc_macro2::{Ident, Literal, Span, TokenStream};
+use quote::{format_ident, quote};
+
+use crate::expr::{ExprId, Func, Graph, Node};
+
+/// A single-use expression heavier than this many operations gets its own `let`, so that no
+/// line of generated code grows unreadable.
+const MAX_INLINE_WEIGHT: u32 = 6;
+
+/// Stores into one output: `target` followed by each entry's index, e.g. `r` and `[(0, 1)]`.
+pub struct OutputGroup {
+    /// The place being written, e.g. `r` or `dk[2].a`.
+    pub target: TokenStream,
+    /// Index suffix and value of each entry.
+    pub entries: Vec<(TokenStream, ExprId)>,
+}
+
+/// One function to emit.
+pub struct FunctionSpec {
+    /// Its name, for statistics.
+    pub name: &'static str,
+    /// Doc comment.
+    pub doc: String,
+    /// `fn name(&self, ...) -> ...` without a body.
+    pub signature: TokenStream,
+    /// Variable number → the expression that loads it, e.g. `q[0]`.
+    pub inputs: Vec<(u32, TokenStream)>,
+    /// Outputs, stored in this order.
+    pub groups: Vec<OutputGroup>,
+    /// The returned scalar, if any.
+    pub ret: Option<ExprId>,
+}
+
+/// Operation counts of one emitted function.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FunctionStats {
+    /// Function name.
+    pub name: &'static str,
+    /// Output values (stored entries plus the returned scalar), zeros included.
+    pub outputs: usize,
+    /// Of those, structural zeros.
+    pub zero_outputs: usize,
+    /// Operations if every output were written as its own expression tree, with no sharing at
+    /// all (a naive transcription of the formulas). A float because it can be astronomically
+    /// large.
+    pub ops_tree: f64,
+    /// Operations if every output were computed separately, each with its own common
+    /// subexpressions shared (CSE within an output, not across outputs).
+    pub ops_per_output: u64,
+    /// Operations in the emitted code, after CSE across all outputs.
+    pub ops_emitted: u64,
+    /// `let` temporaries in the emitted code.
+    pub temporaries: usize,
+}
+
+/// The cost in operations of one node once lowered (integer powers cost multiplications).
+fn op_cost(node: Node) -> u64 {
+    match node {
+        Node::Const(_) | Node::Var(_) => 0,
+        Node::Powi(_, n) => {
+            let m = n.unsigned_abs();
+            // Square-and-multiply: ⌊log2 m⌋ squarings plus (popcount − 1) multiplications,
+            // plus one division for a negative exponent.
+            u64::from(31 - m.leading_zeros()) + u64::from(m.count_ones()) - 1 + u64::from(n < 0)
+        }
+        _ => 1,
+    }
+}
+
+/// Lowers integer powers into multiplications: returns a fresh, unsimplified graph holding only
+/// what `roots` reach, and the roots' ids in it. Evaluating the lowered graph in id order is
+/// exactly what the emitted code does.
+pub fn lower(graph: &Graph, roots: &[ExprId]) -> (Graph, Vec<ExprId>) {
+    let mut lowering = Lowering::new(graph);
+    let lowered = lowering.lower(graph, roots);
+    (lowering.out, lowered)
+}
+
+/// The state of one lowering: the new graph and the map from old ids to new.
+struct Lowering {
+    out: Graph,
+    map: HashMap<ExprId, ExprId>,
+}
+
+impl Lowering {
+    fn new(src: &Graph) -> Self {
+        let mut out = Graph::new_unsimplified();
+        for v in 0..src.var_count() {
+            out.var(src.var_name(v as u32));
+        }
+        Lowering { out, map: HashMap::new() }
+    }
+
+    fn lower(&mut self, src: &Graph, roots: &[ExprId]) -> Vec<ExprId> {
+        let reachable = src.reachable(roots);
+        for (i, &node) in src.nodes().iter().enumerate() {
+            if !reachable[i] {
+                continue;
+            }
+            let m = |c: ExprId| self.map[&c];
+            let id = match node {
+                Node::Const(_) | Node::Var(_) => self.out.push(node),
+                Node::Neg(a) => self.out.neg(m(a)),
+                Node::Add(a, b) => self.out.add(m(a), m(b)),
+                Node::Sub(a, b) => self.out.sub(m(a), m(b)),
+                Node::Mul(a, b) => self.out.mul(m(a), m(b)),
+                Node::Div(a, b) => self.out.div(m(a), m(b)),
+                Node::Powf(a, b) => self.out.pow(m(a), m(b)),
+                Node::Call(f, a) => self.out.call(f, m(a)),
+                Node::Atan2(a, b) => self.out.atan2(m(a), m(b)),
+                Node::Powi(a, n) => {
+                    let p = self.power(m(a), n.unsigned_abs());
+                    if n < 0 {
+                        let one = self.out.one();
+                        self.out.div(one, p)
+                    } else {
+                        p
+                    }
+                }
+            };
+            self.map.insert(ExprId::from_index(i), id);
+        }
+        roots.iter().map(|r| self.map[r]).collect()
+    }
+
+    /// `x^n` for n ≥ 1 by square-and-multiply; `x·x` is hash-consed, so powers share squares.
+    fn power(&mut self, x: ExprId, n: u32) -> ExprId {
+        if n == 1 {
+            return x;
+        }
+        let half = self.power(x, n / 2);
+        let sq = self.out.mul(half, half);
+        if n % 2 == 1 { self.out.mul(sq, x) } else { sq }
+    }
+}
+
+/// A printed expression with its precedence: 4 atom, 3 unary minus, 2 `* /`, 1 `+ -`.
+#[derive(Clone)]
+struct Printed {
+    tokens: TokenStream,
+    prec: u8,
+    weight: u32,
+}
+
+impl Printed {
+    /// The tokens, parenthesised if this binds more loosely than `min`.
+    fn at_least(&self, min: u8) -> TokenStream {
+        let t = &self.tokens;
+        if self.prec < min { quote!((#t)) } else { t.clone() }
+    }
+}
+
+fn literal(value: f64, suffixed: bool) -> Printed {
+    let text = format!("{:?}{}", value.abs(), if suffixed { "f64" } else { "" });
+    let lit: Literal = text.parse().expect("a finite f64 prints as a valid literal");
+    if value.is_sign_negative() {
+        Printed { tokens: quote!(-#lit), prec: 3, weight: 0 }
+    } else {
+        Printed { tokens: quote!(#lit), prec: 4, weight: 0 }
+    }
+}
+
+fn atom(ident: &Ident) -> Printed {
+    Printed { tokens: quote!(#ident), prec: 4, weight: 0 }
+}
+
+/// Emits one function: its tokens and statistics.
+pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -> (TokenStream, FunctionStats) {
+    let mut roots: Vec<ExprId> = spec.groups.iter().flat_map(|g| g.entries.iter().map(|(_, e)| *e)).collect();
+    roots.extend(spec.ret);
+    let stats_before = count_before(graph, &roots);
+
+    let (lowered, lowered_roots) = lower(graph, &roots);
+    let lg = &lowered;
+    let reachable = lg.reachable(&lowered_roots);
+
+    // How often each node is used: by parents within this function and by stores or return.
+    let mut uses = vec![0u32; lg.len()];
+    for (i, node) in lg.nodes().iter().enumerate() {
+        if reachable[i] {
+            for c in node.children() {
+                uses[c.index()] += 1;
+            }
+        }
+    }
+    for r in &lowered_roots {
+        uses[r.index()] += 1;
+    }
+
+    // sin(x) and cos(x) of one x come from one sin_cos call.
+    let mut trig: HashMap<ExprId, [Option<ExprId>; 2]> = HashMap::new();
+    for (i, node) in lg.nodes().iter().enumerate() {
+        if let (true, Node::Call(f @ (Func::Sin | Func::Cos), x)) = (reachable[i], *node) {
+            trig.entry(x).or_default()[usize::from(f == Func::Cos)] = Some(ExprId::from_index(i));
+        }
+    }
+
+    let mut printed: Vec<Option<Printed>> = vec![None; lg.len()];
+    let mut statements: Vec<TokenStream> = Vec::new();
+    let mut temporaries = 0usize;
+    let mut ops_emitted = 0u64;
+    let mut next_temp = 0usize;
+    let mut fresh = || {
+        let t = format_ident!("t{}", next_temp);
+        next_temp += 1;
+        t
+    };
+
+    for (i, &node) in lg.nodes().iter().enumerate() {
+        if !reachable[i] || printed[i].is_some() {
+            continue;
+        }
+        let p = |c: ExprId, printed: &Vec<Option<Printed>>| -> Printed {
+            printed[c.index()].clone().expect("children are printed before parents")
+        };
+        ops_emitted += op_cost(node);
+        let expr = match node {
+            Node::Const(bits) => {
+                printed[i] = Some(literal(f64::from_bits(bits), false));
+                continue;
+            }
+            Node::Var(k) => {
+                let ident = &var_idents[k as usize];
+                let load = spec
+                    .inputs
+                    .iter()
+                    .find(|(v, _)| *v == k)
+                    .map(|(_, t)| t.clone())
+                    .expect("every variable a function reaches is one of its inputs");
+                statements.push(quote!(let #ident = #load;));
+                printed[i] = Some(atom(ident));
+                continue;
+            }
+            Node::Call(Func::Sin | Func::Cos, x) if trig[&x].iter().all(Option::is_some) => {
+                let [s, c] = trig[&x].map(|id| id.expect("both present"));
+                let (ts, tc) = (fresh(), fresh());
+                let recv = p(x, &printed).at_least(4);
+                statements.push(quote!(let (#ts, #tc) = #recv.sin_cos();));
+                temporaries += 2;
+                // The pair is one call, counted once: the second node is skipped as printed.
+                printed[s.index()] = Some(atom(&ts));
+                printed[c.index()] = Some(atom(&tc));
+                continue;
+            }
+            Node::Neg(a) => {
+                let a = p(a, &printed);
+                let t = a.at_least(4);
+                Printed { tokens: quote!(-#t), prec: 3, weight: a.weight + 1 }
+            }
+            Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
+                let (a, b) = (p(a, &printed), p(b, &printed));
+                let prec = if matches!(node, Node::Add(..) | Node::Sub(..)) { 1 } else { 2 };
+                // Left-associative: the right operand must bind strictly tighter to keep the
+                // graph's evaluation order.
+                let (l, r) = (a.at_least(prec), b.at_least(prec + 1));
+                let tokens = match node {
+                    Node::Add(..) => quote!(#l + #r),
+                    Node::Sub(..) => quote!(#l - #r),
+                    Node::Mul(..) => quote!(#l * #r),
+                    _ => quote!(#l / #r),
+                };
+                Printed { tokens, prec, weight: a.weight + b.weight + 1 }
+            }
+            Node::Powi(..) => unreachable!("integer powers were lowered to multiplications"),
+            Node::Powf(a, b) => {
+                let (a, b) = (receiver(lg, a, &printed), p(b, &printed));
+                let (ra, tb) = (a.at_least(4), &b.tokens);
+                Printed { tokens: quote!(#ra.powf(#tb)), prec: 4, weight: a.weight + b.weight + 1 }
+            }
+            Node::Call(f, a) => {
+                let a = receiver(lg, a, &printed);
+                let ra = a.at_least(4);
+                let method = Ident::new(f.name(), Span::call_site());
+                Printed { tokens: quote!(#ra.#method()), prec: 4, weight: a.weight + 1 }
+            }
+            Node::Atan2(y, x) => {
+                let (y, x) = (receiver(lg, y, &printed), p(x, &printed));
+                let (ry, tx) = (y.at_least(4), &x.tokens);
+                Printed { tokens: quote!(#ry.atan2(#tx)), prec: 4, weight: y.weight + x.weight + 1 }
+            }
+        };
+        if uses[i] > 1 || expr.weight > MAX_INLINE_WEIGHT {
+            let t = fresh();
+            let tokens = &expr.tokens;
+            statements.push(quote!(let #t = #tokens;));
+            temporaries += 1;
+            printed[i] = Some(atom(&t));
+        } else {
+            printed[i] = Some(expr);
+        }
+    }
+
+    let mut zero_outputs = 0usize;
+    let mut outputs = 0usize;
+    let mut k = 0usize;
+    for group in &spec.groups {
+        let target = &group.target;
+        let values: Vec<ExprId> = group.entries.iter().map(|_| {
+            k += 1;
+            lowered_roots[k - 1]
+        }).collect();
+        outputs += values.len();
+        let zeros = values.iter().filter(|&&v| lg.is_zero(v)).count();
+        zero_outputs += zeros;
+        if group.entries.is_empty() {
+            continue;
+        }
+        if zeros > 0 {
+            statements.push(quote!(#target.fill(0.0);));
+        }
+        for ((index, _), v) in group.entries.iter().zip(&values) {
+            if lg.is_zero(*v) {
+                continue;
+            }
+            let value = &printed[v.index()].as_ref().expect("outputs are printed").tokens;
+            statements.push(quote!(#target #index = #value;));
+        }
+    }
+    if spec.ret.is_some() {
+        outputs += 1;
+        let r = lowered_roots[lowered_roots.len() - 1];
+        let value = &printed[r.index()].as_ref().expect("the return value is printed").tokens;
+        statements.push(quote!(#value));
+    }
+
+    let doc = doc_lines(&spec.doc);
+    let signature = &spec.signature;
+    let tokens = quote! {
+        #doc
+        #signature {
+            #(#statements)*
+        }
+    };
+    let stats = FunctionStats {
+        name: spec.name,
+        outputs,
+        zero_outputs,
+        ops_tree: stats_before.0,
+        ops_per_output: stats_before.1,
+        ops_emitted,
+        temporaries,
+    };
+    (tokens, stats)
+}
+
+/// A method-call receiver: a constant needs a type suffix (`2.0f64.sqrt()`).
+fn receiver(g: &Graph, id: ExprId, printed: &[Option<Printed>]) -> Printed {
+    match g.as_const(id) {
+        Some(v) => literal(v, true),
+        None => printed[id.index()].clone().expect("children are printed before parents"),
+    }
+}
+
+/// Operation counts without sharing: (every output as a tree, every output as its own DAG).
+fn count_before(graph: &Graph, roots: &[ExprId]) -> (f64, u64) {
+    let reachable = graph.reachable(roots);
+    let mut tree = vec![0f64; graph.len()];
+    for (i, &node) in graph.nodes().iter().enumerate() {
+        if reachable[i] {
+            tree[i] = op_cost(node) as f64 + node.children().map(|c| tree[c.index()]).sum::<f64>();
+        }
+    }
+    let ops_tree = roots.iter().map(|r| tree[r.index()]).sum();
+    // Per-output DAG sizes, with a stamp array instead of a fresh visited set per output.
+    let mut stamp = vec![usize::MAX; graph.len()];
+    let mut per_output = 0u64;
+    let mut stack = Vec::new();
+    for (n, r) in roots.iter().enumerate() {
+        stack.push(*r);
+        while let Some(e) = stack.pop() {
+            if stamp[e.index()] == n {
+                continue;
+            }
+            stamp[e.index()] = n;
+            let node = graph.node(e);
+            per_output += op_cost(node);
+            stack.extend(node.children());
+        }
+    }
+    (ops_tree, per_output)
+}
+
+/// Formats a token stream of items as a Rust file with a header comment.
+pub fn format_file(header: &str, items: TokenStream) -> Result<String, syn::Error> {
+    let file: syn::File = syn::parse2(items)?;
+    let body = prettyplease::unparse(&file);
+    // prettyplease puts no blank line between items; one after each item's closing brace reads
+    // better.
+    let mut out = format!("{header}\n");
+    let mut lines = body.lines().peekable();
+    while let Some(line) = lines.next() {
+        out.push_str(line);
+        out.push('\n');
+        let indent = line.len() - line.trim_start().len();
+        let closes_item = (line.trim_start() == "}" && indent <= 4) || (indent == 0 && line.starts_with("pub struct") && line.ends_with(';'));
+        let ends_use = line.starts_with("use ") && lines.peek().is_some_and(|next| !next.starts_with("use "));
+        if (closes_item || ends_use) && lines.peek().is_some_and(|next| !next.trim().starts_with('}')) {
+            out.push('\n');
+        }
+    }
+    Ok(out)
+}
+
+/// Doc attributes, one per line, so that they print as `///` comments.
+pub fn doc_lines(text: &str) -> TokenStream {
+    let lines = text.lines().map(|l| format!(" {l}").trim_end().to_owned());
+    quote!(#(#[doc = #lines])*)
+}
+
+/// An unsuffixed integer literal, for indices and sizes.
+pub fn index(i: usize) -> Literal {
+    Literal::usize_unsuffixed(i)
+}

@@ -1,0 +1,20 @@
+//! The molecules compiled in from `molecules/*.toml`, one module each, generated at build time.
+//!
+//! `build.rs` runs `rovib-codegen` on every definition; the generated sources live in `OUT_DIR`
+//! and are included here. Each module holds a unit struct implementing
+//! [`Molecule`](crate::runtime::Molecule); [`visit`] finds one by name for code that is generic
+//! over the molecule.
+#![allow(
+    unused_variables,
+    clippy::approx_constant,
+    clippy::excessive_precision,
+    clippy::let_and_return,
+    clippy::neg_multiply,
+    clippy::double_neg,
+    clippy::unreadable_literal,
+    clippy::too_many_lines,
+    clippy::similar_names,
+    clippy::many_single_char_names
+)]
+
+include!(concat!(env!("OUT_DIR"), "/molecules.rs"));
