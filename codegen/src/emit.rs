@@ -409,7 +409,8 @@ pub fn format_file(header: &str, items: TokenStream) -> Result<String, syn::Erro
         out.push_str(line);
         out.push('\n');
         let indent = line.len() - line.trim_start().len();
-        let closes_item = (line.trim_start() == "}" && indent <= 4) || (indent == 0 && line.starts_with("pub struct") && line.ends_with(';'));
+        let closes_item = ((line.trim_start() == "}" || line.ends_with("{}")) && indent <= 4)
+            || (indent == 0 && line.starts_with("pub struct") && line.ends_with(';'));
         let ends_use = line.starts_with("use ") && lines.peek().is_some_and(|next| !next.starts_with("use "));
         if (closes_item || ends_use) && lines.peek().is_some_and(|next| !next.trim().starts_with('}')) {
             out.push('\n');

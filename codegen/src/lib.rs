@@ -344,9 +344,26 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
         na = def.atoms.len()
     );
     let doc = doc_lines(&doc);
+    // Import only the unit types the coordinate table names, so no import is unused.
+    let mut unit_names: Vec<&str> = Vec::new();
+    for c in &def.coordinates {
+        unit_names.push("CoordinateUnit");
+        unit_names.push(match c.unit {
+            CoordinateUnit::Length(_) => "LengthUnit",
+            CoordinateUnit::Angle(_) => "AngleUnit",
+        });
+    }
+    unit_names.sort_unstable();
+    unit_names.dedup();
+    let unit_idents = unit_names.iter().map(|n| Ident::new(n, Span::call_site()));
+    let unit_imports = if unit_names.is_empty() {
+        quote!()
+    } else {
+        quote!(use ::rovib_runtime::units::{#(#unit_idents),*};)
+    };
     let items = quote! {
         use ::rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
-        use ::rovib_runtime::units::{AngleUnit, CoordinateUnit, LengthUnit};
+        #unit_imports
         use ::rovib_runtime::{Atom, Coordinate, KineticMatrices, Molecule};
 
         #doc

@@ -171,7 +171,8 @@ fn finite(x: f64, quantity: &'static str) -> Result<f64, HamiltonianError> {
     }
 }
 
-/// `H = ½ pᵀ G22 p + Jᵀ G12 p + ½ Jᵀ G11 J` with the G matrices of `g`.
+/// The kinetic part of eq. (1), `T = ½ pᵀ G22 p + Jᵀ G12 p + ½ Jᵀ G11 J`; given `∂G/∂q_k`
+/// instead of `G` it is the kinetic part of `∂H/∂q_k` in eq. (16).
 fn kinetic_energy<const N: usize>(g: &GMatrices<N>, j: &Vector3<f64>, p: &SVector<f64, N>) -> f64 {
     0.5 * p.dot(&(g.g22 * p)) + j.dot(&(g.g12 * p)) + 0.5 * j.dot(&(g.g11 * j))
 }

@@ -1,0 +1,236 @@
+//! Every kind of bad molecule definition stops generation with a message that names the file,
+//! the place, what is wrong and what to change.
+
+use rovib_codegen::{DefinitionError, generate_molecule};
+
+/// A valid triatomic; each test breaks one thing in it.
+const GOOD: &str = r#"name = "xy2"
+length_unit = "bohr"
+
+[[coordinates]]
+name = "r1"
+unit = "bohr"
+
+[[coordinates]]
+name = "r2"
+unit = "bohr"
+
+[[coordinates]]
+name = "alpha"
+unit = "rad"
+
+[[atoms]]
+label = "O"
+position = [0, 0, 0]
+
+[[atoms]]
+label = "H1"
+position = ["r1 * sin(alpha / 2)", 0, "r1 * cos(alpha / 2)"]
+
+[[atoms]]
+label = "H2"
+position = ["-r2 * sin(alpha / 2)", 0, "r2 * cos(alpha / 2)"]
+
+[potential]
+energy_unit = "hartree"
+expression = "k * (pow(r1 - 1.8, 2) + pow(r2 - 1.8, 2))"
+parameters = { k = 0.2 }
+"#;
+
+fn error(text: &str) -> DefinitionError {
+    match generate_molecule("molecules/xy2.toml", text) {
+        Ok(_) => panic!("expected an error for:\n{text}"),
+        Err(e) => e,
+    }
+}
+
+/// Replaces `from` (which must occur exactly once) in the good definition.
+fn with(from: &str, to: &str) -> String {
+    assert_eq!(GOOD.matches(from).count(), 1, "`{from}` must occur once");
+    GOOD.replace(from, to)
+}
+
+fn assert_error(e: &DefinitionError, line: usize, column: usize, message: &str, help: &str) {
+    assert_eq!(e.path, "molecules/xy2.toml");
+    assert_eq!(e.message, message, "message of {e:#?}");
+    assert_eq!((e.line, e.column), (line, column), "place of {e:#?}");
+    assert!(e.help.contains(help), "help `{}` should contain `{help}`", e.help);
+    let shown = e.to_string();
+    assert!(shown.contains(&format!("--> molecules/xy2.toml:{line}:{column}")), "{shown}");
+    assert!(shown.starts_with(&format!("error: {message}")), "{shown}");
+}
+
+#[test]
+fn the_good_definition_generates() {
+    let m = generate_molecule("molecules/xy2.toml", GOOD).expect("valid");
+    assert_eq!((m.atoms, m.coordinates), (3, 3));
+    assert!(m.source.starts_with("// @generated from molecules/xy2.toml"));
+}
+
+#[test]
+fn toml_syntax_error() {
+    let e = error(&with("label = \"O\"", "label = \"O"));
+    assert_eq!((e.line, e.column), (17, 11), "{e}");
+    assert!(e.message.contains("string"), "{e}");
+    assert!(e.help.contains("TOML"));
+}
+
+#[test]
+fn expression_syntax_error_is_located_in_the_file() {
+    let e = error(&with("\"r1 * sin(alpha / 2)\"", "\"r1 * sin(alpha / )\""));
+    assert_eq!(e.line, 22, "{e}");
+    assert!(e.message.starts_with("syntax error in the position of atom H1"), "{e}");
+    // The column points into the string, past `position = ["`.
+    assert!(e.column > 14, "{e}");
+}
+
+#[test]
+fn unknown_name() {
+    let e = error(&with("\"r1 * sin(alpha / 2)\"", "\"r1 * sin(alph / 2)\""));
+    assert_error(&e, 22, 23, "unknown name `alph` in the position of atom H1", "did you mean `alpha`?");
+    assert!(e.to_string().contains("22 | position = [\"r1 * sin(alph / 2)\""), "{e}");
+}
+
+#[test]
+fn unknown_function() {
+    let e = error(&with("\"r1 * sin(alpha / 2)\"", "\"r1 * sine(alpha / 2)\""));
+    assert_error(&e, 22, 19, "unknown function `sine` in the position of atom H1", "the functions are sin, cos");
+}
+
+#[test]
+fn wrong_argument_count() {
+    let e = error(&with("pow(r1 - 1.8, 2)", "pow(r1 - 1.8)"));
+    assert_error(&e, 30, 20, "`pow` takes 2 arguments but 1 was given in the potential", "pow(base, exponent)");
+}
+
+#[test]
+fn caret_is_not_a_power() {
+    let e = error(&with("pow(r1 - 1.8, 2)", "(r1 - 1.8)^2"));
+    assert_error(&e, 30, 30, "`^` is not a power in the potential", "pow(base, exponent)");
+}
+
+#[test]
+fn duplicate_atom() {
+    let e = error(&with("label = \"H2\"", "label = \"H1\""));
+    assert_error(&e, 25, 9, "duplicate atom `H1`: another atom on line 21 has the same label", "own label");
+}
+
+#[test]
+fn duplicate_coordinate() {
+    let e = error(&with("name = \"r2\"", "name = \"r1\""));
+    assert_error(&e, 9, 8, "duplicate name `r1`: already declared as a coordinate on line 5", "rename");
+}
+
+#[test]
+fn parameter_clashing_with_a_coordinate() {
+    let e = error(&with("parameters = { k = 0.2 }", "parameters = { r1 = 0.2 }"));
+    assert_error(&e, 31, 16, "duplicate name `r1`: already declared as a coordinate on line 5", "rename this parameter");
+}
+
+#[test]
+fn missing_position() {
+    let e = error(&with("position = [0, 0, 0]\n", ""));
+    assert_error(&e, 17, 9, "missing position for atom `O`", "position = [x, y, z]");
+}
+
+#[test]
+fn position_with_two_components() {
+    let e = error(&with("position = [0, 0, 0]", "position = [0, 0]"));
+    assert_error(&e, 18, 12, "the position of atom `O` has 2 components instead of 3", "[x, y, z]");
+}
+
+#[test]
+fn coordinate_that_moves_no_atom() {
+    let text = with("[[atoms]]\nlabel = \"O\"", "[[coordinates]]\nname = \"d\"\nunit = \"bohr\"\n\n[[atoms]]\nlabel = \"O\"");
+    let e = error(&text);
+    assert_error(&e, 17, 8, "no atom position depends on coordinate `d`", "use the coordinate in some atom's position");
+}
+
+#[test]
+fn non_positive_mass() {
+    let e = error(&with("label = \"O\"", "label = \"O\"\nmass = -16.0"));
+    assert_error(&e, 18, 8, "the mass of atom `O` must be positive and finite, got -16", "daltons");
+    let e = error(&with("label = \"O\"", "label = \"O\"\nmass = 0"));
+    assert_eq!(e.message, "the mass of atom `O` must be positive and finite, got 0");
+}
+
+#[test]
+fn non_finite_mass() {
+    let e = error(&with("label = \"O\"", "label = \"O\"\nmass = inf"));
+    assert_error(&e, 18, 8, "the mass of atom `O` must be positive and finite, got inf", "daltons");
+    let e = error(&with("label = \"O\"", "label = \"O\"\nmass = nan"));
+    assert_eq!(e.message, "the mass of atom `O` must be positive and finite, got NaN");
+}
+
+#[test]
+fn unknown_units() {
+    let e = error(&with("unit = \"rad\"", "unit = \"radian\""));
+    assert_error(&e, 14, 8, "unknown unit `radian` for coordinate `alpha`", "\"rad\", \"deg\"");
+    let e = error(&with("length_unit = \"bohr\"", "length_unit = \"nm\""));
+    assert_error(&e, 2, 15, "unknown length unit `nm`", "\"bohr\", \"angstrom\"");
+    let e = error(&with("energy_unit = \"hartree\"", "energy_unit = \"kJ/mol\""));
+    assert_error(&e, 29, 15, "unknown energy unit `kJ/mol`", "\"cm-1\", \"eV\"");
+}
+
+#[test]
+fn misspelt_key() {
+    let e = error(&with("position = [0, 0, 0]", "postion = [0, 0, 0]"));
+    assert_eq!(e.line, 18, "{e}");
+    assert!(e.message.starts_with("unknown field `postion`"), "{e}");
+    assert!(e.help.contains("check the spelling"));
+}
+
+#[test]
+fn unknown_element() {
+    let e = error(&with("label = \"O\"", "label = \"Q1\""));
+    assert_error(&e, 17, 9, "cannot tell the element of atom `Q1` from its label", "element = \"X\"");
+    let e = error(&with("label = \"O\"", "label = \"O\"\nelement = \"Oo\""));
+    assert_error(&e, 18, 11, "unknown element `Oo`", "chemical symbol");
+}
+
+#[test]
+fn name_must_match_the_file() {
+    let e = error(&with("name = \"xy2\"", "name = \"water\""));
+    assert_error(&e, 1, 8, "molecule name `water` does not match the file name `xy2.toml`", "rename the file");
+}
+
+#[test]
+fn reserved_and_invalid_names() {
+    let e = error(&with("name = \"alpha\"", "name = \"sin\""));
+    assert_error(&e, 13, 8, "the coordinate name `sin` is reserved", "cannot be redefined");
+    let e = error(&with("name = \"alpha\"", "name = \"2a\""));
+    assert_error(&e, 13, 8, "`2a` is not a valid coordinate name", "start with a letter");
+}
+
+#[test]
+fn constants_resolve_in_any_order_but_not_in_cycles() {
+    let text = with("length_unit = \"bohr\"", "length_unit = \"bohr\"\n[constants]\nb = \"2 * a\"\na = 0.5");
+    generate_molecule("molecules/xy2.toml", &text).expect("b uses a, defined later");
+    let text = with("length_unit = \"bohr\"", "length_unit = \"bohr\"\n[constants]\nb = \"2 * a\"\na = \"b\"");
+    let e = error(&text);
+    assert!(e.message.contains("defined in terms of itself"), "{e}");
+}
+
+#[test]
+fn too_few_atoms() {
+    let start = GOOD.find("[[atoms]]\nlabel = \"H1\"").unwrap();
+    let end = GOOD.find("[potential]").unwrap();
+    let text = format!("{}{}", &GOOD[..start], &GOOD[end..]);
+    let e = error(&text.replace("r1 - 1.8", "0").replace("r2 - 1.8", "0"));
+    assert_eq!(e.message, "a molecule needs at least 2 atoms, this one has 1");
+}
+
+#[test]
+fn every_error_of_a_directory_is_reported() {
+    let dir = std::env::temp_dir().join(format!("rovib-codegen-errors-{}", std::process::id()));
+    let out = dir.join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(dir.join("xy2.toml"), with("\"r1 * sin(alpha / 2)\"", "\"r1 * sin(alph / 2)\"")).unwrap();
+    std::fs::write(dir.join("zz.toml"), GOOD.replace("xy2", "zz").replace("\"hartree\"", "\"joule\"")).unwrap();
+    let errors = rovib_codegen::generate(&dir, "molecules", &out).unwrap_err();
+    let messages: Vec<&str> = errors.iter().map(|e| e.message.as_str()).collect();
+    assert_eq!(messages, ["unknown name `alph` in the position of atom H1", "unknown energy unit `joule`"]);
+    assert_eq!(errors[1].path, "molecules/zz.toml");
+    assert!(std::fs::read_dir(&out).unwrap().next().is_none(), "nothing is written when a definition is bad");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,69 @@
+//! Helpers shared by the workspace's integration tests: random states near a molecule's
+//! reference geometry, finite differences, and matrix comparisons.
+#![allow(dead_code)]
+
+use rovib::runtime::Molecule;
+use rovib::runtime::nalgebra::{SMatrix, SVector};
+use rovib::runtime::units::CoordinateUnit;
+
+/// A small deterministic generator (SplitMix64), so tests need no RNG dependency and every run
+/// sees the same points.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+    }
+}
+
+/// A random geometry near the reference: lengths within ±8 %, angles within ±0.15 rad.
+pub fn random_q<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, rng: &mut Rng) -> SVector<f64, N> {
+    let reference = m.reference_geometry().unwrap_or_else(|| panic!("{} has no reference geometry", m.name()));
+    let coords = m.coordinates();
+    SVector::from_fn(|k, _| match coords[k].unit {
+        CoordinateUnit::Length(_) => reference[k] * rng.uniform(0.92, 1.08),
+        CoordinateUnit::Angle(_) => reference[k] + rng.uniform(-0.15, 0.15),
+    })
+}
+
+/// The step for central differences along coordinate k.
+pub fn fd_step<const N: usize>(q: &SVector<f64, N>, k: usize) -> f64 {
+    1e-3 * q[k].abs().max(1.0)
+}
+
+/// Fourth-order central difference of a vector-valued function along q_k.
+pub fn central_difference<const N: usize, const R: usize, const C: usize>(
+    q: &SVector<f64, N>,
+    k: usize,
+    mut f: impl FnMut(&SVector<f64, N>) -> SMatrix<f64, R, C>,
+) -> SMatrix<f64, R, C> {
+    let h = fd_step(q, k);
+    let at = |t: f64, f: &mut dyn FnMut(&SVector<f64, N>) -> SMatrix<f64, R, C>| {
+        let mut x = *q;
+        x[k] += t;
+        f(&x)
+    };
+    let (m2, m1, p1, p2) = (at(-2.0 * h, &mut f), at(-h, &mut f), at(h, &mut f), at(2.0 * h, &mut f));
+    (m2 - 8.0 * m1 + 8.0 * p1 - p2) / (12.0 * h)
+}
+
+/// max |a − b| / max(max |b|, floor): a norm-wise relative difference.
+pub fn rel_diff<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>, b: &SMatrix<f64, R, C>, floor: f64) -> f64 {
+    if R * C == 0 {
+        return 0.0;
+    }
+    (a - b).amax() / b.amax().max(floor)
+}

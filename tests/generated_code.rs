@@ -1,0 +1,235 @@
+//! The generated code of every shipped molecule against independent evaluations: the kinetic
+//! matrices recomputed from the generated positions with finite-difference jacobians, every
+//! q-derivative against finite differences, and the centre of mass at the origin.
+
+mod common;
+
+use common::{Rng, central_difference, random_q, rel_diff};
+use rovib::molecules;
+use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
+
+const POINTS: usize = 5;
+
+/// Runs `check` on every shipped molecule.
+fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
+    assert!(!molecules::NAMES.is_empty());
+    for name in molecules::NAMES {
+        molecules::visit(name, check).expect("every listed molecule can be visited");
+    }
+}
+
+#[derive(Copy, Clone)]
+struct CentreOfMass;
+impl MoleculeVisitor for CentreOfMass {
+    type Output = ();
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
+        let masses = m.masses();
+        let total: f64 = masses.iter().sum();
+        let mut rng = Rng::new(1);
+        for _ in 0..POINTS {
+            let q = random_q(&m, &mut rng);
+            let mut r = SMatrix::<f64, 3, NA>::zeros();
+            m.positions(&q, &mut r);
+            let com: Vector3<f64> = (0..NA).map(|i| r.column(i) * masses[i]).sum::<Vector3<f64>>() / total;
+            let size = r.amax();
+            assert!(com.amax() <= 1e-14 * size, "{}: centre of mass {com:?}", m.name());
+        }
+    }
+}
+
+#[test]
+fn centre_of_mass_is_at_the_origin() {
+    for_each_molecule(CentreOfMass);
+}
+
+#[derive(Copy, Clone)]
+struct PositionsJacobian;
+impl MoleculeVisitor for PositionsJacobian {
+    type Output = ();
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
+        let mut rng = Rng::new(2);
+        for _ in 0..POINTS {
+            let q = random_q(&m, &mut rng);
+            let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
+            m.positions_jacobian(&q, &mut dr);
+            for k in 0..N {
+                let fd = central_difference(&q, k, |x| {
+                    let mut r = SMatrix::<f64, 3, NA>::zeros();
+                    m.positions(x, &mut r);
+                    r
+                });
+                let e = rel_diff(&dr[k], &fd, 1e-300);
+                assert!(e < 1e-8, "{}: ∂R/∂q_{k} off by {e:e}", m.name());
+            }
+        }
+    }
+}
+
+#[test]
+fn position_jacobian_matches_finite_differences() {
+    for_each_molecule(PositionsJacobian);
+}
+
+/// a, A and I computed directly from the generated positions, with the jacobian by finite
+/// differences: no generated kinetic code involved.
+fn kinetic_by_hand<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, q: &SVector<f64, N>) -> KineticMatrices<N> {
+    let masses = m.masses();
+    let mut r = SMatrix::<f64, 3, NA>::zeros();
+    m.positions(q, &mut r);
+    let dr: Vec<SMatrix<f64, 3, NA>> = (0..N)
+        .map(|k| {
+            central_difference(q, k, |x| {
+                let mut r = SMatrix::<f64, 3, NA>::zeros();
+                m.positions(x, &mut r);
+                r
+            })
+        })
+        .collect();
+    let mut out = KineticMatrices::<N>::default();
+    for i in 0..NA {
+        let ri: Vector3<f64> = r.column(i).into();
+        out.inertia += masses[i] * (Matrix3::identity() * ri.norm_squared() - ri * ri.transpose());
+        for j in 0..N {
+            let dj: Vector3<f64> = dr[j].column(i).into();
+            for k in 0..N {
+                let dk: Vector3<f64> = dr[k].column(i).into();
+                out.a[(j, k)] += masses[i] * dj.dot(&dk);
+            }
+            let c = ri.cross(&dj);
+            for axis in 0..3 {
+                out.coriolis[(axis, j)] += masses[i] * c[axis];
+            }
+        }
+    }
+    out
+}
+
+#[derive(Copy, Clone)]
+struct KineticMatchesPositions;
+impl MoleculeVisitor for KineticMatchesPositions {
+    type Output = ();
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
+        let mut rng = Rng::new(3);
+        for _ in 0..POINTS {
+            let q = random_q(&m, &mut rng);
+            let mut k = KineticMatrices::<N>::default();
+            m.kinetic(&q, &mut k);
+            let hand = kinetic_by_hand(&m, &q);
+            let name = m.name();
+            let e = rel_diff(&k.a, &hand.a, 1e-300);
+            assert!(e < 1e-8, "{name}: a off by {e:e}");
+            let e = rel_diff(&k.coriolis, &hand.coriolis, hand.inertia.amax() * 1e-12);
+            assert!(e < 1e-8, "{name}: A off by {e:e}");
+            let e = rel_diff(&k.inertia, &hand.inertia, 1e-300);
+            assert!(e < 1e-13, "{name}: I off by {e:e}");
+        }
+    }
+}
+
+#[test]
+fn kinetic_matrices_match_a_direct_evaluation_from_the_positions() {
+    for_each_molecule(KineticMatchesPositions);
+}
+
+#[derive(Copy, Clone)]
+struct KineticJacobian;
+impl MoleculeVisitor for KineticJacobian {
+    type Output = ();
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
+        let mut rng = Rng::new(4);
+        let mut worst = 0f64;
+        for _ in 0..POINTS {
+            let q = random_q(&m, &mut rng);
+            let mut dk = [KineticMatrices::<N>::default(); N];
+            m.kinetic_jacobian(&q, &mut dk);
+            let mut k0 = KineticMatrices::<N>::default();
+            m.kinetic(&q, &mut k0);
+            for l in 0..N {
+                let eval = |x: &SVector<f64, N>| {
+                    let mut k = KineticMatrices::<N>::default();
+                    m.kinetic(x, &mut k);
+                    k
+                };
+                let fd_a = central_difference(&q, l, |x| eval(x).a);
+                let fd_c = central_difference(&q, l, |x| eval(x).coriolis);
+                let fd_i = central_difference(&q, l, |x| eval(x).inertia);
+                // Relative to the size of the matrix being differentiated, so that an entry
+                // whose derivative happens to be tiny is not held to an impossible standard.
+                let e = [
+                    rel_diff(&dk[l].a, &fd_a, k0.a.amax()),
+                    rel_diff(&dk[l].coriolis, &fd_c, k0.inertia.amax()),
+                    rel_diff(&dk[l].inertia, &fd_i, k0.inertia.amax()),
+                ];
+                worst = worst.max(e.into_iter().fold(0.0, f64::max));
+            }
+        }
+        assert!(worst < 1e-9, "{}: ∂(a, A, I)/∂q off by {worst:e}", m.name());
+    }
+}
+
+#[test]
+fn kinetic_derivatives_match_finite_differences() {
+    for_each_molecule(KineticJacobian);
+}
+
+#[derive(Copy, Clone)]
+struct EnergyGradient;
+impl MoleculeVisitor for EnergyGradient {
+    type Output = ();
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
+        let mut rng = Rng::new(5);
+        for _ in 0..POINTS {
+            let q = random_q(&m, &mut rng);
+            let omega = Vector3::from_fn(|_, _| rng.uniform(-1e-3, 1e-3));
+            let qdot = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-1e-3, 1e-3));
+            // T = ½ vᵀ M v from the kinetic matrices, v = (ω, q̇).
+            let t_of = |x: &SVector<f64, N>| {
+                let mut k = KineticMatrices::<N>::default();
+                m.kinetic(x, &mut k);
+                let t = 0.5 * omega.dot(&(k.inertia * omega))
+                    + omega.dot(&(k.coriolis * qdot))
+                    + 0.5 * qdot.dot(&(k.a * qdot));
+                SMatrix::<f64, 1, 1>::new(t)
+            };
+            let mut grad = SVector::<f64, N>::zeros();
+            let t = m.kinetic_energy_gradient(&q, &omega, &qdot, &mut grad);
+            let t_ref = t_of(&q)[0];
+            assert!((t - t_ref).abs() <= 1e-13 * t_ref.abs(), "{}: T = {t} vs {t_ref}", m.name());
+            for k in 0..N {
+                let fd = central_difference(&q, k, t_of)[0];
+                assert!((grad[k] - fd).abs() <= 1e-8 * t_ref.abs(), "{}: ∂T/∂q_{k} = {} vs {fd}", m.name(), grad[k]);
+            }
+        }
+    }
+}
+
+#[test]
+fn kinetic_energy_gradient_matches_finite_differences() {
+    for_each_molecule(EnergyGradient);
+}
+
+#[derive(Copy, Clone)]
+struct PotentialGradient;
+impl MoleculeVisitor for PotentialGradient {
+    type Output = ();
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
+        let mut rng = Rng::new(6);
+        for _ in 0..POINTS {
+            let q = random_q(&m, &mut rng);
+            let mut grad = SVector::<f64, N>::zeros();
+            let u = m.potential_gradient(&q, &mut grad);
+            assert_eq!(u, m.potential(&q), "the two entry points compute the same U");
+            let scale = grad.amax().max(1e-6);
+            for k in 0..N {
+                let fd = central_difference(&q, k, |x| SMatrix::<f64, 1, 1>::new(m.potential(x)))[0];
+                assert!((grad[k] - fd).abs() <= 1e-8 * scale, "{}: ∂U/∂q_{k} = {} vs {fd}", m.name(), grad[k]);
+            }
+        }
+    }
+}
+
+#[test]
+fn potential_gradient_matches_finite_differences() {
+    for_each_molecule(PotentialGradient);
+}
