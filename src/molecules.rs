@@ -10,7 +10,6 @@
     clippy::excessive_precision,
     clippy::let_and_return,
     clippy::neg_multiply,
-    clippy::double_neg,
     clippy::unreadable_literal,
     clippy::too_many_lines,
     clippy::similar_names,

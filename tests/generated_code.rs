@@ -73,7 +73,10 @@ fn position_jacobian_matches_finite_differences() {
 
 /// a, A and I computed directly from the generated positions, with the jacobian by finite
 /// differences: no generated kinetic code involved.
-fn kinetic_by_hand<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, q: &SVector<f64, N>) -> KineticMatrices<N> {
+fn kinetic_by_hand<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    q: &SVector<f64, N>,
+) -> KineticMatrices<N> {
     let masses = m.masses();
     let mut r = SMatrix::<f64, 3, NA>::zeros();
     m.positions(q, &mut r);

@@ -264,8 +264,7 @@ impl Source<'_> {
         }
         let offset = if content == value {
             let line_start: usize = content.split_inclusive('\n').take(e.line - 1).map(str::len).sum();
-            let in_line: usize =
-                content[line_start..].chars().take(e.column).map(char::len_utf8).sum();
+            let in_line: usize = content[line_start..].chars().take(e.column).map(char::len_utf8).sum();
             content_start + line_start + in_line
         } else {
             span.start
@@ -341,7 +340,9 @@ impl Validator<'_> {
             return Err(self.src.error(
                 name.span(),
                 format!("duplicate name `{n}`: already declared as a {other} on line {line}"),
-                format!("rename this {what} or the {other}; every coordinate, constant and parameter needs its own name"),
+                format!(
+                    "rename this {what} or the {other}; every coordinate, constant and parameter needs its own name"
+                ),
             ));
         }
         self.declared.insert(n.clone(), (what, name.span()));
@@ -390,11 +391,7 @@ impl Validator<'_> {
         let length_unit = match &raw.length_unit {
             None => LengthUnit::Bohr,
             Some(u) => LengthUnit::parse(u.get_ref()).ok_or_else(|| {
-                src.error(
-                    u.span(),
-                    format!("unknown length unit `{}`", u.get_ref()),
-                    unit_help(LengthUnit::SPELLINGS),
-                )
+                src.error(u.span(), format!("unknown length unit `{}`", u.get_ref()), unit_help(LengthUnit::SPELLINGS))
             })?,
         };
 
@@ -522,7 +519,11 @@ impl Validator<'_> {
         for (k, v) in &pot.parameters {
             self.declare(k, "parameter")?;
             if !v.get_ref().is_finite() {
-                return Err(src.error(v.span(), format!("non-finite value of parameter `{}`", k.get_ref()), "write a finite number"));
+                return Err(src.error(
+                    v.span(),
+                    format!("non-finite value of parameter `{}`", k.get_ref()),
+                    "write a finite number",
+                ));
             }
             let c = self.graph.constant(*v.get_ref());
             self.names.insert(k.get_ref().clone(), c);

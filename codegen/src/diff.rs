@@ -31,8 +31,7 @@ impl Differentiator {
                 stack.pop();
                 continue;
             }
-            let pending: Vec<ExprId> =
-                g.node(top).children().filter(|c| !self.memo.contains_key(&(*c, var))).collect();
+            let pending: Vec<ExprId> = g.node(top).children().filter(|c| !self.memo.contains_key(&(*c, var))).collect();
             if pending.is_empty() {
                 let d = self.rule(g, top, var);
                 self.memo.insert((top, var), d);

@@ -23,10 +23,7 @@ pub const ELEMENTS: &[Element] = &[
     Element { symbol: "B", isotopes: &[(11, 11.009_305_36), (10, 10.012_936_95)] },
     Element { symbol: "C", isotopes: &[(12, 12.0), (13, 13.003_354_835_07)] },
     Element { symbol: "N", isotopes: &[(14, 14.003_074_004_43), (15, 15.000_108_898_88)] },
-    Element {
-        symbol: "O",
-        isotopes: &[(16, 15.994_914_619_57), (17, 16.999_131_756_50), (18, 17.999_159_612_86)],
-    },
+    Element { symbol: "O", isotopes: &[(16, 15.994_914_619_57), (17, 16.999_131_756_50), (18, 17.999_159_612_86)] },
     Element { symbol: "F", isotopes: &[(19, 18.998_403_162_73)] },
     Element { symbol: "Ne", isotopes: &[(20, 19.992_440_176_2), (22, 21.991_385_114)] },
     Element { symbol: "Na", isotopes: &[(23, 22.989_769_282_0)] },

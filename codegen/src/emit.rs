@@ -312,10 +312,14 @@ pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -
     let mut k = 0usize;
     for group in &spec.groups {
         let target = &group.target;
-        let values: Vec<ExprId> = group.entries.iter().map(|_| {
-            k += 1;
-            lowered_roots[k - 1]
-        }).collect();
+        let values: Vec<ExprId> = group
+            .entries
+            .iter()
+            .map(|_| {
+                k += 1;
+                lowered_roots[k - 1]
+            })
+            .collect();
         outputs += values.len();
         let zeros = values.iter().filter(|&&v| lg.is_zero(v)).count();
         zero_outputs += zeros;

@@ -243,10 +243,7 @@ impl Graph {
             return id;
         }
         let id = ExprId(u32::try_from(self.nodes.len()).expect("expression graph overflow"));
-        debug_assert!(
-            node.children().all(|c| c < id),
-            "children must come before parents: {node:?} at {id:?}"
-        );
+        debug_assert!(node.children().all(|c| c < id), "children must come before parents: {node:?} at {id:?}");
         self.nodes.push(node);
         self.memo.insert(node, id);
         id

@@ -64,9 +64,8 @@ pub fn build(def: &mut Definition) -> KineticExprs {
     let mut diff = Differentiator::new();
 
     let positions = centred(g, &def.positions, &masses);
-    let jacobian: Vec<Vec<[ExprId; 3]>> = (0..n)
-        .map(|k| positions.iter().map(|r| r.map(|c| diff.derivative(g, c, k as u32))).collect())
-        .collect();
+    let jacobian: Vec<Vec<[ExprId; 3]>> =
+        (0..n).map(|k| positions.iter().map(|r| r.map(|c| diff.derivative(g, c, k as u32))).collect()).collect();
 
     let kinetic = kinetic_set(g, &masses, &positions, &jacobian);
     let kinetic_jacobian = (0..n)

@@ -239,12 +239,7 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
             doc: "dr[k] = ∂R/∂q_k, bohr per unit of q_k.".into(),
             signature: quote!(fn positions_jacobian(&self, q: #q_ty, dr: &mut [SMatrix<f64, 3, #na>; #n])),
             inputs: q_inputs.clone(),
-            groups: e
-                .jacobian
-                .iter()
-                .enumerate()
-                .map(|(k, rows)| positions_group(ix(quote!(dr), k), rows))
-                .collect(),
+            groups: e.jacobian.iter().enumerate().map(|(k, rows)| positions_group(ix(quote!(dr), k), rows)).collect(),
             ret: None,
         },
         FunctionSpec {
@@ -356,11 +351,8 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
     unit_names.sort_unstable();
     unit_names.dedup();
     let unit_idents = unit_names.iter().map(|n| Ident::new(n, Span::call_site()));
-    let unit_imports = if unit_names.is_empty() {
-        quote!()
-    } else {
-        quote!(use ::rovib_runtime::units::{#(#unit_idents),*};)
-    };
+    let unit_imports =
+        if unit_names.is_empty() { quote!() } else { quote!(use ::rovib_runtime::units::{#(#unit_idents),*};) };
     let items = quote! {
         use ::rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
         #unit_imports
@@ -425,7 +417,9 @@ pub fn generate(molecules_dir: &Path, display_dir: &str, out_dir: &Path) -> Resu
         source_line: None,
     };
     let mut inputs: Vec<PathBuf> = std::fs::read_dir(molecules_dir)
-        .map_err(|e| vec![io_error(display_dir.to_owned(), e, "create the molecules directory with one NAME.toml per molecule")])?
+        .map_err(|e| {
+            vec![io_error(display_dir.to_owned(), e, "create the molecules directory with one NAME.toml per molecule")]
+        })?
         .filter_map(|entry| entry.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
         .collect();

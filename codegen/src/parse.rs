@@ -61,8 +61,7 @@ pub fn parse_expression(graph: &mut Graph, text: &str, scope: &Scope<'_>) -> Res
         let help = if text.contains("**") {
             "write powers as `pow(x, 2)`; `**` is not an operator here".to_owned()
         } else {
-            "expressions use numbers, names, + - * /, parentheses and calls such as sin(x) or pow(x, 2)"
-                .to_owned()
+            "expressions use numbers, names, + - * /, parentheses and calls such as sin(x) or pow(x, 2)".to_owned()
         };
         ExprError::at(e.span(), format!("syntax error in {}: {e}", scope.context), help)
     })?;
@@ -259,12 +258,7 @@ fn function_help() -> String {
 
 /// The known name closest to `name` by edit distance, if it is close enough to be a typo.
 pub fn closest<'a>(name: &str, known: &[&'a str]) -> Option<&'a str> {
-    known
-        .iter()
-        .map(|k| (edit_distance(name, k), *k))
-        .filter(|(d, k)| *d <= 2.max(k.len() / 3))
-        .min()
-        .map(|(_, k)| k)
+    known.iter().map(|k| (edit_distance(name, k), *k)).filter(|(d, k)| *d <= 2.max(k.len() / 3)).min().map(|(_, k)| k)
 }
 
 fn edit_distance(a: &str, b: &str) -> usize {

@@ -124,7 +124,13 @@ fn duplicate_coordinate() {
 #[test]
 fn parameter_clashing_with_a_coordinate() {
     let e = error(&with("parameters = { k = 0.2 }", "parameters = { r1 = 0.2 }"));
-    assert_error(&e, 31, 16, "duplicate name `r1`: already declared as a coordinate on line 5", "rename this parameter");
+    assert_error(
+        &e,
+        31,
+        16,
+        "duplicate name `r1`: already declared as a coordinate on line 5",
+        "rename this parameter",
+    );
 }
 
 #[test]
@@ -141,7 +147,8 @@ fn position_with_two_components() {
 
 #[test]
 fn coordinate_that_moves_no_atom() {
-    let text = with("[[atoms]]\nlabel = \"O\"", "[[coordinates]]\nname = \"d\"\nunit = \"bohr\"\n\n[[atoms]]\nlabel = \"O\"");
+    let text =
+        with("[[atoms]]\nlabel = \"O\"", "[[coordinates]]\nname = \"d\"\nunit = \"bohr\"\n\n[[atoms]]\nlabel = \"O\"");
     let e = error(&text);
     assert_error(&e, 17, 8, "no atom position depends on coordinate `d`", "use the coordinate in some atom's position");
 }

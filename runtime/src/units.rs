@@ -76,11 +76,8 @@ pub enum AngleUnit {
 
 impl AngleUnit {
     /// Spellings accepted in files.
-    pub const SPELLINGS: &'static [(&'static str, AngleUnit)] = &[
-        ("rad", AngleUnit::Rad),
-        ("deg", AngleUnit::Deg),
-        ("degree", AngleUnit::Deg),
-    ];
+    pub const SPELLINGS: &'static [(&'static str, AngleUnit)] =
+        &[("rad", AngleUnit::Rad), ("deg", AngleUnit::Deg), ("degree", AngleUnit::Deg)];
 
     /// Parses a unit as written in a file.
     pub fn parse(s: &str) -> Option<Self> {
@@ -164,9 +161,7 @@ pub enum CoordinateUnit {
 impl CoordinateUnit {
     /// Parses any length or angle unit.
     pub fn parse(s: &str) -> Option<Self> {
-        LengthUnit::parse(s)
-            .map(CoordinateUnit::Length)
-            .or_else(|| AngleUnit::parse(s).map(CoordinateUnit::Angle))
+        LengthUnit::parse(s).map(CoordinateUnit::Length).or_else(|| AngleUnit::parse(s).map(CoordinateUnit::Angle))
     }
 
     /// How many atomic units (bohr or rad) one of this unit is.

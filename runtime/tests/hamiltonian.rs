@@ -7,9 +7,9 @@ mod common;
 
 use common::{RigidTop, Rng, Water, derivative, random_euler, random_vector, random_water_q};
 use rovib_runtime::hamiltonian::{
-    self, Evaluation, HamiltonianError, HamiltonianSystem, InverseMetric, MetricBlock, PhaseState,
-    WMatrices, Workspace, angular_velocity_matrix, body_angular_momentum,
-    euler_momenta_from_angular_momentum, rotation_matrix, velocities, w_matrix,
+    self, Evaluation, HamiltonianError, HamiltonianSystem, InverseMetric, MetricBlock, PhaseState, WMatrices,
+    Workspace, angular_velocity_matrix, body_angular_momentum, euler_momenta_from_angular_momentum, rotation_matrix,
+    velocities, w_matrix,
 };
 use rovib_runtime::integrate::OdeSystem;
 use rovib_runtime::molecule::{Atom, Coordinate, KineticMatrices, Molecule};
@@ -26,10 +26,7 @@ fn water_state(rng: &mut Rng) -> PhaseState<3> {
     }
 }
 
-fn rhs_of<M: Molecule<N, NA>, const N: usize, const NA: usize>(
-    molecule: &M,
-    state: &PhaseState<N>,
-) -> PhaseState<N> {
+fn rhs_of<M: Molecule<N, NA>, const N: usize, const NA: usize>(molecule: &M, state: &PhaseState<N>) -> PhaseState<N> {
     let mut ws = Workspace::default();
     hamiltonian::rhs(molecule, state, &mut ws).unwrap()
 }
@@ -41,10 +38,7 @@ fn flat<const N: usize>(s: &PhaseState<N>) -> Vec<f64> {
 }
 
 /// Hamilton's equations by finite differences of H in each of the 2N + 6 flat components.
-fn fd_rhs<M: Molecule<N, NA>, const N: usize, const NA: usize>(
-    molecule: &M,
-    state: &PhaseState<N>,
-) -> PhaseState<N> {
+fn fd_rhs<M: Molecule<N, NA>, const N: usize, const NA: usize>(molecule: &M, state: &PhaseState<N>) -> PhaseState<N> {
     let y0 = flat(state);
     let dh: Vec<f64> = (0..y0.len())
         .map(|i| {
@@ -70,12 +64,7 @@ fn fd_rhs<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         })
         .collect();
     let grad = PhaseState::<N>::read_from(&dh).unwrap();
-    PhaseState {
-        q: grad.p,
-        p: -grad.q,
-        euler: grad.pe,
-        pe: -grad.euler,
-    }
+    PhaseState { q: grad.p, p: -grad.q, euler: grad.pe, pe: -grad.euler }
 }
 
 /// Largest `|x_i − y_i| / max(|y_i|, 1e-3 ‖y_block‖)` over the four blocks of a state, so that a
@@ -123,10 +112,7 @@ fn rhs_equals_finite_differences_of_h_for_the_triatomic() {
         let analytic = rhs_of(&Water, &state);
         let fd = fd_rhs(&Water, &state);
         let err = worst_relative(&fd, &analytic);
-        assert!(
-            err < 1e-8,
-            "state {state:?}: relative error {err:e}\n{analytic:?}\n{fd:?}"
-        );
+        assert!(err < 1e-8, "state {state:?}: relative error {err:e}\n{analytic:?}\n{fd:?}");
         worst = worst.max(err);
     }
     println!("triatomic: worst relative error rhs vs finite differences of H = {worst:.2e}");
@@ -181,11 +167,7 @@ fn momentum_gradient_agrees_with_the_kinetic_energy_gradient() {
         // And T = H − U.
         let h = hamiltonian::hamiltonian(&Water, &state).unwrap();
         let u = Water.potential(&state.q);
-        assert!(
-            ((h - u) - t).abs() < 1e-13 * t.abs(),
-            "T = {t}, H − U = {}",
-            h - u
-        );
+        assert!(((h - u) - t).abs() < 1e-13 * t.abs(), "T = {t}, H − U = {}", h - u);
     }
 }
 
@@ -231,9 +213,7 @@ fn short_trajectory_conserves_energy() {
     assert_eq!(y[2 * 3 + 3], state.pe[0]);
     // So is |J| (the body-frame angular momentum only rotates).
     let j0 = body_angular_momentum(&state).unwrap().norm();
-    let j1 = body_angular_momentum(&PhaseState::<3>::read_from(&y).unwrap())
-        .unwrap()
-        .norm();
+    let j1 = body_angular_momentum(&PhaseState::<3>::read_from(&y).unwrap()).unwrap().norm();
     assert!((j1 - j0).abs() < 1e-7 * j0, "|J| {j0} → {j1}");
 }
 
@@ -251,14 +231,11 @@ fn g_blocks_invert_the_kinetic_metric() {
         let mut inverse = SMatrix::<f64, 6, 6>::zeros();
         full.fixed_view_mut::<3, 3>(0, 0).copy_from(&k.inertia);
         full.fixed_view_mut::<3, 3>(0, 3).copy_from(&k.coriolis);
-        full.fixed_view_mut::<3, 3>(3, 0)
-            .copy_from(&k.coriolis.transpose());
+        full.fixed_view_mut::<3, 3>(3, 0).copy_from(&k.coriolis.transpose());
         full.fixed_view_mut::<3, 3>(3, 3).copy_from(&k.a);
         inverse.fixed_view_mut::<3, 3>(0, 0).copy_from(&g.g11);
         inverse.fixed_view_mut::<3, 3>(0, 3).copy_from(&g.g12);
-        inverse
-            .fixed_view_mut::<3, 3>(3, 0)
-            .copy_from(&g.g12.transpose());
+        inverse.fixed_view_mut::<3, 3>(3, 0).copy_from(&g.g12.transpose());
         inverse.fixed_view_mut::<3, 3>(3, 3).copy_from(&g.g22);
         let err = max_abs(&(full * inverse - SMatrix::<f64, 6, 6>::identity()));
         assert!(err < 1e-12, "q = {q:?}: ‖M G − 1‖_max = {err:e}");
@@ -276,13 +253,9 @@ fn g_blocks_invert_the_kinetic_metric() {
 fn g22_is_wilsons_g_matrix_of_the_bent_triatomic() {
     let (mx, my) = (1.0 / Water::m_x(), 1.0 / Water::m_y());
     let mut worst: f64 = 0.0;
-    for (r1, r2, alpha) in [
-        (Water::RE, Water::RE, Water::ALPHA_E),
-        (1.6, 2.1, 1.3),
-        (2.0, 1.7, 2.6),
-        (1.9, 1.5, 0.9),
-        (1.75, 1.85, 2.95),
-    ] {
+    for (r1, r2, alpha) in
+        [(Water::RE, Water::RE, Water::ALPHA_E), (1.6, 2.1, 1.3), (2.0, 1.7, 2.6), (1.9, 1.5, 0.9), (1.75, 1.85, 2.95)]
+    {
         let q = SVector::<f64, 3>::new(r1, r2, alpha);
         let (s, c) = alpha.sin_cos();
         #[rustfmt::skip]
@@ -296,10 +269,7 @@ fn g22_is_wilsons_g_matrix_of_the_bent_triatomic() {
         for i in 0..3 {
             for j in 0..3 {
                 let err = (g22[(i, j)] - wilson[(i, j)]).abs() / wilson[(i, j)].abs();
-                assert!(
-                    err < 1e-12,
-                    "q = {q:?}, G[{i}][{j}]: relative error {err:e}"
-                );
+                assert!(err < 1e-12, "q = {q:?}, G[{i}][{j}]: relative error {err:e}");
                 worst = worst.max(err);
             }
         }
@@ -337,9 +307,7 @@ fn g_derivatives_equal_finite_differences_of_g() {
             check(dg.g22.as_slice(), &|i, x| g_at(x).g22.as_slice()[i]);
         }
     }
-    println!(
-        "∂G/∂q: worst error vs finite differences (relative to the block's largest entry) = {worst:.2e}"
-    );
+    println!("∂G/∂q: worst error vs finite differences (relative to the block's largest entry) = {worst:.2e}");
 }
 
 #[test]
@@ -372,9 +340,7 @@ fn metric_errors_name_the_matrix() {
     k.coriolis[1] = f64::NAN;
     assert_eq!(
         InverseMetric::new(&k, &q).unwrap_err(),
-        HamiltonianError::NonFinite {
-            quantity: "kinetic matrices a, A, I"
-        }
+        HamiltonianError::NonFinite { quantity: "kinetic matrices a, A, I" }
     );
 }
 
@@ -411,10 +377,7 @@ fn w_derivatives_equal_finite_differences() {
                 );
                 let scale = max_abs(&analytic).max(1.0);
                 let a = analytic.as_slice()[i];
-                assert!(
-                    (fd - a).abs() < 1e-10 * scale,
-                    "{euler:?}, axis {axis}: {a} vs {fd}"
-                );
+                assert!((fd - a).abs() < 1e-10 * scale, "{euler:?}, axis {axis}: {a} vs {fd}");
             }
         }
     }
@@ -431,30 +394,18 @@ fn rotation_matrix_is_consistent_with_the_angular_velocity() {
         let r = rotation_matrix(&euler);
         assert!(max_abs(&(r.transpose() * r - Matrix3::identity())) < 1e-14);
         assert!((r.determinant() - 1.0).abs() < 1e-14);
-        let rdot = Matrix3::from_fn(|i, j| {
-            derivative(|t| rotation_matrix(&(euler + rates * t))[(i, j)], 0.0, 1e-2)
-        });
+        let rdot = Matrix3::from_fn(|i, j| derivative(|t| rotation_matrix(&(euler + rates * t))[(i, j)], 0.0, 1e-2));
         let s = r.transpose() * rdot;
-        assert!(
-            max_abs(&(s + s.transpose())) < 1e-10,
-            "Rᵀ Ṙ is not skew: {s}"
-        );
+        assert!(max_abs(&(s + s.transpose())) < 1e-10, "Rᵀ Ṙ is not skew: {s}");
         let axial = Vector3::new(s[(2, 1)], s[(0, 2)], s[(1, 0)]);
         let omega = angular_velocity_matrix(&euler) * rates;
-        assert!(
-            (axial - omega).norm() < 1e-10 * omega.norm().max(1.0),
-            "{axial} vs {omega}"
-        );
+        assert!((axial - omega).norm() < 1e-10 * omega.norm().max(1.0), "{axial} vs {omega}");
     }
     // The convention itself: R = Rz(φ) Rx(θ) Rz(ψ) maps the body z axis to
     // (sin φ sin θ, −cos φ sin θ, cos θ).
     let (phi, theta) = (0.4, 1.1);
     let z_lab = rotation_matrix(&Vector3::new(phi, theta, 0.7)) * Vector3::z();
-    let expected = Vector3::new(
-        phi.sin() * theta.sin(),
-        -phi.cos() * theta.sin(),
-        theta.cos(),
-    );
+    let expected = Vector3::new(phi.sin() * theta.sin(), -phi.cos() * theta.sin(), theta.cos());
     assert!((z_lab - expected).norm() < 1e-15);
 }
 
@@ -527,14 +478,8 @@ fn gimbal_lock_is_an_euler_error() {
     let mut s = water_state(&mut Rng::new(14));
     for theta in [0.0, PI, -PI, 1e-9] {
         s.euler[1] = theta;
-        assert_eq!(
-            rhs_err(&Water, &s),
-            HamiltonianError::EulerSingular { theta }
-        );
-        assert_eq!(
-            body_angular_momentum(&s).unwrap_err(),
-            HamiltonianError::EulerSingular { theta }
-        );
+        assert_eq!(rhs_err(&Water, &s), HamiltonianError::EulerSingular { theta });
+        assert_eq!(body_angular_momentum(&s).unwrap_err(), HamiltonianError::EulerSingular { theta });
     }
     let msg = HamiltonianError::EulerSingular { theta: 0.0 }.to_string();
     assert!(msg.starts_with("the Euler angle θ = 0 rad"), "{msg}");
@@ -551,13 +496,7 @@ fn singular_geometries_are_metric_errors_naming_the_matrix() {
     ] {
         s.q = q;
         let err = rhs_err(&Water, &s);
-        assert_eq!(
-            err,
-            HamiltonianError::SingularMetric {
-                matrix: MetricBlock::Inertia,
-                q: q.as_slice().to_vec()
-            }
-        );
+        assert_eq!(err, HamiltonianError::SingularMetric { matrix: MetricBlock::Inertia, q: q.as_slice().to_vec() });
         let msg = err.to_string();
         assert!(msg.starts_with("the inertia tensor I is singular"), "{msg}");
     }
@@ -580,17 +519,11 @@ fn non_finite_inputs_are_reported_by_quantity() {
             let mut y = flat(&base);
             y[index] = bad;
             let s = PhaseState::<3>::read_from(&y).unwrap();
-            assert_eq!(
-                rhs_err(&Water, &s),
-                HamiltonianError::NonFinite { quantity }
-            );
+            assert_eq!(rhs_err(&Water, &s), HamiltonianError::NonFinite { quantity });
         }
     }
     assert_eq!(
-        HamiltonianError::NonFinite {
-            quantity: "internal momenta p"
-        }
-        .to_string(),
+        HamiltonianError::NonFinite { quantity: "internal momenta p" }.to_string(),
         "non-finite internal momenta p"
     );
 }
@@ -633,11 +566,7 @@ impl Molecule<3, 3> for BrokenPotential {
         Water.kinetic_energy_gradient(q, omega, qdot, grad)
     }
     fn potential(&self, q: &SVector<f64, 3>) -> f64 {
-        if q[0] > 2.0 {
-            f64::NAN
-        } else {
-            Water.potential(q)
-        }
+        if q[0] > 2.0 { f64::NAN } else { Water.potential(q) }
     }
     fn potential_gradient(&self, q: &SVector<f64, 3>, grad: &mut SVector<f64, 3>) -> f64 {
         let u = Water.potential_gradient(q, grad);
@@ -655,15 +584,11 @@ fn non_finite_molecule_results_are_reported() {
     let mut ws = Workspace::default();
     assert_eq!(
         hamiltonian::rhs(&BrokenPotential, &s, &mut ws).unwrap_err(),
-        HamiltonianError::NonFinite {
-            quantity: "potential gradient ∂U/∂q"
-        }
+        HamiltonianError::NonFinite { quantity: "potential gradient ∂U/∂q" }
     );
     assert_eq!(
         hamiltonian::hamiltonian(&BrokenPotential, &s).unwrap_err(),
-        HamiltonianError::NonFinite {
-            quantity: "potential U(q)"
-        }
+        HamiltonianError::NonFinite { quantity: "potential U(q)" }
     );
     s.q[0] = 1.9;
     assert!(hamiltonian::rhs(&BrokenPotential, &s, &mut ws).is_ok());
@@ -686,19 +611,10 @@ fn flat_layout_is_q_p_angles_momenta() {
     assert_eq!(PhaseState::<0>::DIM, 6);
     assert_eq!(
         PhaseState::<3>::read_from(&y[..11]).unwrap_err(),
-        HamiltonianError::DimensionMismatch {
-            expected: 12,
-            found: 11
-        }
+        HamiltonianError::DimensionMismatch { expected: 12, found: 11 }
     );
     let mut short = [0.0; 13];
-    assert_eq!(
-        s.write_to(&mut short).unwrap_err(),
-        HamiltonianError::DimensionMismatch {
-            expected: 12,
-            found: 13
-        }
-    );
+    assert_eq!(s.write_to(&mut short).unwrap_err(), HamiltonianError::DimensionMismatch { expected: 12, found: 13 });
 }
 
 #[test]
@@ -710,31 +626,20 @@ fn ode_system_wraps_the_seed_rhs() {
     let mut dydt = vec![0.0; 12];
     system.rhs(0.0, &y, &mut dydt).unwrap();
     assert_eq!(dydt, flat(&rhs_of(&Water, &s)));
-    assert_eq!(
-        system.energy(&y).unwrap(),
-        hamiltonian::hamiltonian(&Water, &s).unwrap()
-    );
+    assert_eq!(system.energy(&y).unwrap(), hamiltonian::hamiltonian(&Water, &s).unwrap());
     assert_eq!(
         system.rhs(0.0, &y[..10], &mut dydt).unwrap_err(),
-        HamiltonianError::DimensionMismatch {
-            expected: 12,
-            found: 10
-        }
+        HamiltonianError::DimensionMismatch { expected: 12, found: 10 }
     );
     assert!(matches!(
         system.rhs(0.0, &y, &mut dydt[..11]),
-        Err(HamiltonianError::DimensionMismatch {
-            expected: 12,
-            found: 11
-        })
+        Err(HamiltonianError::DimensionMismatch { expected: 12, found: 11 })
     ));
 
     let mut rigid = HamiltonianSystem::new(&RigidTop);
     assert_eq!(rigid.dim(), 6);
     let mut d = [0.0; 6];
-    rigid
-        .rhs(0.0, &[0.1, 0.8, -0.4, 1.0, 2.0, 3.0], &mut d)
-        .unwrap();
+    rigid.rhs(0.0, &[0.1, 0.8, -0.4, 1.0, 2.0, 3.0], &mut d).unwrap();
     assert_eq!(d[3], 0.0);
 }
 

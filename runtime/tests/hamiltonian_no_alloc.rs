@@ -56,11 +56,7 @@ fn rhs_evaluations_do_not_allocate() {
         }
     });
     assert!(sum.is_finite());
-    assert_eq!(
-        info.count_total, 0,
-        "{} allocations in 2000 right-hand-side evaluations",
-        info.count_total
-    );
+    assert_eq!(info.count_total, 0, "{} allocations in 2000 right-hand-side evaluations", info.count_total);
 
     // The counter does see this code's allocations: building an error allocates (its q).
     let mut linear = states[0];

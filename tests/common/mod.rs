@@ -67,3 +67,33 @@ pub fn rel_diff<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>, b: &SMat
     }
     (a - b).amax() / b.amax().max(floor)
 }
+
+use rovib::runtime::hamiltonian::PhaseState;
+use rovib::runtime::nalgebra::Vector3;
+
+/// A random phase-space state near the reference geometry: momenta of a few ħ/bohr or ħ (a
+/// kinetic energy of order 0.01 hartree for water), Euler angles away from gimbal lock.
+pub fn random_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, rng: &mut Rng) -> PhaseState<N> {
+    PhaseState {
+        q: random_q(m, rng),
+        p: SVector::from_fn(|_, _| rng.uniform(-5.0, 5.0)),
+        euler: Vector3::new(rng.uniform(-3.0, 3.0), rng.uniform(0.3, 2.8), rng.uniform(-3.0, 3.0)),
+        pe: Vector3::from_fn(|_, _| rng.uniform(-10.0, 10.0)),
+    }
+}
+
+/// `∂f/∂y_i` at `y` by a 5-point central difference with one Richardson extrapolation
+/// (error O(h⁶)), for a scalar function of a flat state.
+pub fn richardson_derivative(y: &[f64], i: usize, h: f64, f: &mut dyn FnMut(&[f64]) -> f64) -> f64 {
+    let mut d = |h: f64| {
+        let mut x = y.to_vec();
+        let mut at = |t: f64, x: &mut Vec<f64>| {
+            x[i] = y[i] + t;
+            f(x)
+        };
+        let (m2, m1, p1, p2) = (at(-2.0 * h, &mut x), at(-h, &mut x), at(h, &mut x), at(2.0 * h, &mut x));
+        (m2 - 8.0 * m1 + 8.0 * p1 - p2) / (12.0 * h)
+    };
+    let (d1, d2) = (d(h), d(h / 2.0));
+    d2 + (d2 - d1) / 15.0
+}

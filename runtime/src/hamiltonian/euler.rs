@@ -69,9 +69,7 @@ impl WMatrices {
     /// finite.
     pub fn new(euler: &Vector3<f64>) -> Result<Self, HamiltonianError> {
         if !euler.iter().all(|a| a.is_finite()) {
-            return Err(HamiltonianError::NonFinite {
-                quantity: "Euler angles (φ, θ, ψ)",
-            });
+            return Err(HamiltonianError::NonFinite { quantity: "Euler angles (φ, θ, ψ)" });
         }
         let theta = euler[1];
         let (st, ct) = theta.sin_cos();
@@ -100,11 +98,7 @@ impl WMatrices {
             -sp / st, -cp,  cot * sp,
              0.0,      0.0, 0.0,
         );
-        Ok(Self {
-            w,
-            dw_dtheta,
-            dw_dpsi,
-        })
+        Ok(Self { w, dw_dtheta, dw_dpsi })
     }
 }
 
@@ -140,9 +134,6 @@ mod tests {
         let j = Vector3::new(1.0, -2.0, 0.5);
         let pe = euler_momenta_from_angular_momentum(&euler, &j);
         assert!((angular_momentum_from_euler_momenta(&euler, &pe).unwrap() - j).norm() < 1e-15);
-        assert_eq!(
-            w_matrix(&Vector3::new(0.3, 0.0, -2.0)),
-            Err(HamiltonianError::EulerSingular { theta: 0.0 })
-        );
+        assert_eq!(w_matrix(&Vector3::new(0.3, 0.0, -2.0)), Err(HamiltonianError::EulerSingular { theta: 0.0 }));
     }
 }

@@ -83,13 +83,8 @@ impl<const N: usize> InverseMetric<N> {
     /// ([`HamiltonianError::SingularMetric`]); the blocks are checked in the order `I`, `a`,
     /// `G11⁻¹`, `G22⁻¹`. Non-finite input gives [`HamiltonianError::NonFinite`].
     pub fn new(k: &KineticMatrices<N>, q: &SVector<f64, N>) -> Result<Self, HamiltonianError> {
-        if !(all_finite(k.a.as_slice())
-            && all_finite(k.coriolis.as_slice())
-            && all_finite(k.inertia.as_slice()))
-        {
-            return Err(HamiltonianError::NonFinite {
-                quantity: "kinetic matrices a, A, I",
-            });
+        if !(all_finite(k.a.as_slice()) && all_finite(k.coriolis.as_slice()) && all_finite(k.inertia.as_slice())) {
+            return Err(HamiltonianError::NonFinite { quantity: "kinetic matrices a, A, I" });
         }
         let inertia_scale = k.inertia.trace();
         let chol_i = factor(k.inertia, |_| inertia_scale, MetricBlock::Inertia, q)?;
@@ -100,23 +95,14 @@ impl<const N: usize> InverseMetric<N> {
 
         // G11 = (I − A a⁻¹ Aᵀ)⁻¹. Symmetrized so that rounding does not make it asymmetric.
         let g11_inv = symmetric_part(&(k.inertia - k.coriolis * a_inv_at));
-        let g11 = symmetric_part(
-            &factor(g11_inv, |_| inertia_scale, MetricBlock::G11Inverse, q)?.inverse(),
-        );
+        let g11 = symmetric_part(&factor(g11_inv, |_| inertia_scale, MetricBlock::G11Inverse, q)?.inverse());
         // G22 = (a − Aᵀ I⁻¹ A)⁻¹.
         let g22_inv = symmetric_part(&(k.a - k.coriolis.transpose() * i_inv_a));
-        let g22 = symmetric_part(
-            &factor(g22_inv, |j| k.a[(j, j)], MetricBlock::G22Inverse, q)?.inverse(),
-        );
+        let g22 = symmetric_part(&factor(g22_inv, |j| k.a[(j, j)], MetricBlock::G22Inverse, q)?.inverse());
         // G12 = −G11 A a⁻¹ = −G11 Xᵀ.
         let g12 = -(g11 * a_inv_at.transpose());
 
-        Ok(Self {
-            g: GMatrices { g11, g12, g22 },
-            chol_a,
-            a_inv_at,
-            i_inv_a,
-        })
+        Ok(Self { g: GMatrices { g11, g12, g22 }, chol_a, a_inv_at, i_inv_a })
     }
 
     /// The derivatives `∂G11/∂q_k`, `∂G12/∂q_k`, `∂G22/∂q_k` of eqs. (10)–(14), given
@@ -148,11 +134,7 @@ impl<const N: usize> InverseMetric<N> {
         let inner = self.chol_a.solve(&(dk.coriolis.transpose() - dk.a * x)); // N × 3
         let dg12 = -(dg11 * x.transpose()) - g11 * inner.transpose();
 
-        GMatrices {
-            g11: dg11,
-            g12: dg12,
-            g22: dg22,
-        }
+        GMatrices { g11: dg11, g12: dg12, g22: dg22 }
     }
 }
 
@@ -172,10 +154,7 @@ fn factor<const D: usize, const N: usize>(
     matrix: MetricBlock,
     q: &SVector<f64, N>,
 ) -> Result<Cholesky<f64, Const<D>>, HamiltonianError> {
-    let singular = || HamiltonianError::SingularMetric {
-        matrix,
-        q: q.as_slice().to_vec(),
-    };
+    let singular = || HamiltonianError::SingularMetric { matrix, q: q.as_slice().to_vec() };
     // `Cholesky::new` only fails on a non-positive pivot; the tolerance catches the
     // numerically singular case too (see PIVOT_TOLERANCE).
     let chol = Cholesky::new(m).ok_or_else(singular)?;
@@ -214,10 +193,7 @@ mod tests {
         assert!(Cholesky::new(k.inertia).is_some());
         assert_eq!(
             InverseMetric::new(&k, &SVector::zeros()).unwrap_err(),
-            HamiltonianError::SingularMetric {
-                matrix: MetricBlock::Inertia,
-                q: vec![]
-            }
+            HamiltonianError::SingularMetric { matrix: MetricBlock::Inertia, q: vec![] }
         );
     }
 }

@@ -115,10 +115,7 @@ pub struct Workspace<const N: usize> {
 
 impl<const N: usize> Default for Workspace<N> {
     fn default() -> Self {
-        Self {
-            kinetic: KineticMatrices::default(),
-            dkinetic: [KineticMatrices::default(); N],
-        }
+        Self { kinetic: KineticMatrices::default(), dkinetic: [KineticMatrices::default(); N] }
     }
 }
 
@@ -154,21 +151,11 @@ where
     let g = &metric.g;
     let omega = g.g11 * j + g.g12 * state.p;
     let qdot = g.g12.transpose() * j + g.g22 * state.p;
-    Ok(Kinematics {
-        w,
-        j,
-        metric,
-        omega,
-        qdot,
-    })
+    Ok(Kinematics { w, j, metric, omega, qdot })
 }
 
 fn finite(x: f64, quantity: &'static str) -> Result<f64, HamiltonianError> {
-    if x.is_finite() {
-        Ok(x)
-    } else {
-        Err(HamiltonianError::NonFinite { quantity })
-    }
+    if x.is_finite() { Ok(x) } else { Err(HamiltonianError::NonFinite { quantity }) }
 }
 
 /// The kinetic part of eq. (1), `T = ½ pᵀ G22 p + Jᵀ G12 p + ½ Jᵀ G11 J`; given `∂G/∂q_k`
@@ -211,20 +198,16 @@ where
     let mut du = SVector::zeros();
     molecule.potential_gradient(&state.q, &mut du);
     if !du.iter().all(|x| x.is_finite()) {
-        return Err(HamiltonianError::NonFinite {
-            quantity: "potential gradient ∂U/∂q",
-        });
+        return Err(HamiltonianError::NonFinite { quantity: "potential gradient ∂U/∂q" });
     }
     molecule.kinetic_jacobian(&state.q, &mut workspace.dkinetic);
-    let dk_finite = workspace.dkinetic.iter().all(|d| {
-        d.a.iter()
-            .chain(d.coriolis.iter())
-            .chain(d.inertia.iter())
-            .all(|x| x.is_finite())
-    });
+    let dk_finite = workspace
+        .dkinetic
+        .iter()
+        .all(|d| d.a.iter().chain(d.coriolis.iter()).chain(d.inertia.iter()).all(|x| x.is_finite()));
     if !dk_finite {
         return Err(HamiltonianError::NonFinite {
-            quantity: "kinetic matrix derivatives ∂a/∂q, ∂A/∂q, ∂I/∂q",
+            quantity: "kinetic matrix derivatives ∂a/∂q, ∂A/∂q, ∂I/∂q"
         });
     }
     let mut pdot = SVector::zeros();
@@ -241,31 +224,20 @@ where
     let dh_dpsi = (kin.w.dw_dpsi * state.pe).dot(&kin.omega);
     let pe_dot = Vector3::new(0.0, -dh_dtheta, -dh_dpsi);
 
-    let out = PhaseState {
-        q: kin.qdot,
-        p: pdot,
-        euler: euler_dot,
-        pe: pe_dot,
-    };
+    let out = PhaseState { q: kin.qdot, p: pdot, euler: euler_dot, pe: pe_dot };
     if out.check_finite().is_err() {
-        return Err(HamiltonianError::NonFinite {
-            quantity: "right-hand side of Hamilton's equations",
-        });
+        return Err(HamiltonianError::NonFinite { quantity: "right-hand side of Hamilton's equations" });
     }
     Ok(out)
 }
 
 /// The body-frame angular momentum `J = W p_e` of a state (eq. 2).
-pub fn body_angular_momentum<const N: usize>(
-    state: &PhaseState<N>,
-) -> Result<Vector3<f64>, HamiltonianError> {
+pub fn body_angular_momentum<const N: usize>(state: &PhaseState<N>) -> Result<Vector3<f64>, HamiltonianError> {
     let j = angular_momentum_from_euler_momenta(&state.euler, &state.pe)?;
     if j.iter().all(|x| x.is_finite()) {
         Ok(j)
     } else {
-        Err(HamiltonianError::NonFinite {
-            quantity: "Euler momenta (p_φ, p_θ, p_ψ)",
-        })
+        Err(HamiltonianError::NonFinite { quantity: "Euler momenta (p_φ, p_θ, p_ψ)" })
     }
 }
 
@@ -352,10 +324,7 @@ where
 {
     /// The system of `molecule`; allocates its [`Workspace`] once, here.
     pub fn new(molecule: &'a M) -> Self {
-        Self {
-            molecule,
-            workspace: Workspace::boxed(),
-        }
+        Self { molecule, workspace: Workspace::boxed() }
     }
 
     /// The molecule.

@@ -42,12 +42,7 @@ impl<const N: usize> PhaseState<N> {
 
     /// The state with every component zero.
     pub fn zeros() -> Self {
-        Self {
-            q: SVector::zeros(),
-            p: SVector::zeros(),
-            euler: Vector3::zeros(),
-            pe: Vector3::zeros(),
-        }
+        Self { q: SVector::zeros(), p: SVector::zeros(), euler: Vector3::zeros(), pe: Vector3::zeros() }
     }
 
     /// Writes the state into `y` in the flat layout `[q, p, φ, θ, ψ, p_φ, p_θ, p_ψ]`.
@@ -100,9 +95,6 @@ fn check_len<const N: usize>(found: usize) -> Result<(), HamiltonianError> {
     if found == PhaseState::<N>::DIM {
         Ok(())
     } else {
-        Err(HamiltonianError::DimensionMismatch {
-            expected: PhaseState::<N>::DIM,
-            found,
-        })
+        Err(HamiltonianError::DimensionMismatch { expected: PhaseState::<N>::DIM, found })
     }
 }

@@ -8,7 +8,7 @@
 //! algorithm (error norm, step-size factor, rejection rule, initial step) but not its layout.
 //! Stiffness detection is not implemented.
 
-use super::{InvalidInput, OdeSystem, Observer, SolveError, Stats, check_dim, check_run};
+use super::{InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_run};
 
 /// Number of stages including the FSAL stage and the three extra dense-output stages.
 const STAGES: usize = 16;
@@ -24,25 +24,27 @@ const FAC1: f64 = 0.333;
 /// Largest allowed ratio new/old step (`FAC2` in `dop853.f`).
 const FAC2: f64 = 6.0;
 
-// The coefficients, as published to 30 significant digits in Hairer's dop853.f (subroutine
-// DP86CO, version of 2004, http://www.unige.ch/~hairer/software.html; the same numbers are in
-// SciPy's scipy/integrate/_ivp/dop853_coefficients.py). The literals keep all published digits
-// so that they can be checked against the source line by line; the compiler rounds each one
-// correctly to the nearest double.
-//
-// ```text
-// Stage numbering: index i here is stage i+1 of dop853.f. Stages 0..=11 are the 12 stages of
-// the 8th-order step, stage 12 is f(t+h, y_new) (FSAL, "K4" after acceptance in dop853.f),
-// stages 13, 14, 15 are the extra stages 14, 15, 16 of the dense output.
-//
-// dop853.f name  ->  here
-//   C2..C16          C[1..=15]          (C[11] = C[12] = 1)
-//   Aij              A[i-1] entry (j-1, Aij)
-//   B1, B6..B12      A[12]              (the 8th-order weights; y_new = y + h·Σ A[12]·k)
-//   BHH1..BHH3       BHH                (3rd-order weights on stages 0, 8, 11)
-//   ER1, ER6..ER12   ER                 (5th-order error weights)
-//   D41..D416        D[0], D51.. D[1], D61.. D[2], D71.. D[3]
-// ```
+/// The coefficients, as published to about 30 significant digits in Hairer's `dop853.f`
+/// (parameters of subroutine `DP86CO`; <https://www.unige.ch/~hairer/software.html>), read from
+/// a Fortran-90 copy of that code and checked against SciPy's
+/// `scipy/integrate/_ivp/dop853_coefficients.py`: after rounding to double, every value here
+/// equals SciPy's bit for bit. The compiler rounds each literal correctly to the nearest double.
+///
+/// ```text
+/// Stage numbering: index i here is stage i+1 of dop853.f. Stages 0..=11 are the 12 stages of
+/// the 8th-order step, stage 12 is f(t+h, y_new) (FSAL, "K4" after acceptance in dop853.f),
+/// stages 13, 14, 15 are the extra stages 14, 15, 16 of the dense output.
+///
+/// dop853.f name  ->  here
+///   C2..C16          C[1..=15]          (C[11] = C[12] = 1)
+///   Aij              A[i-1] entry (j-1, Aij)
+///   B1, B6..B12      A[12]              (the 8th-order weights; y_new = y + h·Σ A[12]·k)
+///   BHH1..BHH3       BHH                (3rd-order weights on stages 0, 8, 11)
+///   ER1, ER6..ER12   ER                 (5th-order error weights)
+///   D41..D416        D[0], D51.. D[1], D61.. D[2], D71.. D[3]
+/// ```
+// The literals keep every published digit (more than a double holds) so that they can be
+// compared with the source line by line; clippy's excessive_precision would have them cut.
 #[allow(clippy::excessive_precision)]
 mod coefficients {
     /// Nodes `c_i`.
@@ -69,14 +71,8 @@ mod coefficients {
     pub(super) const A: [&[(usize, f64)]; super::STAGES] = [
         &[],
         &[(0, 5.26001519587677318785587544488e-2)],
-        &[
-            (0, 1.97250569845378994544595329183e-2),
-            (1, 5.91751709536136983633785987549e-2),
-        ],
-        &[
-            (0, 2.95875854768068491816892993775e-2),
-            (2, 8.87627564304205475450678981324e-2),
-        ],
+        &[(0, 1.97250569845378994544595329183e-2), (1, 5.91751709536136983633785987549e-2)],
+        &[(0, 2.95875854768068491816892993775e-2), (2, 8.87627564304205475450678981324e-2)],
         &[
             (0, 2.41365134159266685502369798665e-1),
             (2, -8.84549479328286085344864962717e-1),
@@ -307,35 +303,21 @@ impl Dop853Options {
     /// Checks that the options can be run with.
     pub fn validate(&self) -> Result<(), InvalidInput> {
         if !(self.rtol > 10.0 * f64::EPSILON && self.rtol.is_finite()) {
-            return Err(InvalidInput(format!(
-                "rtol must be finite and larger than 10·ε ≈ 2.2e-15, not {}",
-                self.rtol
-            )));
+            return Err(InvalidInput(format!("rtol must be finite and larger than 10·ε ≈ 2.2e-15, not {}", self.rtol)));
         }
         if !(self.atol > 0.0 && self.atol.is_finite()) {
-            return Err(InvalidInput(format!(
-                "atol must be positive and finite, not {}",
-                self.atol
-            )));
+            return Err(InvalidInput(format!("atol must be positive and finite, not {}", self.atol)));
         }
         if let Some(h) = self.initial_step
             && !(h > 0.0 && h.is_finite())
         {
-            return Err(InvalidInput(format!(
-                "the initial step must be positive and finite, not {h}"
-            )));
+            return Err(InvalidInput(format!("the initial step must be positive and finite, not {h}")));
         }
-        if !(self.max_step > 0.0) {
-            return Err(InvalidInput(format!(
-                "max_step must be positive, not {}",
-                self.max_step
-            )));
+        if self.max_step.is_nan() || self.max_step <= 0.0 {
+            return Err(InvalidInput(format!("max_step must be positive, not {}", self.max_step)));
         }
         if !(self.min_step >= 0.0 && self.min_step.is_finite()) {
-            return Err(InvalidInput(format!(
-                "min_step must be zero or positive and finite, not {}",
-                self.min_step
-            )));
+            return Err(InvalidInput(format!("min_step must be zero or positive and finite, not {}", self.min_step)));
         }
         if self.min_step > self.max_step {
             return Err(InvalidInput(format!(
@@ -347,10 +329,7 @@ impl Dop853Options {
             return Err(InvalidInput("max_steps must be at least 1".into()));
         }
         if !(0.0..=0.2).contains(&self.beta) {
-            return Err(InvalidInput(format!(
-                "beta must lie in [0, 0.2], not {}",
-                self.beta
-            )));
+            return Err(InvalidInput(format!("beta must lie in [0, 0.2], not {}", self.beta)));
         }
         Ok(())
     }
@@ -447,17 +426,14 @@ impl Dop853 {
         let mut next_output = 1;
 
         let mut x = t0;
-        eval_into(system, x, &self.y, &mut self.k[..n], &mut stats)
-            .map_err(|(t, source)| self.rhs_error(t, source))?;
+        eval_into(system, x, &self.y, &mut self.k[..n], &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?;
         if !self.k[..n].iter().all(|v| v.is_finite()) {
             return Err(self.non_finite(x));
         }
         let h_max = opts.max_step.min(t_end - t0);
         let mut h = match opts.initial_step {
             Some(h) => h.min(h_max),
-            None => self
-                .initial_step(system, x, h_max, &mut stats)
-                .map_err(|(t, source)| self.rhs_error(t, source))?,
+            None => self.initial_step(system, x, h_max, &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?,
         };
 
         let expo1 = 1.0 / 8.0 - opts.beta * 0.2;
@@ -465,18 +441,10 @@ impl Dop853 {
         let mut reject = false;
         loop {
             if stats.steps >= opts.max_steps {
-                return Err(SolveError::TooManySteps {
-                    t: x,
-                    max_steps: opts.max_steps,
-                    y: self.y.clone(),
-                });
+                return Err(SolveError::TooManySteps { t: x, max_steps: opts.max_steps, y: self.y.clone() });
             }
             if 0.1 * h.abs() <= x.abs() * UROUND || h < opts.min_step || h.is_nan() {
-                return Err(SolveError::StepSizeTooSmall {
-                    t: x,
-                    h,
-                    y: self.y.clone(),
-                });
+                return Err(SolveError::StepSizeTooSmall { t: x, h, y: self.y.clone() });
             }
             // Stretch a step that would end just short of t_end (as dop853.f does), so no
             // sliver step follows.
@@ -485,10 +453,8 @@ impl Dop853 {
                 h = t_end - x;
             }
             stats.steps += 1;
-            self.trial_step(system, x, h, &mut stats)
-                .map_err(|(t, source)| self.rhs_error(t, source))?;
+            self.trial_step(system, x, h, &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?;
             let err = self.error_norm(h);
-            if std::env::var_os("DOPDEBUG").is_some() { eprintln!("x {x:.6} h {h:.4e} err {err:.3e}"); }
 
             // Step-size factor of dop853.f: h_new = h / fac with fac = err^expo1 / fac_old^β / SAFETY
             // clamped to [1/FAC2, 1/FAC1]. A non-finite err is infinite here, which rejects the step
@@ -501,19 +467,14 @@ impl Dop853 {
                 stats.accepted += 1;
                 let x_new = if last { t_end } else { x + h };
                 let fsal = &mut self.k[FSAL * n..(FSAL + 1) * n];
-                eval_into(system, x_new, &self.y_new, fsal, &mut stats).map_err(
-                    |(t, source)| SolveError::Rhs {
-                        t,
-                        y: self.y_new.clone(),
-                        source,
-                    },
-                )?;
+                eval_into(system, x_new, &self.y_new, fsal, &mut stats).map_err(|(t, source)| SolveError::Rhs {
+                    t,
+                    y: self.y_new.clone(),
+                    source,
+                })?;
                 let fsal = &self.k[FSAL * n..(FSAL + 1) * n];
                 if !fsal.iter().all(|v| v.is_finite()) {
-                    return Err(SolveError::NonFinite {
-                        t: x_new,
-                        y: self.y_new.clone(),
-                    });
+                    return Err(SolveError::NonFinite { t: x_new, y: self.y_new.clone() });
                 }
 
                 // Serve the output times in (x, x_new].
@@ -561,19 +522,12 @@ impl Dop853 {
 
     /// A [`SolveError::Rhs`] at `t` carrying the last accepted state.
     fn rhs_error<E>(&self, t: f64, source: E) -> SolveError<E> {
-        SolveError::Rhs {
-            t,
-            y: self.y.clone(),
-            source,
-        }
+        SolveError::Rhs { t, y: self.y.clone(), source }
     }
 
     /// A [`SolveError::NonFinite`] at `t` carrying the last accepted state.
     fn non_finite<E>(&self, t: f64) -> SolveError<E> {
-        SolveError::NonFinite {
-            t,
-            y: self.y.clone(),
-        }
+        SolveError::NonFinite { t, y: self.y.clone() }
     }
 
     /// Hairer's `HINIT` (HNW I, section II.4): an explicit Euler step of size
@@ -595,11 +549,7 @@ impl Dop853 {
             dnf += (self.k[i] / sk).powi(2);
             dny += (self.y[i] / sk).powi(2);
         }
-        let mut h: f64 = if dnf <= 1e-10 || dny <= 1e-10 {
-            1e-6
-        } else {
-            (dny / dnf).sqrt() * 0.01
-        };
+        let mut h: f64 = if dnf <= 1e-10 || dny <= 1e-10 { 1e-6 } else { (dny / dnf).sqrt() * 0.01 };
         h = h.min(h_max);
         for i in 0..n {
             self.y_stage[i] = self.y[i] + h * self.k[i];
@@ -690,18 +640,13 @@ impl Dop853 {
             combine(&mut self.y_stage, &self.y, &self.k, n, h, A[stage]);
             let out = &mut self.k[stage * n..(stage + 1) * n];
             let t = x + C[stage] * h;
-            eval_into(system, t, &self.y_stage, out, stats).map_err(|(t, source)| {
-                SolveError::Rhs {
-                    t,
-                    y: self.y_new.clone(),
-                    source,
-                }
+            eval_into(system, t, &self.y_stage, out, stats).map_err(|(t, source)| SolveError::Rhs {
+                t,
+                y: self.y_new.clone(),
+                source,
             })?;
             if !out.iter().all(|v| v.is_finite()) {
-                return Err(SolveError::NonFinite {
-                    t,
-                    y: self.y_new.clone(),
-                });
+                return Err(SolveError::NonFinite { t, y: self.y_new.clone() });
             }
         }
         let (cont, k) = (&mut self.cont, &self.k);
@@ -731,8 +676,7 @@ impl Dop853 {
         let c = |j: usize, i: usize| self.cont[j * n + i];
         for i in 0..n {
             let high = c(4, i) + s * (c(5, i) + s1 * (c(6, i) + s * c(7, i)));
-            self.y_out[i] =
-                c(0, i) + s * (c(1, i) + s1 * (c(2, i) + s * (c(3, i) + s1 * high)));
+            self.y_out[i] = c(0, i) + s * (c(1, i) + s1 * (c(2, i) + s * (c(3, i) + s1 * high)));
         }
     }
 }
@@ -785,11 +729,7 @@ mod tests {
             // Rows 8–11 have entries up to ≈ 44 that cancel, so allow rounding of that size.
             let scale: f64 = row.iter().map(|&(_, a)| a.abs()).sum();
             let sum = row_weight_sum(row, 0);
-            assert!(
-                (sum - C[i]).abs() <= 4.0 * f64::EPSILON * scale,
-                "row {i}: Σa = {sum}, c = {}",
-                C[i]
-            );
+            assert!((sum - C[i]).abs() <= 4.0 * f64::EPSILON * scale, "row {i}: Σa = {sum}, c = {}", C[i]);
         }
         for k in 1..=8 {
             let q = row_weight_sum(A[FSAL], k - 1);
@@ -850,11 +790,7 @@ mod tests {
     /// `rk_step` and `E5`, `E3` from `dop853_coefficients.py` for y' = y·cos t, rtol = atol = 1e-7.
     #[test]
     fn error_norm_matches_scipy() {
-        let options = Dop853Options {
-            rtol: 1e-7,
-            atol: 1e-7,
-            ..Default::default()
-        };
+        let options = Dop853Options { rtol: 1e-7, atol: 1e-7, ..Default::default() };
         let cases = [
             (0.0, 1.0, 0.5, 1.6151462928238984, 0.0006579254417574376),
             (4.161057, 4.161057_f64.sin().exp(), 0.63554, 0.36918529891290497, 6.204273860608963e-05),
@@ -884,7 +820,7 @@ mod tests {
             solver.y[0] = 1.0;
             eval_into(&mut ExpSin, 0.0, &[1.0], &mut solver.k[..1], &mut stats).unwrap();
             solver.trial_step(&mut ExpSin, 0.0, h, &mut stats).unwrap();
-            let fsal = &mut solver.k[FSAL..FSAL + 1];
+            let fsal = &mut solver.k[FSAL..FSAL + 1]; // dimension 1: stage FSAL is element FSAL
             eval_into(&mut ExpSin, h, &solver.y_new, fsal, &mut stats).unwrap();
             solver.prepare_dense(&mut ExpSin, 0.0, h, &mut stats).unwrap();
             let mut worst: f64 = 0.0;

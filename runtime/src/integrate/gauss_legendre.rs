@@ -12,8 +12,8 @@
 //!   "Achieving Brouwer's law with implicit Runge–Kutta methods", BIT 48 (2008) 231–243.
 
 use super::{
-    FixedStep, InvalidInput, OdeSystem, Observer, SolveError, Stats, check_dim, check_positive,
-    check_run, eval_checked, run_fixed,
+    FixedStep, InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_positive, check_run,
+    eval_checked, run_fixed,
 };
 
 /// Largest number of stages supported (the 3-stage method).
@@ -47,13 +47,7 @@ pub struct GaussLegendreOptions {
 
 impl Default for GaussLegendreOptions {
     fn default() -> Self {
-        Self {
-            stages: 3,
-            step: 1.0,
-            compensated: true,
-            max_iterations: 100,
-            max_steps: u64::MAX,
-        }
+        Self { stages: 3, step: 1.0, compensated: true, max_iterations: 100, max_steps: u64::MAX }
     }
 }
 
@@ -61,10 +55,7 @@ impl GaussLegendreOptions {
     /// Checks that the options can be run with.
     pub fn validate(&self) -> Result<(), InvalidInput> {
         if !(self.stages == 2 || self.stages == 3) {
-            return Err(InvalidInput(format!(
-                "Gauss–Legendre needs 2 or 3 stages, not {}",
-                self.stages
-            )));
+            return Err(InvalidInput(format!("Gauss–Legendre needs 2 or 3 stages, not {}", self.stages)));
         }
         check_positive("the Gauss–Legendre step", self.step)?;
         if self.max_iterations == 0 {
@@ -108,12 +99,7 @@ impl Tableau {
     /// entries use the same expressions, so the symmetry `a[s−1−i][s−1−j] + a[i][j] = b[j]` and
     /// `b[i] = b[s−1−i]` survive rounding.
     pub(crate) fn gauss(stages: usize) -> Self {
-        let mut t = Self {
-            s: stages,
-            a: [[0.0; MAX_STAGES]; MAX_STAGES],
-            b: [0.0; MAX_STAGES],
-            c: [0.0; MAX_STAGES],
-        };
+        let mut t = Self { s: stages, a: [[0.0; MAX_STAGES]; MAX_STAGES], b: [0.0; MAX_STAGES], c: [0.0; MAX_STAGES] };
         if stages == 2 {
             let r = 3.0_f64.sqrt() / 6.0;
             t.c[..2].copy_from_slice(&[0.5 - r, 0.5 + r]);
@@ -126,11 +112,7 @@ impl Tableau {
             let (a0, a1) = (5.0 / 36.0, 2.0 / 9.0);
             t.c = [0.5 - r10, 0.5, 0.5 + r10];
             t.b = [5.0 / 18.0, 4.0 / 9.0, 5.0 / 18.0];
-            t.a = [
-                [a0, a1 - r15, a0 - r30],
-                [a0 + r24, a1, a0 - r24],
-                [a0 + r30, a1 + r15, a0],
-            ];
+            t.a = [[a0, a1 - r15, a0 - r30], [a0 + r24, a1, a0 - r24], [a0 + r30, a1 + r15, a0]];
         }
         t
     }
@@ -348,10 +330,7 @@ impl FixedStep for GaussLegendre {
             previous_norm = norm;
         }
         if !converged {
-            return Err(SolveError::NotConverged {
-                t,
-                y: self.y.clone(),
-            });
+            return Err(SolveError::NotConverged { t, y: self.y.clone() });
         }
 
         // The increment uses the last F, evaluated at Z equal to the final one up to round-off,
@@ -377,10 +356,7 @@ impl FixedStep for GaussLegendre {
             }
         }
         if !self.scratch.iter().all(|v| v.is_finite()) {
-            return Err(SolveError::NonFinite {
-                t: t + h,
-                y: self.y.clone(),
-            });
+            return Err(SolveError::NonFinite { t: t + h, y: self.y.clone() });
         }
         core::mem::swap(&mut self.y, &mut self.scratch);
         if self.options.compensated {
@@ -416,9 +392,7 @@ mod tests {
             }
             for j in 0..s {
                 for k in 1..=s {
-                    let sum: f64 = (0..s)
-                        .map(|i| t.b[i] * t.c[i].powi(k as i32 - 1) * t.a[i][j])
-                        .sum();
+                    let sum: f64 = (0..s).map(|i| t.b[i] * t.c[i].powi(k as i32 - 1) * t.a[i][j]).sum();
                     let exact = t.b[j] * (1.0 - t.c[j].powi(k as i32)) / k as f64;
                     assert!((sum - exact).abs() < 1e-15, "D({k}), column {j}, s = {s}");
                 }
@@ -454,10 +428,7 @@ mod tests {
     #[test]
     fn stages_other_than_2_or_3_are_rejected() {
         for stages in [0, 1, 4] {
-            let options = GaussLegendreOptions {
-                stages,
-                ..Default::default()
-            };
+            let options = GaussLegendreOptions { stages, ..Default::default() };
             assert!(GaussLegendre::new(2, options).is_err());
         }
     }

@@ -5,6 +5,7 @@
 //! A method writes the state at each output time to an [`Observer`]. Every method allocates its
 //! workspace once, when it is created; a step never allocates.
 
+use core::fmt;
 use core::ops::ControlFlow;
 
 /// A system of ordinary differential equations `dy/dt = f(t, y)` of fixed dimension.
@@ -101,8 +102,6 @@ mod rk4;
 pub use dop853::{Dop853, Dop853Options};
 pub use gauss_legendre::{GaussLegendre, GaussLegendreOptions};
 pub use rk4::{Rk4, Rk4Options};
-
-use core::fmt;
 
 impl<E> fmt::Display for SolveError<E> {
     /// The system's own error is not repeated here; it is available through
@@ -222,8 +221,7 @@ impl Method {
 }
 
 /// Integrates `system` from `(t0, y0)` to `t_end` with `method`, calling `observer` at `t0` and
-/// at the output times `t0 + k·output_interval` up to and including `t_end` (see
-/// [`OutputGrid`](self#output-times) below for the exact rule).
+/// at the output times `t0 + k·output_interval` up to and including `t_end` (exact rule below).
 ///
 /// This allocates the method's workspace for this one run; to run many trajectories without
 /// allocating, create a [`Dop853`], [`GaussLegendre`] or [`Rk4`] once and call its `integrate`.
@@ -256,15 +254,11 @@ where
 {
     let dim = system.dim();
     match method {
-        Method::Dop853(o) => {
-            Dop853::new(dim, *o)?.integrate(system, t0, y0, t_end, output_interval, observer)
-        }
+        Method::Dop853(o) => Dop853::new(dim, *o)?.integrate(system, t0, y0, t_end, output_interval, observer),
         Method::GaussLegendre(o) => {
             GaussLegendre::new(dim, *o)?.integrate(system, t0, y0, t_end, output_interval, observer)
         }
-        Method::Rk4(o) => {
-            Rk4::new(dim, *o)?.integrate(system, t0, y0, t_end, output_interval, observer)
-        }
+        Method::Rk4(o) => Rk4::new(dim, *o)?.integrate(system, t0, y0, t_end, output_interval, observer),
     }
 }
 
@@ -276,11 +270,7 @@ const SNAP: f64 = 64.0 * f64::EPSILON;
 /// integer. Saturates at `u64::MAX`.
 fn ceil_snapped(ratio: f64) -> u64 {
     let nearest = ratio.round();
-    let n = if (ratio - nearest).abs() <= SNAP * ratio {
-        nearest
-    } else {
-        ratio.ceil()
-    };
+    let n = if (ratio - nearest).abs() <= SNAP * ratio { nearest } else { ratio.ceil() };
     // `as` saturates, which is what a step or output count that cannot be reached needs.
     n as u64
 }
@@ -297,27 +287,14 @@ pub(crate) struct OutputGrid {
 
 impl OutputGrid {
     fn new(t0: f64, t_end: f64, interval: f64) -> Self {
-        let count = if t_end > t0 {
-            ceil_snapped((t_end - t0) / interval).max(1)
-        } else {
-            0
-        };
-        Self {
-            t0,
-            interval,
-            t_end,
-            count,
-        }
+        let count = if t_end > t0 { ceil_snapped((t_end - t0) / interval).max(1) } else { 0 };
+        Self { t0, interval, t_end, count }
     }
 
     /// Output time number `k` (`0 ..= count`); computed from `t0` rather than accumulated, so
     /// that long runs do not drift off the grid.
     fn time(&self, k: u64) -> f64 {
-        if k >= self.count {
-            self.t_end
-        } else {
-            self.t0 + k as f64 * self.interval
-        }
+        if k >= self.count { self.t_end } else { self.t0 + k as f64 * self.interval }
     }
 }
 
@@ -342,36 +319,23 @@ fn check_run(
         )));
     }
     if !t0.is_finite() || !t_end.is_finite() {
-        return Err(InvalidInput(format!(
-            "start and end times must be finite (t0 = {t0}, t_end = {t_end})"
-        )));
+        return Err(InvalidInput(format!("start and end times must be finite (t0 = {t0}, t_end = {t_end})")));
     }
     if t_end < t0 {
-        return Err(InvalidInput(format!(
-            "the end time {t_end} is before the start time {t0}"
-        )));
+        return Err(InvalidInput(format!("the end time {t_end} is before the start time {t0}")));
     }
     if !(output_interval > 0.0 && output_interval.is_finite()) {
-        return Err(InvalidInput(format!(
-            "the output interval must be positive and finite, not {output_interval}"
-        )));
+        return Err(InvalidInput(format!("the output interval must be positive and finite, not {output_interval}")));
     }
     if let Some(i) = y0.iter().position(|v| !v.is_finite()) {
-        return Err(InvalidInput(format!(
-            "component {i} of the initial state is not finite ({})",
-            y0[i]
-        )));
+        return Err(InvalidInput(format!("component {i} of the initial state is not finite ({})", y0[i])));
     }
     Ok(OutputGrid::new(t0, t_end, output_interval))
 }
 
 /// Checks that a dimension can be integrated at all.
 fn check_dim(dim: usize) -> Result<(), InvalidInput> {
-    if dim == 0 {
-        Err(InvalidInput("the dimension of the system must be at least 1".into()))
-    } else {
-        Ok(())
-    }
+    if dim == 0 { Err(InvalidInput("the dimension of the system must be at least 1".into())) } else { Ok(()) }
 }
 
 /// Checks that a step size or tolerance is positive and finite.
@@ -379,9 +343,7 @@ fn check_positive(name: &str, value: f64) -> Result<(), InvalidInput> {
     if value > 0.0 && value.is_finite() {
         Ok(())
     } else {
-        Err(InvalidInput(format!(
-            "{name} must be positive and finite, not {value}"
-        )))
+        Err(InvalidInput(format!("{name} must be positive and finite, not {value}")))
     }
 }
 
@@ -436,11 +398,7 @@ where
         for j in 0..n {
             let t = t_start + j as f64 * h_k;
             if stats.steps >= max_steps {
-                return Err(SolveError::TooManySteps {
-                    t,
-                    max_steps,
-                    y: method.state().to_vec(),
-                });
+                return Err(SolveError::TooManySteps { t, max_steps, y: method.state().to_vec() });
             }
             let h_j = if j + 1 == n { t_stop - t } else { h_k };
             method.step(system, t, h_j, &mut stats)?;
@@ -466,16 +424,6 @@ fn eval_checked<S: OdeSystem + ?Sized>(
     stats: &mut Stats,
 ) -> Result<(), SolveError<S::Error>> {
     stats.rhs_evals += 1;
-    system
-        .rhs(t, y_arg, out)
-        .map_err(|source| SolveError::Rhs {
-            t,
-            y: y.to_vec(),
-            source,
-        })?;
-    if out.iter().all(|v| v.is_finite()) {
-        Ok(())
-    } else {
-        Err(SolveError::NonFinite { t, y: y.to_vec() })
-    }
+    system.rhs(t, y_arg, out).map_err(|source| SolveError::Rhs { t, y: y.to_vec(), source })?;
+    if out.iter().all(|v| v.is_finite()) { Ok(()) } else { Err(SolveError::NonFinite { t, y: y.to_vec() }) }
 }

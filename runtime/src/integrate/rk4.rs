@@ -5,8 +5,8 @@
 //! Wanner, *Solving Ordinary Differential Equations I*, 2nd ed., Springer 1993, section II.1.
 
 use super::{
-    FixedStep, InvalidInput, OdeSystem, Observer, SolveError, Stats, check_dim, check_positive,
-    check_run, eval_checked, run_fixed,
+    FixedStep, InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_positive, check_run,
+    eval_checked, run_fixed,
 };
 
 /// Options of [`Rk4`].
@@ -23,10 +23,7 @@ pub struct Rk4Options {
 
 impl Default for Rk4Options {
     fn default() -> Self {
-        Self {
-            step: 1.0,
-            max_steps: u64::MAX,
-        }
+        Self { step: 1.0, max_steps: u64::MAX }
     }
 }
 
@@ -144,14 +141,10 @@ impl FixedStep for Rk4 {
         // Write into the stage buffer first so that a non-finite result leaves `y` as the last
         // accepted state.
         for i in 0..self.y.len() {
-            self.y_stage[i] = self.y[i]
-                + sixth * (self.k1[i] + 2.0 * (self.k2[i] + self.k3[i]) + self.k4[i]);
+            self.y_stage[i] = self.y[i] + sixth * (self.k1[i] + 2.0 * (self.k2[i] + self.k3[i]) + self.k4[i]);
         }
         if !self.y_stage.iter().all(|v| v.is_finite()) {
-            return Err(SolveError::NonFinite {
-                t: t + h,
-                y: self.y.clone(),
-            });
+            return Err(SolveError::NonFinite { t: t + h, y: self.y.clone() });
         }
         self.y.copy_from_slice(&self.y_stage);
         Ok(())

@@ -23,12 +23,7 @@ pub const N_DA: f64 = 14.003_074_004_43;
 pub const C_DA: f64 = 12.0;
 
 fn atom(label: &'static str, element: &'static str, mass_da: f64) -> Atom {
-    Atom {
-        label,
-        element,
-        mass_da,
-        mass: mass_da * DALTON_IN_ELECTRON_MASSES,
-    }
+    Atom { label, element, mass_da, mass: mass_da * DALTON_IN_ELECTRON_MASSES }
 }
 
 /// Positions (centre of mass at the origin) with their first and second q-derivatives.
@@ -64,11 +59,7 @@ impl<const N: usize, const NA: usize> PositionDerivatives<N, NA> {
             }
             out
         };
-        Self {
-            r: centre(&r),
-            dr: dr.map(|d| centre(&d)),
-            d2r: d2r.map(|row| row.map(|d| centre(&d))),
-        }
+        Self { r: centre(&r), dr: dr.map(|d| centre(&d)), d2r: d2r.map(|row| row.map(|d| centre(&d))) }
     }
 
     /// `a`, `A`, `I` by the sums of eq. (3).
@@ -100,10 +91,8 @@ impl<const N: usize, const NA: usize> PositionDerivatives<N, NA> {
                 let m = masses[i];
                 let r: Vector3<f64> = self.r.column(i).into();
                 let drk: Vector3<f64> = self.dr[k].column(i).into();
-                d.inertia += (Matrix3::identity() * (2.0 * r.dot(&drk))
-                    - drk * r.transpose()
-                    - r * drk.transpose())
-                    * m;
+                d.inertia +=
+                    (Matrix3::identity() * (2.0 * r.dot(&drk)) - drk * r.transpose() - r * drk.transpose()) * m;
                 for l in 0..N {
                     let drl: Vector3<f64> = self.dr[l].column(i).into();
                     let d2lk: Vector3<f64> = self.d2r[l][k].column(i).into();
@@ -189,9 +178,8 @@ impl Water {
     pub fn derivatives(&self, q: &SVector<f64, 3>) -> PositionDerivatives<3, 3> {
         let (r1, r2, alpha) = (q[0], q[1], q[2]);
         let (s, c) = (0.5 * alpha).sin_cos();
-        let col = |x0: Vector3<f64>, y1: Vector3<f64>, y2: Vector3<f64>| {
-            SMatrix::<f64, 3, 3>::from_columns(&[x0, y1, y2])
-        };
+        let col =
+            |x0: Vector3<f64>, y1: Vector3<f64>, y2: Vector3<f64>| SMatrix::<f64, 3, 3>::from_columns(&[x0, y1, y2]);
         let z = Vector3::zeros();
         let u1 = Vector3::new(s, 0.0, c);
         let u2 = Vector3::new(-s, 0.0, c);
@@ -225,31 +213,15 @@ impl Molecule<3, 3> for Water {
     }
 
     fn atoms(&self) -> [Atom; 3] {
-        [
-            atom("O", "O", O_DA),
-            atom("H1", "H", H_DA),
-            atom("H2", "H", H_DA),
-        ]
+        [atom("O", "O", O_DA), atom("H1", "H", H_DA), atom("H2", "H", H_DA)]
     }
 
     fn coordinates(&self) -> [Coordinate; 3] {
         let bohr = CoordinateUnit::Length(LengthUnit::Bohr);
         [
-            Coordinate {
-                name: "r1",
-                unit: bohr,
-                reference: Some(Self::RE),
-            },
-            Coordinate {
-                name: "r2",
-                unit: bohr,
-                reference: Some(Self::RE),
-            },
-            Coordinate {
-                name: "alpha",
-                unit: CoordinateUnit::Angle(AngleUnit::Rad),
-                reference: Some(Self::ALPHA_E),
-            },
+            Coordinate { name: "r1", unit: bohr, reference: Some(Self::RE) },
+            Coordinate { name: "r2", unit: bohr, reference: Some(Self::RE) },
+            Coordinate { name: "alpha", unit: CoordinateUnit::Angle(AngleUnit::Rad), reference: Some(Self::ALPHA_E) },
         ]
     }
 
@@ -276,8 +248,7 @@ impl Molecule<3, 3> for Water {
         qdot: &SVector<f64, 3>,
         grad: &mut SVector<f64, 3>,
     ) -> f64 {
-        self.derivatives(q)
-            .kinetic_energy_gradient(&self.masses(), omega, qdot, grad)
+        self.derivatives(q).kinetic_energy_gradient(&self.masses(), omega, qdot, grad)
     }
 
     fn potential(&self, q: &SVector<f64, 3>) -> f64 {
@@ -289,18 +260,11 @@ impl Molecule<3, 3> for Water {
         let (x1, x2, y) = (q[0] - Self::RE, q[1] - Self::RE, q[2] - Self::ALPHA_E);
         let morse = |x: f64| {
             let e = (-Self::BETA * x).exp();
-            (
-                Self::D * (1.0 - e) * (1.0 - e),
-                2.0 * Self::D * Self::BETA * e * (1.0 - e),
-            )
+            (Self::D * (1.0 - e) * (1.0 - e), 2.0 * Self::D * Self::BETA * e * (1.0 - e))
         };
         let (u1, g1) = morse(x1);
         let (u2, g2) = morse(x2);
-        let u = u1
-            + u2
-            + 0.5 * Self::K_BEND * y * y
-            + Self::F_RR * x1 * x2
-            + Self::F_RA * (x1 + x2) * y;
+        let u = u1 + u2 + 0.5 * Self::K_BEND * y * y + Self::F_RR * x1 * x2 + Self::F_RA * (x1 + x2) * y;
         grad[0] = g1 + Self::F_RR * x2 + Self::F_RA * y;
         grad[1] = g2 + Self::F_RR * x1 + Self::F_RA * y;
         grad[2] = Self::K_BEND * y + Self::F_RA * (x1 + x2);
@@ -337,11 +301,7 @@ impl Molecule<0, 3> for RigidTop {
     }
 
     fn atoms(&self) -> [Atom; 3] {
-        [
-            atom("C", "C", C_DA),
-            atom("N", "N", N_DA),
-            atom("O", "O", O_DA),
-        ]
+        [atom("C", "C", C_DA), atom("N", "N", N_DA), atom("O", "O", O_DA)]
     }
 
     fn coordinates(&self) -> [Coordinate; 0] {
@@ -367,8 +327,7 @@ impl Molecule<0, 3> for RigidTop {
         qdot: &SVector<f64, 0>,
         grad: &mut SVector<f64, 0>,
     ) -> f64 {
-        self.derivatives()
-            .kinetic_energy_gradient(&self.masses(), omega, qdot, grad)
+        self.derivatives().kinetic_energy_gradient(&self.masses(), omega, qdot, grad)
     }
 
     fn potential(&self, _q: &SVector<f64, 0>) -> f64 {
@@ -408,21 +367,13 @@ impl Rng {
 
 /// A random water geometry around equilibrium: `r ∈ [1.5, 2.3]` bohr, `α ∈ [1.4, 2.5]` rad.
 pub fn random_water_q(rng: &mut Rng) -> SVector<f64, 3> {
-    SVector::<f64, 3>::new(
-        rng.uniform(1.5, 2.3),
-        rng.uniform(1.5, 2.3),
-        rng.uniform(1.4, 2.5),
-    )
+    SVector::<f64, 3>::new(rng.uniform(1.5, 2.3), rng.uniform(1.5, 2.3), rng.uniform(1.4, 2.5))
 }
 
 /// Random generic Euler angles, with θ kept away from 0 and π (`sin θ > 0.3`).
 pub fn random_euler(rng: &mut Rng) -> Vector3<f64> {
     use core::f64::consts::PI;
-    Vector3::new(
-        rng.uniform(-PI, PI),
-        rng.uniform(0.31, PI - 0.31),
-        rng.uniform(-PI, PI),
-    )
+    Vector3::new(rng.uniform(-PI, PI), rng.uniform(0.31, PI - 0.31), rng.uniform(-PI, PI))
 }
 
 /// A random vector with components in `[-s, s)`.
@@ -433,7 +384,6 @@ pub fn random_vector<const D: usize>(rng: &mut Rng, s: f64) -> SVector<f64, D> {
 /// `f'(x)` by the 5-point central difference with step `h`, improved by one Richardson
 /// extrapolation (error O(h⁶)).
 pub fn derivative(f: impl Fn(f64) -> f64, x: f64, h: f64) -> f64 {
-    let d4 =
-        |h: f64| (8.0 * (f(x + h) - f(x - h)) - (f(x + 2.0 * h) - f(x - 2.0 * h))) / (12.0 * h);
+    let d4 = |h: f64| (8.0 * (f(x + h) - f(x - h)) - (f(x + 2.0 * h) - f(x - 2.0 * h))) / (12.0 * h);
     (16.0 * d4(0.5 * h) - d4(h)) / 15.0
 }
