@@ -1,0 +1,2 @@
+//! Criterion benchmarks of one right-hand-side evaluation per molecule.
+fn main() {}

@@ -1,0 +1,2 @@
+//! Criterion benchmarks of code generation per molecule.
+fn main() {}

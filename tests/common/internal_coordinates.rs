@@ -1,0 +1,160 @@
+//! Internal coordinates computed from lab-frame Cartesian positions with nothing but distances,
+//! bond angles and dihedral angles: the independent side of the Cartesian cross-check.
+//!
+//! This shares no code with the generated kinetic matrices: the cross-check integrates Newton's
+//! equations for the atoms with forces `−∂U(q(x))/∂x`, where `q(x)` is computed here and its
+//! x-derivative comes from forward-mode automatic differentiation ([`Dual`]), and `∂U/∂q` from
+//! the molecule's potential (the one thing both sides must share: they simulate the same
+//! potential).
+#![allow(dead_code)]
+
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// The arithmetic the coordinate functions need, for `f64` and for [`Dual`].
+pub trait Real:
+    Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Div<Output = Self> + Neg<Output = Self>
+{
+    fn from_f64(x: f64) -> Self;
+    fn value(self) -> f64;
+    fn sqrt(self) -> Self;
+    fn atan2(self, x: Self) -> Self;
+}
+
+impl Real for f64 {
+    fn from_f64(x: f64) -> Self {
+        x
+    }
+    fn value(self) -> f64 {
+        self
+    }
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+    fn atan2(self, x: Self) -> Self {
+        f64::atan2(self, x)
+    }
+}
+
+/// A number with one directional derivative: `v + d ε`, ε² = 0.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Dual {
+    pub v: f64,
+    pub d: f64,
+}
+
+impl Add for Dual {
+    type Output = Dual;
+    fn add(self, o: Dual) -> Dual {
+        Dual { v: self.v + o.v, d: self.d + o.d }
+    }
+}
+impl Sub for Dual {
+    type Output = Dual;
+    fn sub(self, o: Dual) -> Dual {
+        Dual { v: self.v - o.v, d: self.d - o.d }
+    }
+}
+impl Mul for Dual {
+    type Output = Dual;
+    fn mul(self, o: Dual) -> Dual {
+        Dual { v: self.v * o.v, d: self.d * o.v + self.v * o.d }
+    }
+}
+impl Div for Dual {
+    type Output = Dual;
+    fn div(self, o: Dual) -> Dual {
+        Dual { v: self.v / o.v, d: (self.d * o.v - self.v * o.d) / (o.v * o.v) }
+    }
+}
+impl Neg for Dual {
+    type Output = Dual;
+    fn neg(self) -> Dual {
+        Dual { v: -self.v, d: -self.d }
+    }
+}
+impl Real for Dual {
+    fn from_f64(x: f64) -> Self {
+        Dual { v: x, d: 0.0 }
+    }
+    fn value(self) -> f64 {
+        self.v
+    }
+    fn sqrt(self) -> Self {
+        let s = self.v.sqrt();
+        Dual { v: s, d: self.d / (2.0 * s) }
+    }
+    fn atan2(self, x: Self) -> Self {
+        let r2 = self.v * self.v + x.v * x.v;
+        Dual { v: self.v.atan2(x.v), d: (x.v * self.d - self.v * x.d) / r2 }
+    }
+}
+
+/// A 3-vector of [`Real`]s.
+pub type V3<T> = [T; 3];
+
+pub fn sub<T: Real>(a: V3<T>, b: V3<T>) -> V3<T> {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub fn dot<T: Real>(a: V3<T>, b: V3<T>) -> T {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+pub fn cross<T: Real>(a: V3<T>, b: V3<T>) -> V3<T> {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+pub fn norm<T: Real>(a: V3<T>) -> T {
+    dot(a, a).sqrt()
+}
+
+/// The distance |a − b|.
+pub fn distance<T: Real>(a: V3<T>, b: V3<T>) -> T {
+    norm(sub(a, b))
+}
+
+/// The angle a–b–c at vertex b, in [0, π], as atan2(|u × v|, u · v), which stays accurate near
+/// 0 and π where acos does not.
+pub fn angle<T: Real>(a: V3<T>, b: V3<T>, c: V3<T>) -> T {
+    let (u, v) = (sub(a, b), sub(c, b));
+    norm(cross(u, v)).atan2(dot(u, v))
+}
+
+/// The dihedral angle a–b–c–d in (−π, π] (IUPAC sign: positive when, looking along b → c, the
+/// bond b–a turns clockwise onto the bond c–d). Example: a = x̂, b = 0, c = ẑ, d = ẑ + ŷ gives
+/// +π/2 (checked by `dihedral_sign_follows_iupac` in `tests/cartesian.rs`).
+pub fn dihedral<T: Real>(a: V3<T>, b: V3<T>, c: V3<T>, d: V3<T>) -> T {
+    let (b1, b2, b3) = (sub(b, a), sub(c, b), sub(d, c));
+    let y = norm(b2) * dot(b1, cross(b2, b3));
+    let x = dot(cross(b1, b2), cross(b2, b3));
+    y.atan2(x)
+}
+
+/// Water: (r1, r2, α) = (|H1 − O|, |H2 − O|, ∠H1–O–H2), atoms in the order O, H1, H2.
+pub fn h2o<T: Real>(x: &[V3<T>]) -> Vec<T> {
+    vec![distance(x[1], x[0]), distance(x[2], x[0]), angle(x[1], x[0], x[2])]
+}
+
+/// Every atom position's derivative of every coordinate: `jac[k][i][axis] = ∂q_k/∂x_{i,axis}`,
+/// by forward-mode differentiation, one direction at a time.
+pub fn jacobian(x: &[[f64; 3]], q_of_x: impl Fn(&[V3<Dual>]) -> Vec<Dual>) -> (Vec<f64>, Vec<Vec<[f64; 3]>>) {
+    let n_atoms = x.len();
+    let lift = |seed: Option<(usize, usize)>| -> Vec<V3<Dual>> {
+        (0..n_atoms)
+            .map(|i| {
+                [0, 1, 2].map(|a| Dual { v: x[i][a], d: if seed == Some((i, a)) { 1.0 } else { 0.0 } })
+            })
+            .collect()
+    };
+    let q: Vec<f64> = q_of_x(&lift(None)).iter().map(|d| d.v).collect();
+    let mut jac = vec![vec![[0.0; 3]; n_atoms]; q.len()];
+    for i in 0..n_atoms {
+        for a in 0..3 {
+            for (k, dq) in q_of_x(&lift(Some((i, a)))).iter().enumerate() {
+                jac[k][i][a] = dq.d;
+            }
+        }
+    }
+    (q, jac)
+}
+
