@@ -3,8 +3,9 @@
 //! A molecule is defined in `molecules/NAME.toml` (atoms, internal coordinates, body-frame
 //! positions as expressions, potential); `cargo build` generates straight-line Rust for its
 //! kinetic matrices and their derivatives ([`molecules`]), and the [`runtime`] turns them into
-//! Hamilton's equations and trajectories.
+//! Hamilton's equations and trajectories. The [`cli`] is the `rovib` command.
 
+pub mod cli;
 pub mod molecules;
 
 pub use rovib_runtime as runtime;

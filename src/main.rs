@@ -1,2 +1,17 @@
-//! The `rovib` command line.
-fn main() {}
+//! The `rovib` command line. The commands live in [`rovib::cli`]; this file only parses
+//! arguments and turns an error into one line on stderr and a non-zero exit status.
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let cli = rovib::cli::Cli::parse();
+    match rovib::cli::execute(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

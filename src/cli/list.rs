@@ -1,0 +1,35 @@
+//! `rovib list`: the compiled-in molecules, their atoms and coordinates.
+
+use std::fmt::Write as _;
+
+use crate::molecules;
+use crate::runtime::{Molecule, MoleculeVisitor};
+
+struct Describe;
+
+impl MoleculeVisitor for Describe {
+    type Output = String;
+
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "{} ({}): {NA} atoms, {N} internal coordinates", m.name(), m.source());
+        let atoms: Vec<String> = m.atoms().iter().map(|a| format!("{} ({}, {} Da)", a.label, a.element, a.mass_da)).collect();
+        let _ = writeln!(s, "  atoms:       {}", atoms.join(", "));
+        if N == 0 {
+            let _ = writeln!(s, "  coordinates: none (rigid)");
+        } else {
+            let coords: Vec<String> = m
+                .coordinates()
+                .iter()
+                .map(|c| format!("{} [{} in the definition, {} at run time]", c.name, c.unit.name(), c.unit.atomic().name()))
+                .collect();
+            let _ = writeln!(s, "  coordinates: {}", coords.join(", "));
+        }
+        s
+    }
+}
+
+/// The text `rovib list` prints.
+pub fn list() -> String {
+    molecules::NAMES.iter().filter_map(|name| molecules::visit(name, Describe)).collect::<Vec<_>>().join("\n")
+}
