@@ -2,6 +2,9 @@
 //!
 //! Thin on purpose: it calls `rovib_codegen::generate`, prints one `rerun-if-changed` per
 //! definition, and on a bad definition prints readable errors and exits 1 (never a panic).
+//!
+//! `ROVIB_MOLECULES_DIR`, if set, replaces `molecules/` (for building a private set of
+//! molecules without editing the checkout).
 
 use std::path::PathBuf;
 
@@ -9,9 +12,14 @@ fn main() {
     let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
     let out_dir = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     println!("cargo::rerun-if-changed=build.rs");
+    println!("cargo::rerun-if-env-changed=ROVIB_MOLECULES_DIR");
+    let (dir, display) = match std::env::var("ROVIB_MOLECULES_DIR") {
+        Ok(d) if !d.is_empty() => (PathBuf::from(&d), d),
+        _ => (manifest.join("molecules"), "molecules".to_owned()),
+    };
     // The directory itself, so that adding a definition reruns generation.
-    println!("cargo::rerun-if-changed=molecules");
-    match rovib_codegen::generate(&manifest.join("molecules"), "molecules", &out_dir) {
+    println!("cargo::rerun-if-changed={}", dir.display());
+    match rovib_codegen::generate(&dir, &display, &out_dir) {
         Ok(report) => {
             for input in &report.inputs {
                 println!("cargo::rerun-if-changed={}", input.display());

@@ -7,5 +7,7 @@
 
 pub mod cli;
 pub mod molecules;
+pub mod output;
+pub mod scene;
 
 pub use rovib_runtime as runtime;

@@ -9,6 +9,11 @@ fn main() -> ExitCode {
     let cli = rovib::cli::Cli::parse();
     match rovib::cli::execute(cli) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(rovib::cli::CliError::File(e)) => {
+            // Already formatted as `error: ...` with its place and help.
+            eprintln!("{e}");
+            ExitCode::FAILURE
+        }
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE

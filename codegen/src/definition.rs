@@ -37,56 +37,20 @@
 //! wrong and what to change.
 
 use std::collections::{BTreeMap, HashMap};
-use std::fmt;
 use std::ops::Range;
 
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::diagnostic::{FileError, Source};
 use crate::elements;
 use crate::expr::{ExprId, Func, Graph};
 use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
 use crate::units::{CoordinateUnit, EnergyUnit, LengthUnit};
 
-/// A problem in a definition file, with its place and a suggested fix.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct DefinitionError {
-    /// The file, as given to the generator (e.g. `molecules/h2o.toml`).
-    pub path: String,
-    /// 1-based line, or 0 if the problem concerns the whole file.
-    pub line: usize,
-    /// 1-based column (in characters), or 0.
-    pub column: usize,
-    /// What is wrong.
-    pub message: String,
-    /// What to change.
-    pub help: String,
-    /// The text of the offending line, for display.
-    pub source_line: Option<String>,
-}
-
-impl fmt::Display for DefinitionError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "error: {}", self.message)?;
-        if self.line == 0 {
-            writeln!(f, "  --> {}", self.path)?;
-        } else {
-            writeln!(f, "  --> {}:{}:{}", self.path, self.line, self.column)?;
-        }
-        if let Some(src) = &self.source_line {
-            let gutter = self.line.to_string();
-            let pad = " ".repeat(gutter.len());
-            writeln!(f, "{pad} |")?;
-            writeln!(f, "{gutter} | {src}")?;
-            let caret_pad: String =
-                src.chars().take(self.column.saturating_sub(1)).map(|c| if c == '\t' { '\t' } else { ' ' }).collect();
-            writeln!(f, "{pad} | {caret_pad}^")?;
-        }
-        write!(f, "  = help: {}", self.help)
-    }
-}
-
-impl std::error::Error for DefinitionError {}
+/// A problem in a definition file, with its place and a suggested fix (file, line, column,
+/// message, help), displayed like a rustc error.
+pub type DefinitionError = FileError;
 
 /// An atom after validation.
 #[derive(Clone, Debug, PartialEq)]
@@ -196,79 +160,15 @@ enum RawValue {
     Expr(String),
 }
 
-/// The text of a definition file, for turning byte spans into places.
-struct Source<'a> {
-    path: &'a str,
-    text: &'a str,
+/// Places inside expression strings.
+trait ExpressionPlace {
+    /// Turns an error inside the string value at `span` into an error at its place in the file.
+    fn expression_error(&self, span: Range<usize>, value: &str, e: ExprError) -> DefinitionError;
 }
 
-impl Source<'_> {
-    fn place(&self, offset: usize) -> (usize, usize) {
-        let offset = offset.min(self.text.len());
-        let before = &self.text[..offset];
-        let line = before.matches('\n').count() + 1;
-        let line_start = before.rfind('\n').map_or(0, |i| i + 1);
-        let column = self.text[line_start..offset].chars().count() + 1;
-        (line, column)
-    }
-
-    fn line_text(&self, line: usize) -> Option<String> {
-        self.text.lines().nth(line.checked_sub(1)?).map(str::to_owned)
-    }
-
-    fn error_at_offset(&self, offset: usize, message: impl Into<String>, help: impl Into<String>) -> DefinitionError {
-        let (line, column) = self.place(offset);
-        DefinitionError {
-            path: self.path.to_owned(),
-            line,
-            column,
-            message: message.into(),
-            help: help.into(),
-            source_line: self.line_text(line),
-        }
-    }
-
-    fn error(&self, span: Range<usize>, message: impl Into<String>, help: impl Into<String>) -> DefinitionError {
-        self.error_at_offset(span.start, message, help)
-    }
-
-    fn whole_file(&self, message: impl Into<String>, help: impl Into<String>) -> DefinitionError {
-        DefinitionError {
-            path: self.path.to_owned(),
-            line: 0,
-            column: 0,
-            message: message.into(),
-            help: help.into(),
-            source_line: None,
-        }
-    }
-
-    /// Turns an error inside the string value at `span` into an error at its place in the file.
-    ///
-    /// Where the string has no escapes, the place is exact; otherwise it is the start of the
-    /// string.
+impl ExpressionPlace for Source<'_> {
     fn expression_error(&self, span: Range<usize>, value: &str, e: ExprError) -> DefinitionError {
-        let raw = &self.text[span.clone()];
-        let delimiter = ["\"\"\"", "'''", "\"", "'"].into_iter().find(|d| raw.starts_with(d)).unwrap_or("");
-        let mut content_start = span.start + delimiter.len();
-        let mut content = &raw[delimiter.len()..raw.len().saturating_sub(delimiter.len())];
-        if delimiter.len() == 3 {
-            // TOML drops a newline right after the opening delimiter of a multi-line string.
-            for nl in ["\r\n", "\n"] {
-                if let Some(rest) = content.strip_prefix(nl) {
-                    content = rest;
-                    content_start += nl.len();
-                    break;
-                }
-            }
-        }
-        let offset = if content == value {
-            let line_start: usize = content.split_inclusive('\n').take(e.line - 1).map(str::len).sum();
-            let in_line: usize = content[line_start..].chars().take(e.column).map(char::len_utf8).sum();
-            content_start + line_start + in_line
-        } else {
-            span.start
-        };
+        let offset = self.offset_in_string(span, value, e.line, e.column);
         self.error_at_offset(offset, e.message, e.help)
     }
 }

@@ -1,7 +1,7 @@
 //! Isotope masses of the elements that molecule definitions name.
 //!
 //! Atomic masses in daltons from the AME2020 evaluation as tabulated by NIST ("Atomic Weights
-//! and Isotopic Compositions", https://physics.nist.gov/Comp). The default isotope of an element
+//! and Isotopic Compositions", <https://physics.nist.gov/Comp>). The default isotope of an element
 //! is its most abundant one.
 
 /// An element: symbol, and its isotopes as (mass number, mass in Da), most abundant first.

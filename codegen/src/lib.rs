@@ -19,6 +19,8 @@ use proc_macro2::{Ident, Span, TokenStream};
 use quote::{format_ident, quote};
 
 pub mod definition;
+#[path = "../../runtime/src/diagnostic.rs"]
+pub mod diagnostic;
 pub mod diff;
 pub mod elements;
 pub mod emit;
@@ -236,7 +238,7 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
         },
         FunctionSpec {
             name: "positions_jacobian",
-            doc: "dr[k] = ∂R/∂q_k, bohr per unit of q_k.".into(),
+            doc: "`dr[k]` = ∂R/∂q_k, bohr per unit of q_k.".into(),
             signature: quote!(fn positions_jacobian(&self, q: #q_ty, dr: &mut [SMatrix<f64, 3, #na>; #n])),
             inputs: q_inputs.clone(),
             groups: e.jacobian.iter().enumerate().map(|(k, rows)| positions_group(ix(quote!(dr), k), rows)).collect(),
@@ -252,7 +254,7 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
         },
         FunctionSpec {
             name: "kinetic_jacobian",
-            doc: "dk[l] holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
+            doc: "`dk[l]` holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
             signature: quote!(fn kinetic_jacobian(&self, q: #q_ty, dk: &mut [KineticMatrices<#n>; #n])),
             inputs: q_inputs.clone(),
             groups: e

@@ -9,11 +9,14 @@
 //! Atomic units throughout: lengths in bohr, angles in radians, masses in electron masses,
 //! energies in hartree, time in ħ/E_h (≈ 0.024 188 fs). See [`units`] for the conversions.
 
+pub mod diagnostic;
+pub mod frames;
 pub mod hamiltonian;
 pub mod integrate;
 pub mod molecule;
 pub mod units;
 
-pub use hamiltonian::{HamiltonianError, HamiltonianSystem, PhaseState};
+pub use frames::{CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, to_lab};
+pub use hamiltonian::{FastSystem, HamiltonianError, HamiltonianSystem, PhaseState};
 pub use molecule::{Atom, Coordinate, KineticMatrices, Molecule, MoleculeVisitor};
 pub use nalgebra;

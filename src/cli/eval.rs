@@ -30,10 +30,10 @@ fn rows<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Value {
 fn vector<const K: usize>(field: &str, values: Option<&Vec<f64>>, default: SVector<f64, K>) -> Result<SVector<f64, K>, CliError> {
     let Some(values) = values else { return Ok(default) };
     if values.len() != K {
-        return Err(CliError(format!("`{field}` has {} entries, expected {K}", values.len())));
+        return Err(CliError::Message(format!("`{field}` has {} entries, expected {K}", values.len())));
     }
     if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-        return Err(CliError(format!("`{field}[{i}]` is not a finite number")));
+        return Err(CliError::Message(format!("`{field}[{i}]` is not a finite number")));
     }
     Ok(SVector::from_column_slice(values))
 }
@@ -51,7 +51,7 @@ impl MoleculeVisitor for Eval<'_> {
         let state = match self.state {
             Some(s) => {
                 if s.q.is_none() && reference.is_none() {
-                    return Err(CliError(format!(
+                    return Err(CliError::Message(format!(
                         "`q` is missing and {} has no reference geometry to default to",
                         m.name()
                     )));

@@ -8,8 +8,11 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
 
+use crate::runtime::diagnostic::FileError;
+
 mod eval;
 mod list;
+pub mod run;
 
 /// Classical rotation-vibration dynamics of polyatomic molecules.
 #[derive(Debug, Parser)]
@@ -36,25 +39,56 @@ pub enum Command {
         #[arg(long)]
         state: Option<PathBuf>,
     },
+    /// Integrate a scene: write trajectory.csv, lab.xyz and summary.json.
+    Run {
+        /// The scene file (see scenes/ and the README).
+        scene: PathBuf,
+        /// Output directory [default: out/SCENE_NAME].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// No progress bar and no report on stdout.
+        #[arg(long, short)]
+        quiet: bool,
+    },
 }
 
-/// A command's failure: one line for the user.
+/// A command's failure.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct CliError(pub String);
+pub enum CliError {
+    /// One line for the user.
+    Message(String),
+    /// A problem located in a file (scene), shown with its place and a fix.
+    File(FileError),
+}
 
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        // One line, whatever the cause contained.
-        f.write_str(&self.0.replace('\n', " "))
+        match self {
+            // One line, whatever the cause contained.
+            CliError::Message(m) => f.write_str(&m.replace('\n', " ")),
+            CliError::File(e) => write!(f, "{e}"),
+        }
     }
 }
 
 impl std::error::Error for CliError {}
 
+impl From<FileError> for CliError {
+    fn from(e: FileError) -> Self {
+        CliError::File(e)
+    }
+}
+
+impl From<String> for CliError {
+    fn from(m: String) -> Self {
+        CliError::Message(m)
+    }
+}
+
 impl CliError {
     /// An error from anything displayable, prefixed with context.
     pub fn context(context: impl fmt::Display, e: impl fmt::Display) -> Self {
-        CliError(format!("{context}: {e}"))
+        CliError::Message(format!("{context}: {e}"))
     }
 }
 
@@ -70,12 +104,31 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             println!("{json}");
             Ok(())
         }
+        Command::Run { scene, out, quiet } => {
+            let report = run::run(&scene, out.as_deref(), quiet)?;
+            if !quiet {
+                let c = &report.conservation;
+                println!(
+                    "{} steps ({} rejected), {} right-hand sides, {:.3} s; max relative energy error {:.2e}, max |J| change {:.2e} hbar",
+                    report.stats.steps,
+                    report.stats.rejected,
+                    report.stats.rhs_evals,
+                    report.wall_time,
+                    c.max_relative_energy_error(),
+                    c.max_j_change
+                );
+                for f in &report.files {
+                    println!("wrote {}", f.display());
+                }
+            }
+            Ok(())
+        }
     }
 }
 
 /// The error for a molecule name that is not compiled in.
 pub(crate) fn unknown_molecule(name: &str) -> CliError {
-    CliError(format!(
+    CliError::Message(format!(
         "unknown molecule `{name}`; the compiled-in molecules are {} (add molecules/{name}.toml and rebuild to add it)",
         crate::molecules::NAMES.join(", ")
     ))

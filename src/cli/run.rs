@@ -1,0 +1,336 @@
+//! `rovib run SCENE.toml`: integrate a scene and write its trajectory and diagnostics.
+
+use std::io::IsTerminal as _;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+
+use super::{CliError, unknown_molecule};
+use crate::molecules;
+use crate::output::{Conservation, LabXyz, TrajectoryCsv, write_summary};
+use crate::runtime::diagnostic::FileError;
+use crate::runtime::hamiltonian::{
+    HamiltonianSystem, PhaseState, euler_momenta_from_angular_momentum, hamiltonian, rotation_matrix,
+    w_matrix,
+};
+use crate::runtime::integrate::{Method, Observer, Stats, solve};
+use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
+use crate::runtime::units::CoordinateUnit;
+use crate::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
+use crate::scene::{Initial, Momenta, Rotation, Scene, parse_scene};
+
+/// What a finished run reports on the terminal.
+pub struct RunReport {
+    /// The output directory.
+    pub out_dir: PathBuf,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+    /// Work counters.
+    pub stats: Stats,
+    /// Diagnostics.
+    pub conservation: Conservation,
+    /// Wall time of the integration, s.
+    pub wall_time: f64,
+}
+
+/// Runs the scene at `path`, writing into `out_dir` (default `out/SCENE_NAME`).
+pub fn run(path: &Path, out_dir: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
+    let scene = parse_scene(&path.display().to_string(), &text)?;
+    let out_dir = match out_dir {
+        Some(d) => d.to_owned(),
+        None => Path::new("out").join(path.file_stem().unwrap_or_default()),
+    };
+    std::fs::create_dir_all(&out_dir).map_err(|e| CliError::context(format!("cannot create {}", out_dir.display()), e))?;
+    let name = scene.molecule.get_ref().clone();
+    let visitor = Run { scene: &scene, out_dir: &out_dir, progress: !quiet && std::io::stderr().is_terminal() };
+    molecules::visit(&name, visitor).ok_or_else(|| {
+        let e = unknown_molecule(&name);
+        CliError::File(scene.source().error(scene.molecule.span(), e.to_string(), "use a name from `rovib list`"))
+    })?
+}
+
+/// Where a run starts: the phase-space state and the centre-of-mass motion (bohr, bohr/a.u.).
+pub struct Start<const N: usize> {
+    /// The internal state.
+    pub state: PhaseState<N>,
+    /// Centre-of-mass position.
+    pub com_position: Vector3<f64>,
+    /// Centre-of-mass velocity.
+    pub com_velocity: Vector3<f64>,
+}
+
+/// Binds the scene's initial condition to molecule `m`: names to indices, units to atomic units.
+pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, scene: &Scene) -> Result<Start<N>, FileError> {
+    let src = scene.source();
+    let coords = m.coordinates();
+    let index = |name: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
+        coords.iter().position(|c| c.name == name.get_ref()).ok_or_else(|| {
+            let known: Vec<&str> = coords.iter().map(|c| c.name).collect();
+            src.error(
+                name.span(),
+                format!("{} has no coordinate `{}` (in {what})", m.name(), name.get_ref()),
+                if known.is_empty() {
+                    format!("{} is rigid: remove {what}", m.name())
+                } else {
+                    format!("the coordinates of {} are {}", m.name(), known.join(", "))
+                },
+            )
+        })
+    };
+    // Per-coordinate factor from the scene's units to atomic units.
+    let scale = |k: usize| match coords[k].unit {
+        CoordinateUnit::Length(_) => scene.units.length,
+        CoordinateUnit::Angle(_) => scene.units.angle,
+    };
+    match &scene.initial {
+        Initial::Internal { q, momenta, euler, rotation } => {
+            let mut qv = SVector::<f64, N>::zeros();
+            let mut given = [false; N];
+            for (name, value) in q {
+                let k = index(name, "q")?;
+                qv[k] = value * scale(k);
+                given[k] = true;
+            }
+            if let Some(k) = (0..N).find(|&k| !given[k]) {
+                let reference = m.reference_geometry().ok_or_else(|| {
+                    src.error(
+                        scene.molecule.span(),
+                        format!("the initial q does not give `{}` and {} has no reference geometry", coords[k].name, m.name()),
+                        format!("give every coordinate in q = {{ ... }}, or add `reference` values to {}", m.source()),
+                    )
+                })?;
+                for k in (0..N).filter(|&k| !given[k]) {
+                    qv[k] = reference[k];
+                }
+            }
+            let euler = Vector3::from(*euler);
+            let (pv, pe) = match (momenta, rotation) {
+                (Momenta::P(p), rot) => {
+                    let mut pv = SVector::<f64, N>::zeros();
+                    for (name, value) in p {
+                        pv[index(name, "p")?] = *value;
+                    }
+                    let pe = match rot {
+                        Rotation::Pe(pe) => Vector3::from(*pe),
+                        Rotation::J(j) => euler_momenta_from_angular_momentum(&euler, &Vector3::from(*j)),
+                    };
+                    (pv, pe)
+                }
+                (Momenta::Qdot(qd), rot) => {
+                    let mut qdot = SVector::<f64, N>::zeros();
+                    for (name, value) in qd {
+                        let k = index(name, "qdot")?;
+                        qdot[k] = value * scale(k) / scene.units.time;
+                    }
+                    // J is given (or follows from p_e); then ω = I⁻¹(J − A q̇) and p = Aᵀω + a q̇.
+                    let j = match rot {
+                        Rotation::J(j) => Vector3::from(*j),
+                        Rotation::Pe(pe) => w_matrix(&euler)
+                            .map_err(|e| src.whole_file(format!("the initial orientation: {e}"), "choose θ away from 0 and π"))?
+                            * Vector3::from(*pe),
+                    };
+                    let mut k = KineticMatrices::<N>::default();
+                    m.kinetic(&qv, &mut k);
+                    let inertia = k.inertia.cholesky().ok_or_else(|| {
+                        src.whole_file(
+                            format!("the inertia tensor of {} is singular at the initial geometry q = {:?}", m.name(), qv.as_slice()),
+                            "start from a geometry where the molecule is not linear",
+                        )
+                    })?;
+                    let omega = inertia.solve(&(j - k.coriolis * qdot));
+                    let pv = k.coriolis.transpose() * omega + k.a * qdot;
+                    (pv, euler_momenta_from_angular_momentum(&euler, &j))
+                }
+            };
+            Ok(Start { state: PhaseState { q: qv, p: pv, euler, pe }, com_position: Vector3::zeros(), com_velocity: Vector3::zeros() })
+        }
+        Initial::Lab { span, .. } => Err(src.error(
+            span.clone(),
+            "lab-frame initial conditions are not available in this build",
+            "give the initial condition in internal form (q, p or qdot, euler, pe or j)",
+        )),
+    }
+}
+
+struct Run<'a> {
+    scene: &'a Scene,
+    out_dir: &'a Path,
+    progress: bool,
+}
+
+impl MoleculeVisitor for Run<'_> {
+    type Output = Result<RunReport, CliError>;
+
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        let scene = self.scene;
+        let start = initial_state(&m, scene)?;
+        // Fail before writing anything if the initial state is not valid.
+        hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
+        let mut system = HamiltonianSystem::new(&m);
+        let mut y0 = vec![0.0; 2 * N + 6];
+        start.state.write_to(&mut y0).map_err(|e| CliError::context("the initial state", e))?;
+
+        let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
+        let mut recorder = Recorder::<M, N, NA> {
+            molecule: &m,
+            trajectory: if scene.outputs.trajectory { Some(TrajectoryCsv::create(self.out_dir, &names)?) } else { None },
+            lab: if scene.outputs.lab {
+                Some(LabXyz::create(self.out_dir, m.atoms().iter().map(|a| a.element).collect(), scene.time_unit.name())?)
+            } else {
+                None
+            },
+            conservation: Conservation::default(),
+            time_scale: scene.time_unit.in_au(),
+            com: (start.com_position, start.com_velocity),
+            progress: self.progress.then(|| progress_bar(scene)),
+            error: None,
+        };
+        let begin = Instant::now();
+        let result = solve(&mut system, &scene.method, 0.0, &y0, scene.t_end, scene.output_interval, &mut recorder);
+        let wall_time = begin.elapsed().as_secs_f64();
+        if let Some(bar) = &recorder.progress {
+            bar.finish_and_clear();
+        }
+        // Keep everything written so far, whatever happened.
+        let flushed = recorder.flush();
+
+        let (stats, failure) = match result {
+            Ok(stats) => (stats, recorder.error.take()),
+            Err(e) => {
+                let t = e.time().map(|t| t / scene.time_unit.in_au());
+                let mut message = format!("the run stopped: {e}");
+                if let Some(source) = std::error::Error::source(&e) {
+                    message.push_str(&format!(": {source}"));
+                }
+                if let Some(t) = t {
+                    message.push_str(&format!(" (at t = {t} {})", scene.time_unit.name()));
+                }
+                if let Some(y) = e.state() {
+                    message.push_str(&format!("; last state [q, p, euler, pe] = {y:?}"));
+                }
+                (Stats::default(), Some(message))
+            }
+        };
+        let mut files: Vec<PathBuf> = Vec::new();
+        if scene.outputs.trajectory {
+            files.push(self.out_dir.join("trajectory.csv"));
+        }
+        if scene.outputs.lab {
+            files.push(self.out_dir.join("lab.xyz"));
+        }
+        if scene.outputs.summary {
+            let summary = json!({
+                "scene": scene.path,
+                "molecule": m.name(),
+                "status": if failure.is_some() { "failed" } else { "completed" },
+                "error": failure,
+                "method": method_json(&scene.method),
+                "t_end": scene.t_end / scene.time_unit.in_au(),
+                "output_interval": scene.output_interval / scene.time_unit.in_au(),
+                "time_unit": scene.time_unit.name(),
+                "units": "q in bohr or rad, p in hbar/bohr or hbar, angles in rad, p_e and J in hbar, H in hartree; lab.xyz in angstrom",
+                "steps": stats.steps,
+                "accepted_steps": stats.accepted,
+                "rejected_steps": stats.rejected,
+                "rhs_evaluations": stats.rhs_evals,
+                "wall_time_s": wall_time,
+                "conservation": recorder.conservation.to_json(),
+                "centre_of_mass": {
+                    "position_bohr": start.com_position.as_slice(),
+                    "velocity_bohr_per_au": start.com_velocity.as_slice(),
+                },
+            });
+            files.push(write_summary(self.out_dir, &summary)?);
+        }
+        flushed?;
+        if let Some(message) = failure {
+            return Err(CliError::Message(format!("{message}; output so far is in {}", self.out_dir.display())));
+        }
+        Ok(RunReport { out_dir: self.out_dir.to_owned(), files, stats, conservation: recorder.conservation, wall_time })
+    }
+}
+
+fn method_json(method: &Method) -> serde_json::Value {
+    match method {
+        Method::Dop853(o) => json!({"name": "dop853", "rtol": o.rtol, "atol": o.atol}),
+        Method::GaussLegendre(o) => {
+            json!({"name": "gauss-legendre", "stages": o.stages, "step_au": o.step, "compensated": o.compensated})
+        }
+        Method::Rk4(o) => json!({"name": "rk4", "step_au": o.step}),
+    }
+}
+
+fn progress_bar(scene: &Scene) -> ProgressBar {
+    let outputs = (scene.t_end / scene.output_interval).ceil() as u64 + 1;
+    let bar = ProgressBar::new(outputs);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} outputs, eta {eta}")
+            .expect("a valid template"),
+    );
+    bar
+}
+
+/// Writes each output time and accumulates the diagnostics; remembers the first I/O error and
+/// stops the run there.
+struct Recorder<'m, M, const N: usize, const NA: usize> {
+    molecule: &'m M,
+    trajectory: Option<TrajectoryCsv>,
+    lab: Option<LabXyz>,
+    conservation: Conservation,
+    time_scale: f64,
+    com: (Vector3<f64>, Vector3<f64>),
+    progress: Option<ProgressBar>,
+    error: Option<String>,
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
+    fn record(&mut self, t: f64, y: &[f64]) -> Result<(), String> {
+        let s = PhaseState::<N>::read_from(y).map_err(|e| e.to_string())?;
+        let energy = hamiltonian(self.molecule, &s).map_err(|e| format!("at t = {t}: {e}"))?;
+        let j = w_matrix(&s.euler).map_err(|e| format!("at t = {t}: {e}"))? * s.pe;
+        let rotation = rotation_matrix(&s.euler);
+        let lab_l = rotation * j;
+        self.conservation.record(energy, j.norm(), s.pe[0], lab_l.into());
+        let t_out = t / self.time_scale;
+        if let Some(csv) = &mut self.trajectory {
+            csv.row(t_out, s.q.iter().chain(s.p.iter()).chain(s.euler.iter()).chain(s.pe.iter()).copied().chain([energy]))?;
+        }
+        if let Some(xyz) = &mut self.lab {
+            let mut r = SMatrix::<f64, 3, NA>::zeros();
+            self.molecule.positions(&s.q, &mut r);
+            let com = self.com.0 + self.com.1 * t;
+            let lab = rotation * r;
+            xyz.frame(t_out, energy, (0..NA).map(|i| (lab.column(i) + com).into()))?;
+        }
+        if let Some(bar) = &self.progress {
+            bar.inc(1);
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), String> {
+        if let Some(csv) = &mut self.trajectory {
+            csv.flush()?;
+        }
+        if let Some(xyz) = &mut self.lab {
+            xyz.flush()?;
+        }
+        Ok(())
+    }
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Recorder<'_, M, N, NA> {
+    fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
+        match self.record(t, y) {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                self.error = Some(e);
+                ControlFlow::Break(())
+            }
+        }
+    }
+}

@@ -1,0 +1,197 @@
+//! What a run writes: `trajectory.csv`, `lab.xyz` (extended XYZ) and `summary.json`.
+//!
+//! Files are written as the run goes, through buffers that are flushed when the run ends, also
+//! when it ends with an error, so that everything up to the failure is kept.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use serde_json::{Value, json};
+
+use crate::runtime::units::BOHR_IN_ANGSTROM;
+
+/// A writer that remembers its path for error messages.
+pub struct OutputFile {
+    path: PathBuf,
+    out: BufWriter<File>,
+}
+
+impl OutputFile {
+    /// Creates (truncates) `dir/name`.
+    pub fn create(dir: &Path, name: &str) -> Result<Self, String> {
+        let path = dir.join(name);
+        let file = File::create(&path).map_err(|e| format!("cannot create {}: {e}", path.display()))?;
+        Ok(OutputFile { path, out: BufWriter::new(file) })
+    }
+
+    /// Writes one line (a newline is added).
+    pub fn line(&mut self, text: &str) -> Result<(), String> {
+        writeln!(self.out, "{text}").map_err(|e| format!("cannot write {}: {e}", self.path.display()))
+    }
+
+    /// Flushes the buffer to disk.
+    pub fn flush(&mut self) -> Result<(), String> {
+        self.out.flush().map_err(|e| format!("cannot write {}: {e}", self.path.display()))
+    }
+
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// `trajectory.csv`: one row per output time.
+///
+/// Columns: `t` (in the scene's time unit), each q by name (bohr or rad), each p as `p_NAME`
+/// (ħ/bohr or ħ), `phi`, `theta`, `psi` (rad), `p_phi`, `p_theta`, `p_psi` (ħ), `H` (hartree).
+pub struct TrajectoryCsv {
+    file: OutputFile,
+    row: String,
+}
+
+impl TrajectoryCsv {
+    /// Creates the file and writes the header.
+    pub fn create(dir: &Path, coordinates: &[&str]) -> Result<Self, String> {
+        let mut file = OutputFile::create(dir, "trajectory.csv")?;
+        let mut header = vec!["t".to_owned()];
+        header.extend(coordinates.iter().map(|c| (*c).to_owned()));
+        header.extend(coordinates.iter().map(|c| format!("p_{c}")));
+        header.extend(["phi", "theta", "psi", "p_phi", "p_theta", "p_psi", "H"].map(str::to_owned));
+        file.line(&header.join(","))?;
+        Ok(TrajectoryCsv { file, row: String::new() })
+    }
+
+    /// Writes one row: time, then the values in column order. Numbers are written with full
+    /// round-trip precision.
+    pub fn row(&mut self, t: f64, values: impl IntoIterator<Item = f64>) -> Result<(), String> {
+        use std::fmt::Write as _;
+        self.row.clear();
+        let _ = write!(self.row, "{t:?}");
+        for v in values {
+            let _ = write!(self.row, ",{v:?}");
+        }
+        let row = std::mem::take(&mut self.row);
+        let result = self.file.line(&row);
+        self.row = row;
+        result
+    }
+
+    /// Flushes to disk.
+    pub fn flush(&mut self) -> Result<(), String> {
+        self.file.flush()
+    }
+}
+
+/// `lab.xyz`: extended XYZ, one frame per output time, positions in Å, readable by ASE, VMD
+/// and OVITO. The comment line carries `Properties=species:S:1:pos:R:3`, the time and the
+/// energy.
+pub struct LabXyz {
+    file: OutputFile,
+    elements: Vec<&'static str>,
+    time_unit: &'static str,
+}
+
+impl LabXyz {
+    /// Creates the file for atoms of the given elements.
+    pub fn create(dir: &Path, elements: Vec<&'static str>, time_unit: &'static str) -> Result<Self, String> {
+        Ok(LabXyz { file: OutputFile::create(dir, "lab.xyz")?, elements, time_unit })
+    }
+
+    /// Writes one frame; `positions` are in bohr, one `[x, y, z]` per atom.
+    pub fn frame(&mut self, t: f64, energy: f64, positions: impl IntoIterator<Item = [f64; 3]>) -> Result<(), String> {
+        self.file.line(&self.elements.len().to_string())?;
+        self.file.line(&format!(
+            "Properties=species:S:1:pos:R:3 Time={t:?} time_unit={} energy_hartree={energy:?} pbc=\"F F F\"",
+            self.time_unit
+        ))?;
+        for (element, x) in self.elements.iter().zip(positions) {
+            let [a, b, c] = x.map(|v| v * BOHR_IN_ANGSTROM);
+            self.file.line(&format!("{element} {a:.12} {b:.12} {c:.12}"))?;
+        }
+        Ok(())
+    }
+
+    /// Flushes to disk.
+    pub fn flush(&mut self) -> Result<(), String> {
+        self.file.flush()
+    }
+}
+
+/// Conservation diagnostics accumulated over the output times.
+#[derive(Clone, Debug, Default)]
+pub struct Conservation {
+    /// H at the first output, hartree.
+    pub initial_energy: Option<f64>,
+    /// max |H(t) − H(0)| over output times, hartree.
+    pub max_energy_error: f64,
+    /// |J| at the first output, ħ.
+    pub initial_j: f64,
+    /// max | |J(t)| − |J(0)| |, ħ.
+    pub max_j_change: f64,
+    /// p_φ at the first output, ħ.
+    pub initial_p_phi: f64,
+    /// max |p_φ(t) − p_φ(0)|, ħ.
+    pub max_p_phi_change: f64,
+    /// The lab-frame angular momentum about the centre of mass at the first output, ħ.
+    pub initial_lab_l: [f64; 3],
+    /// max |L(t) − L(0)| (vector difference), ħ.
+    pub max_lab_l_change: f64,
+    /// How many output times contributed.
+    pub samples: u64,
+}
+
+impl Conservation {
+    /// Records one output time.
+    pub fn record(&mut self, energy: f64, j_abs: f64, p_phi: f64, lab_l: [f64; 3]) {
+        match self.initial_energy {
+            None => {
+                self.initial_energy = Some(energy);
+                self.initial_j = j_abs;
+                self.initial_p_phi = p_phi;
+                self.initial_lab_l = lab_l;
+            }
+            Some(h0) => {
+                self.max_energy_error = self.max_energy_error.max((energy - h0).abs());
+                self.max_j_change = self.max_j_change.max((j_abs - self.initial_j).abs());
+                self.max_p_phi_change = self.max_p_phi_change.max((p_phi - self.initial_p_phi).abs());
+                let d: f64 = lab_l.iter().zip(&self.initial_lab_l).map(|(a, b)| (a - b) * (a - b)).sum::<f64>().sqrt();
+                self.max_lab_l_change = self.max_lab_l_change.max(d);
+            }
+        }
+        self.samples += 1;
+    }
+
+    /// max |H(t) − H(0)| / |H(0)|, or the absolute error where H(0) = 0.
+    pub fn max_relative_energy_error(&self) -> f64 {
+        match self.initial_energy {
+            Some(h0) if h0 != 0.0 => self.max_energy_error / h0.abs(),
+            _ => self.max_energy_error,
+        }
+    }
+
+    /// As JSON, for `summary.json`.
+    pub fn to_json(&self) -> Value {
+        json!({
+            "sampled_at": "output times",
+            "samples": self.samples,
+            "initial_energy_hartree": self.initial_energy,
+            "max_abs_energy_error_hartree": self.max_energy_error,
+            "max_relative_energy_error": self.max_relative_energy_error(),
+            "initial_abs_j_hbar": self.initial_j,
+            "max_abs_j_change_hbar": self.max_j_change,
+            "initial_p_phi_hbar": self.initial_p_phi,
+            "max_p_phi_change_hbar": self.max_p_phi_change,
+            "initial_lab_angular_momentum_hbar": self.initial_lab_l,
+            "max_lab_angular_momentum_change_hbar": self.max_lab_l_change,
+        })
+    }
+}
+
+/// Writes `summary.json` (pretty-printed).
+pub fn write_summary(dir: &Path, summary: &Value) -> Result<PathBuf, String> {
+    let mut file = OutputFile::create(dir, "summary.json")?;
+    file.line(&serde_json::to_string_pretty(summary).expect("a JSON value serialises"))?;
+    file.flush()?;
+    Ok(file.path().to_owned())
+}

@@ -1,0 +1,518 @@
+//! Scene files: what `rovib run` integrates and what it writes.
+//!
+//! A scene names a molecule, an initial condition, an integrator, the end time, the output
+//! interval and the outputs. Every key is documented in the README ("Scene files"); a short
+//! example:
+//!
+//! ```toml
+//! molecule = "h2o"
+//!
+//! [units]                 # of the numbers in this file (not of the output, which is atomic)
+//! length = "angstrom"     # bohr | angstrom
+//! angle = "deg"           # rad | deg
+//! time = "fs"             # au | fs
+//!
+//! [initial]               # internal form: q, p or qdot, euler, pe or j
+//! q = { r1 = 1.0, r2 = 0.95, alpha = 100.0 }
+//! p = { r1 = 0.0 }        # ħ/bohr or ħ; missing entries are 0
+//! euler = [0, 90, 0]
+//! j = [0, 0, 10]          # body-frame angular momentum, ħ
+//!
+//! [integrator]
+//! method = "dop853"       # dop853 | gauss-legendre | rk4
+//! rtol = 1e-10
+//! atol = 1e-10
+//!
+//! [run]
+//! end = 500.0
+//! output_interval = 1.0
+//! outputs = ["trajectory", "lab", "summary"]
+//! ```
+//!
+//! The lab form of `[initial]` gives `positions` (and optionally `velocities`) of every atom,
+//! keyed by atom label. Parsing checks everything that does not depend on the molecule; the
+//! rest (coordinate and atom names) is checked when the scene is bound to its molecule, with
+//! errors that still point into the file.
+
+use std::collections::BTreeMap;
+use std::ops::Range;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::runtime::diagnostic::{FileError, Source};
+use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4Options};
+use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, LengthUnit};
+
+/// A unit of time accepted in scenes.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum TimeUnit {
+    /// The atomic unit of time, ħ/E_h ≈ 0.024 189 fs.
+    Au,
+    /// Femtoseconds.
+    Fs,
+}
+
+impl TimeUnit {
+    /// How many atomic units of time one of this unit is.
+    pub fn in_au(self) -> f64 {
+        match self {
+            TimeUnit::Au => 1.0,
+            TimeUnit::Fs => 1.0 / AU_TIME_IN_FS,
+        }
+    }
+
+    /// The spelling used in files and column names.
+    pub fn name(self) -> &'static str {
+        match self {
+            TimeUnit::Au => "au",
+            TimeUnit::Fs => "fs",
+        }
+    }
+}
+
+/// Which files a run writes.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub struct Outputs {
+    /// `trajectory.csv`: t, q, p, Euler angles, p_e, H at every output time.
+    pub trajectory: bool,
+    /// `lab.xyz`: extended XYZ lab-frame positions in Å at every output time.
+    pub lab: bool,
+    /// `summary.json`: work counters and conservation diagnostics.
+    pub summary: bool,
+}
+
+/// A name in the file with its place.
+pub type Named<T> = (Spanned<String>, T);
+
+/// The initial condition, in atomic units, with names still to be matched to the molecule.
+#[derive(Clone, Debug)]
+pub enum Initial {
+    /// Internal coordinates, their momenta or velocities, the orientation and its momenta.
+    Internal {
+        /// q by coordinate name (bohr or rad); missing ones default to the reference geometry.
+        q: Vec<Named<f64>>,
+        /// Conjugate momenta, or velocities q̇ (a.u.), by name; missing ones are 0.
+        momenta: Momenta,
+        /// Euler angles (φ, θ, ψ) in rad.
+        euler: [f64; 3],
+        /// The rotational state.
+        rotation: Rotation,
+    },
+    /// Lab-frame Cartesian positions (bohr) and velocities (bohr per a.u. of time) by label.
+    Lab {
+        /// Positions by atom label.
+        positions: Vec<Named<[f64; 3]>>,
+        /// Velocities by atom label; missing ones are 0.
+        velocities: Vec<Named<[f64; 3]>>,
+        /// Where the `positions` table is, for errors about missing atoms.
+        span: Range<usize>,
+    },
+}
+
+/// How the internal motion is given.
+#[derive(Clone, Debug)]
+pub enum Momenta {
+    /// Conjugate momenta p (ħ/bohr or ħ).
+    P(Vec<Named<f64>>),
+    /// Velocities q̇ (bohr or rad per a.u. of time).
+    Qdot(Vec<Named<f64>>),
+}
+
+/// How the rotation is given.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum Rotation {
+    /// The momenta conjugate to the Euler angles, ħ.
+    Pe([f64; 3]),
+    /// The body-frame angular momentum J, ħ.
+    J([f64; 3]),
+}
+
+/// A validated scene, in atomic units.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The file as the user named it.
+    pub path: String,
+    /// Its text, for errors found later.
+    pub text: String,
+    /// The molecule's name and where it is written.
+    pub molecule: Spanned<String>,
+    /// One-line description.
+    pub description: String,
+    /// The initial condition.
+    pub initial: Initial,
+    /// The integrator.
+    pub method: Method,
+    /// End time, a.u. (the run starts at 0).
+    pub t_end: f64,
+    /// Time between outputs, a.u.
+    pub output_interval: f64,
+    /// The unit the file used for time, also used for the `t` column of the output.
+    pub time_unit: TimeUnit,
+    /// The file's units as scale factors to atomic units.
+    pub units: CoordinateScale,
+    /// What to write.
+    pub outputs: Outputs,
+    /// Internal coordinates held fixed (names, checked against the molecule later).
+    pub frozen: Vec<Spanned<String>>,
+}
+
+impl Scene {
+    /// The scene's source, for errors found after parsing.
+    pub fn source(&self) -> Source<'_> {
+        Source { path: &self.path, text: &self.text }
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    molecule: Spanned<String>,
+    #[serde(default)]
+    description: Option<String>,
+    #[serde(default)]
+    units: RawUnits,
+    initial: Spanned<RawInitial>,
+    #[serde(default)]
+    integrator: Option<Spanned<RawIntegrator>>,
+    run: Spanned<RawRun>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawUnits {
+    length: Option<Spanned<String>>,
+    angle: Option<Spanned<String>>,
+    time: Option<Spanned<String>>,
+}
+
+type RawTable<T> = Spanned<BTreeMap<Spanned<String>, Spanned<T>>>;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInitial {
+    q: Option<RawTable<f64>>,
+    p: Option<RawTable<f64>>,
+    qdot: Option<RawTable<f64>>,
+    euler: Option<Spanned<Vec<f64>>>,
+    pe: Option<Spanned<Vec<f64>>>,
+    j: Option<Spanned<Vec<f64>>>,
+    positions: Option<RawTable<Vec<f64>>>,
+    velocities: Option<RawTable<Vec<f64>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawIntegrator {
+    method: Spanned<String>,
+    rtol: Option<Spanned<f64>>,
+    atol: Option<Spanned<f64>>,
+    step: Option<Spanned<f64>>,
+    stages: Option<Spanned<u32>>,
+    compensated: Option<bool>,
+    max_steps: Option<Spanned<u64>>,
+    min_step: Option<Spanned<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRun {
+    end: Spanned<f64>,
+    output_interval: Option<Spanned<f64>>,
+    outputs: Option<Spanned<Vec<Spanned<String>>>>,
+    #[serde(default)]
+    frozen: Vec<Spanned<String>>,
+}
+
+/// The default integrator: DOP853 at rtol = atol = 1e-10.
+pub const DEFAULT_TOLERANCE: f64 = 1e-10;
+
+/// Parses and validates a scene file. `path` names it in messages.
+pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
+    let src = Source { path, text };
+    let raw: RawScene = toml::from_str(text).map_err(|e| {
+        let message = e.message().trim_end().trim_end_matches('.').to_owned();
+        let help = if message.starts_with("unknown field") || message.starts_with("missing field") {
+            "the README's \"Scene files\" section lists every key"
+        } else {
+            "see the TOML syntax at https://toml.io and the shipped scenes/ for examples"
+        };
+        match e.span() {
+            Some(span) => src.error(span, message, help),
+            None => src.whole_file(message, help),
+        }
+    })?;
+
+    let length = unit(&src, raw.units.length.as_ref(), LengthUnit::Bohr, LengthUnit::parse, "length", "\"bohr\", \"angstrom\"")?;
+    let angle = unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?;
+    let time = unit(
+        &src,
+        raw.units.time.as_ref(),
+        TimeUnit::Au,
+        |s| match s {
+            "au" => Some(TimeUnit::Au),
+            "fs" => Some(TimeUnit::Fs),
+            _ => None,
+        },
+        "time",
+        "\"au\", \"fs\"",
+    )?;
+    let (l, a, t) = (length.in_bohr(), angle.in_rad(), time.in_au());
+
+    let initial = initial(&src, &raw.initial, l, a, t)?;
+
+    let run = raw.run.get_ref();
+    let t_end = positive(&src, &run.end, "run.end")? * t;
+    let output_interval = match &run.output_interval {
+        Some(dt) => positive(&src, dt, "run.output_interval")? * t,
+        None => t_end / 100.0,
+    };
+    let outputs = match &run.outputs {
+        None => Outputs { trajectory: true, lab: true, summary: true },
+        Some(list) => {
+            let mut o = Outputs { trajectory: false, lab: false, summary: false };
+            for name in list.get_ref() {
+                match name.get_ref().as_str() {
+                    "trajectory" => o.trajectory = true,
+                    "lab" => o.lab = true,
+                    "summary" => o.summary = true,
+                    other => {
+                        return Err(src.error(
+                            name.span(),
+                            format!("unknown output `{other}`"),
+                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz) and \"summary\" (summary.json)",
+                        ));
+                    }
+                }
+            }
+            o
+        }
+    };
+
+    let method = match &raw.integrator {
+        None => Method::Dop853(Dop853Options { rtol: DEFAULT_TOLERANCE, atol: DEFAULT_TOLERANCE, ..Default::default() }),
+        Some(i) => integrator(&src, i, t)?,
+    };
+
+    Ok(Scene {
+        path: path.to_owned(),
+        text: text.to_owned(),
+        molecule: raw.molecule,
+        description: raw.description.unwrap_or_default(),
+        initial,
+        method,
+        t_end,
+        output_interval,
+        time_unit: time,
+        units: CoordinateScale { length: l, angle: a, time: t },
+        outputs,
+        frozen: run.frozen.clone(),
+    })
+}
+
+fn unit<U: Copy>(
+    src: &Source<'_>,
+    given: Option<&Spanned<String>>,
+    default: U,
+    parse: impl Fn(&str) -> Option<U>,
+    what: &str,
+    allowed: &str,
+) -> Result<U, FileError> {
+    match given {
+        None => Ok(default),
+        Some(s) => parse(s.get_ref())
+            .ok_or_else(|| src.error(s.span(), format!("unknown {what} unit `{}`", s.get_ref()), format!("use one of {allowed}"))),
+    }
+}
+
+fn positive(src: &Source<'_>, x: &Spanned<f64>, what: &str) -> Result<f64, FileError> {
+    let v = *x.get_ref();
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(src.error(x.span(), format!("`{what}` must be a positive finite number, got {v}"), "write a number greater than 0"))
+    }
+}
+
+fn finite(src: &Source<'_>, x: &Spanned<f64>, what: &str) -> Result<f64, FileError> {
+    let v = *x.get_ref();
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(src.error(x.span(), format!("`{what}` is not a finite number"), "write a finite number"))
+    }
+}
+
+fn triple(src: &Source<'_>, v: &Spanned<Vec<f64>>, what: &str, scale: f64) -> Result<[f64; 3], FileError> {
+    let values = v.get_ref();
+    if values.len() != 3 {
+        return Err(src.error(v.span(), format!("`{what}` has {} entries, expected 3", values.len()), format!("write {what} = [x, y, z]")));
+    }
+    if values.iter().any(|x| !x.is_finite()) {
+        return Err(src.error(v.span(), format!("`{what}` has a non-finite entry"), "write finite numbers"));
+    }
+    Ok([values[0] * scale, values[1] * scale, values[2] * scale])
+}
+
+/// A table of numbers by name, unscaled (the scale of each entry depends on the coordinate,
+/// which is known only with the molecule), checked finite.
+fn named_numbers(src: &Source<'_>, table: &RawTable<f64>, what: &str) -> Result<Vec<Named<f64>>, FileError> {
+    table
+        .get_ref()
+        .iter()
+        .map(|(k, v)| Ok((k.clone(), finite(src, v, &format!("{what}.{}", k.get_ref()))?)))
+        .collect()
+}
+
+fn named_triples(src: &Source<'_>, table: &RawTable<Vec<f64>>, what: &str, scale: f64) -> Result<Vec<Named<[f64; 3]>>, FileError> {
+    table
+        .get_ref()
+        .iter()
+        .map(|(k, v)| Ok((k.clone(), triple(src, v, &format!("{what}.{}", k.get_ref()), scale)?)))
+        .collect()
+}
+
+/// The scene's units as factors to atomic units. Numbers given per coordinate (q, qdot) are
+/// kept in the scene's units until the molecule tells which coordinates are lengths and which
+/// are angles.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct CoordinateScale {
+    /// Bohr per scene length unit.
+    pub length: f64,
+    /// Radians per scene angle unit.
+    pub angle: f64,
+    /// Atomic units of time per scene time unit.
+    pub time: f64,
+}
+
+fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) -> Result<Initial, FileError> {
+    let r = raw.get_ref();
+    let internal_keys = r.q.is_some() || r.p.is_some() || r.qdot.is_some() || r.euler.is_some() || r.pe.is_some() || r.j.is_some();
+    if let Some(positions) = &r.positions {
+        if internal_keys {
+            return Err(src.error(
+                raw.span(),
+                "the initial condition mixes the lab form (positions) with the internal form (q, p, qdot, euler, pe, j)",
+                "give either lab-frame positions (and velocities) or internal coordinates, not both",
+            ));
+        }
+        let velocities = match &r.velocities {
+            Some(v) => named_triples(src, v, "velocities", l / t)?,
+            None => Vec::new(),
+        };
+        return Ok(Initial::Lab { positions: named_triples(src, positions, "positions", l)?, velocities, span: positions.span() });
+    }
+    if let Some(v) = &r.velocities {
+        return Err(src.error(v.span(), "velocities without positions", "give the lab-frame positions of every atom too"));
+    }
+    let momenta = match (&r.p, &r.qdot) {
+        (Some(_), Some(qd)) => {
+            return Err(src.error(qd.span(), "both p and qdot are given", "give the internal momenta p or the velocities qdot, not both"));
+        }
+        (_, Some(qd)) => Momenta::Qdot(named_numbers(src, qd, "qdot")?),
+        (Some(p), None) => Momenta::P(named_numbers(src, p, "p")?),
+        (None, None) => Momenta::P(Vec::new()),
+    };
+    let rotation = match (&r.pe, &r.j) {
+        (Some(_), Some(j)) => {
+            return Err(src.error(j.span(), "both pe and j are given", "give the Euler momenta pe or the body-frame angular momentum j, not both"));
+        }
+        (Some(pe), None) => Rotation::Pe(triple(src, pe, "pe", 1.0)?),
+        (None, Some(j)) => Rotation::J(triple(src, j, "j", 1.0)?),
+        (None, None) => Rotation::J([0.0; 3]),
+    };
+    let euler = match &r.euler {
+        Some(e) => triple(src, e, "euler", a)?,
+        // θ = π/2 keeps the default orientation far from gimbal lock.
+        None => [0.0, std::f64::consts::FRAC_PI_2, 0.0],
+    };
+    let q = match &r.q {
+        Some(q) => named_numbers(src, q, "q")?,
+        None => Vec::new(),
+    };
+    Ok(Initial::Internal { q, momenta, euler, rotation })
+}
+
+fn integrator(src: &Source<'_>, raw: &Spanned<RawIntegrator>, t: f64) -> Result<Method, FileError> {
+    let r = raw.get_ref();
+    let name = r.method.get_ref().as_str();
+    let not_for = |key: &str, span: Range<usize>, method: &str| {
+        src.error(span, format!("`{key}` does not apply to the {method} method"), "remove it, or choose a method it applies to")
+    };
+    let step = |required: bool| -> Result<f64, FileError> {
+        match &r.step {
+            Some(s) => Ok(positive(src, s, "integrator.step")? * t),
+            None if required => Err(src.error(
+                r.method.span(),
+                format!("the {name} method needs a step"),
+                "add step = ... (in the scene's time unit) to [integrator]",
+            )),
+            None => Ok(0.0),
+        }
+    };
+    match name {
+        "dop853" => {
+            if let Some(s) = &r.step {
+                return Err(not_for("step", s.span(), "adaptive dop853"));
+            }
+            if let Some(s) = &r.stages {
+                return Err(not_for("stages", s.span(), "dop853"));
+            }
+            let mut o = Dop853Options { rtol: DEFAULT_TOLERANCE, atol: DEFAULT_TOLERANCE, ..Default::default() };
+            if let Some(x) = &r.rtol {
+                o.rtol = positive(src, x, "integrator.rtol")?;
+            }
+            if let Some(x) = &r.atol {
+                o.atol = positive(src, x, "integrator.atol")?;
+            }
+            if let Some(x) = &r.max_steps {
+                o.max_steps = *x.get_ref();
+            }
+            if let Some(x) = &r.min_step {
+                o.min_step = positive(src, x, "integrator.min_step")? * t;
+            }
+            Ok(Method::Dop853(o))
+        }
+        "gauss-legendre" | "rk4" => {
+            for (key, given) in [("rtol", &r.rtol), ("atol", &r.atol), ("min_step", &r.min_step)] {
+                if let Some(x) = given {
+                    return Err(not_for(key, x.span(), &format!("fixed-step {name}")));
+                }
+            }
+            let h = step(true)?;
+            if name == "rk4" {
+                if let Some(s) = &r.stages {
+                    return Err(not_for("stages", s.span(), "rk4"));
+                }
+                let mut o = Rk4Options { step: h, ..Default::default() };
+                if let Some(x) = &r.max_steps {
+                    o.max_steps = *x.get_ref();
+                }
+                return Ok(Method::Rk4(o));
+            }
+            let mut o = GaussLegendreOptions { step: h, ..Default::default() };
+            if let Some(s) = &r.stages {
+                if !matches!(*s.get_ref(), 2 | 3) {
+                    return Err(src.error(
+                        s.span(),
+                        format!("Gauss–Legendre with {} stages is not available", s.get_ref()),
+                        "use stages = 2 (order 4) or stages = 3 (order 6)",
+                    ));
+                }
+                o.stages = *s.get_ref() as usize;
+            }
+            if let Some(c) = r.compensated {
+                o.compensated = c;
+            }
+            if let Some(x) = &r.max_steps {
+                o.max_steps = *x.get_ref();
+            }
+            Ok(Method::GaussLegendre(o))
+        }
+        other => Err(src.error(
+            r.method.span(),
+            format!("unknown integrator `{other}`"),
+            "use \"dop853\" (adaptive, tolerances), \"gauss-legendre\" (symplectic, fixed step) or \"rk4\" (fixed step)",
+        )),
+    }
+}
