@@ -143,7 +143,11 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
                     })?;
                     let omega = inertia.solve(&(j - k.coriolis * qdot));
                     let pv = k.coriolis.transpose() * omega + k.a * qdot;
-                    (pv, euler_momenta_from_angular_momentum(&euler, &j))
+                    let pe = match rot {
+                        Rotation::Pe(pe) => Vector3::from(*pe),
+                        Rotation::J(_) => euler_momenta_from_angular_momentum(&euler, &j),
+                    };
+                    (pv, pe)
                 }
             };
             Ok(Start { state: PhaseState { q: qv, p: pv, euler, pe }, com_position: Vector3::zeros(), com_velocity: Vector3::zeros() })

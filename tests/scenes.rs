@@ -1,0 +1,197 @@
+//! Scene files: every kind of initial condition reproduces what it asked for, scene errors point
+//! at their place, and `rovib run` writes complete outputs, or keeps what it wrote when a run
+//! fails.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use rovib::cli::run::initial_state;
+use rovib::molecules::H2o;
+use rovib::runtime::hamiltonian::{velocities, w_matrix};
+use rovib::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM};
+use rovib::scene::parse_scene;
+
+const BASE: &str = r#"molecule = "h2o"
+
+[units]
+length = "angstrom"
+angle = "deg"
+time = "fs"
+
+[initial]
+INITIAL
+
+[integrator]
+method = "dop853"
+rtol = 1e-10
+atol = 1e-10
+
+[run]
+end = 20.0
+output_interval = 1.0
+"#;
+
+fn scene(initial: &str) -> String {
+    BASE.replace("INITIAL", initial)
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rovib-scenes-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn internal_coordinates_with_momenta_and_body_angular_momentum() {
+    let s = parse_scene("s.toml", &scene("q = { r1 = 1.0, alpha = 100.0 }\np = { r2 = 0.5 }\neuler = [10, 80, 20]\nj = [1, 2, 3]"))
+        .unwrap();
+    let start = initial_state(&H2o, &s).unwrap().state;
+    assert!((start.q[0] - 1.0 / BOHR_IN_ANGSTROM).abs() < 1e-15);
+    assert!((start.q[1] - 0.95785 / BOHR_IN_ANGSTROM).abs() < 1e-15, "r2 from the reference geometry");
+    assert!((start.q[2] - 100f64.to_radians()).abs() < 1e-15);
+    assert_eq!(start.p.as_slice(), &[0.0, 0.5, 0.0]);
+    let j = w_matrix(&start.euler).unwrap() * start.pe;
+    assert!((j - rovib::runtime::nalgebra::Vector3::new(1.0, 2.0, 3.0)).amax() < 1e-14, "J = W p_e = {j:?}");
+}
+
+#[test]
+fn internal_coordinates_with_velocities_and_euler_momenta() {
+    // q̇ in Å/fs and deg/fs; the state must move at exactly these velocities.
+    let s = parse_scene("s.toml", &scene("q = { r1 = 0.96, r2 = 0.97, alpha = 104.0 }\nqdot = { r1 = 0.01, alpha = -0.5 }\neuler = [0, 70, 0]\npe = [1, 0.5, -2]"))
+        .unwrap();
+    let start = initial_state(&H2o, &s).unwrap().state;
+    assert_eq!(start.pe.as_slice(), &[1.0, 0.5, -2.0]);
+    let (_, qdot) = velocities(&H2o, &start).unwrap();
+    let to_au_length = AU_TIME_IN_FS / BOHR_IN_ANGSTROM;
+    let expected = [0.01 * to_au_length, 0.0, (-0.5f64).to_radians() * AU_TIME_IN_FS];
+    for k in 0..3 {
+        assert!((qdot[k] - expected[k]).abs() < 1e-12 * expected[0].abs(), "q̇[{k}] = {} vs {}", qdot[k], expected[k]);
+    }
+}
+
+fn scene_error(text: &str) -> rovib::runtime::diagnostic::FileError {
+    match parse_scene("scenes/bad.toml", text) {
+        Ok(s) => initial_state(&H2o, &s).err().expect("an error"),
+        Err(e) => e,
+    }
+}
+
+#[test]
+fn scene_errors_name_the_place_and_the_fix() {
+    let e = scene_error(&scene("q = { r1 = 1.0, alpah = 100.0 }"));
+    assert_eq!(e.message, "h2o has no coordinate `alpah` (in q)");
+    assert_eq!((e.line, e.column), (9, 17));
+    assert!(e.help.contains("r1, r2, alpha"), "{}", e.help);
+
+    let e = scene_error(&scene("q = { r1 = 1.0 }\np = { r1 = 0.1 }\nqdot = { r1 = 0.1 }"));
+    assert_eq!(e.message, "both p and qdot are given");
+    assert_eq!(e.line, 11);
+
+    let e = scene_error(&scene("euler = [0, 90]"));
+    assert_eq!(e.message, "`euler` has 2 entries, expected 3");
+
+    let e = scene_error(&BASE.replace("INITIAL", "").replace("\"dop853\"", "\"euler\""));
+    assert_eq!(e.message, "unknown integrator `euler`");
+    assert!(e.help.contains("gauss-legendre"));
+
+    let e = scene_error(&BASE.replace("INITIAL", "").replace("\"dop853\"", "\"rk4\""));
+    assert_eq!(e.message, "`rtol` does not apply to the fixed-step rk4 method");
+
+    let e = scene_error(&BASE.replace("INITIAL", "").replace("end = 20.0", "end = -1.0"));
+    assert_eq!(e.message, "`run.end` must be a positive finite number, got -1");
+    assert_eq!((e.line, e.column), (17, 7));
+
+    let e = scene_error(&BASE.replace("INITIAL", "").replace("time = \"fs\"", "time = \"ps\""));
+    assert_eq!(e.message, "unknown time unit `ps`");
+
+    let e = scene_error(&BASE.replace("INITIAL", "").replace("output_interval", "output_intervall"));
+    assert!(e.message.starts_with("unknown field `output_intervall`"), "{}", e.message);
+}
+
+fn rovib(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_rovib")).args(args).output().unwrap()
+}
+
+#[test]
+fn run_writes_the_three_outputs_consistently() {
+    let dir = temp_dir("run");
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, scene("q = { r1 = 1.0 }\nj = [2, 5, 1]")).unwrap();
+    let out = rovib(&["run", path.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let csv = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next().unwrap(), "t,r1,r2,alpha,p_r1,p_r2,p_alpha,phi,theta,psi,p_phi,p_theta,p_psi,H");
+    let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect();
+    assert_eq!(rows.len(), 21, "t = 0, 1, ..., 20 fs");
+    assert_eq!(rows[20][0], 20.0);
+    let h0 = rows[0][13];
+    assert!(rows.iter().all(|r| (r[13] - h0).abs() < 1e-8 * h0.abs()), "H conserved");
+
+    let xyz = std::fs::read_to_string(dir.join("out/lab.xyz")).unwrap();
+    let frames: Vec<&str> = xyz.lines().collect();
+    assert_eq!(frames.len(), 21 * 5, "5 lines per frame");
+    assert_eq!(frames[0], "3");
+    assert!(frames[1].starts_with("Properties=species:S:1:pos:R:3 Time=0.0 time_unit=fs"));
+    assert!(frames[2].starts_with("O "));
+    // The O–H distance in the file (Å) is r1 of the same output time.
+    let atom = |line: &str| -> [f64; 3] {
+        let v: Vec<f64> = line.split_whitespace().skip(1).map(|x| x.parse().unwrap()).collect();
+        [v[0], v[1], v[2]]
+    };
+    for f in [0, 7, 20] {
+        let (o, h1) = (atom(frames[5 * f + 2]), atom(frames[5 * f + 3]));
+        let d = ((o[0] - h1[0]).powi(2) + (o[1] - h1[1]).powi(2) + (o[2] - h1[2]).powi(2)).sqrt();
+        assert!((d / BOHR_IN_ANGSTROM - rows[f][1]).abs() < 1e-10, "frame {f}: |O–H1| = {d} Å vs r1 = {} bohr", rows[f][1]);
+    }
+
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "completed");
+    assert!(summary["rhs_evaluations"].as_u64().unwrap() > 100);
+    let c = &summary["conservation"];
+    assert!(c["max_relative_energy_error"].as_f64().unwrap() < 1e-8);
+    assert!(c["max_abs_j_change_hbar"].as_f64().unwrap() < 1e-9);
+    assert_eq!(c["max_p_phi_change_hbar"].as_f64(), Some(0.0));
+    assert!(c["max_lab_angular_momentum_change_hbar"].as_f64().unwrap() < 1e-9);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_failed_run_keeps_its_output_and_says_where_it_stopped() {
+    let dir = temp_dir("fail");
+    let path = dir.join("scene.toml");
+    // Too few steps allowed: the run must stop, report the time and keep what it wrote.
+    std::fs::write(&path, scene("q = { r1 = 1.0 }").replace("atol = 1e-10", "atol = 1e-10\nmax_steps = 40")).unwrap();
+    let out = rovib(&["run", path.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap(), "--quiet"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.starts_with("error: the run stopped: "), "{err}");
+    assert!(err.contains(" fs)") && err.contains("last state"), "{err}");
+    let csv = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
+    let rows = csv.lines().count() - 1;
+    assert!(rows >= 1 && rows < 21, "{rows} rows kept");
+    assert!(csv.ends_with('\n'), "the last row is complete");
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "failed");
+    assert!(summary["error"].as_str().unwrap().contains("steps"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn every_shipped_scene_parses_and_binds_to_its_molecule() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");
+    let mut count = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            let s = parse_scene(&path.display().to_string(), &text).unwrap_or_else(|e| panic!("{e}"));
+            assert!(rovib::molecules::NAMES.contains(&s.molecule.get_ref().as_str()), "{}", path.display());
+            count += 1;
+        }
+    }
+    assert!(count >= 1);
+}
