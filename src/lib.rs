@@ -8,6 +8,7 @@
 pub mod cli;
 pub mod molecules;
 pub mod output;
+pub mod plot;
 pub mod scene;
 
 pub use rovib_runtime as runtime;

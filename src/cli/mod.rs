@@ -1,4 +1,4 @@
-//! The `rovib` commands: `list`, `eval`, `run`.
+//! The `rovib` commands: `list`, `eval`, `run`, `bench`.
 //!
 //! Each command is generic over the molecule: [`crate::molecules::visit`] calls it with the
 //! generated type, so it runs on fixed-size, monomorphised code.
@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 
 use crate::runtime::diagnostic::FileError;
 
+pub mod bench;
 mod eval;
 mod list;
 pub mod run;
@@ -49,6 +50,18 @@ pub enum Command {
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
+    },
+    /// Work-precision diagram: every integrator over a range of tolerances or steps, wall time
+    /// against error; writes bench.csv, bench.md and bench.svg.
+    Bench {
+        /// The scene file.
+        scene: PathBuf,
+        /// Output directory [default: out/SCENE_NAME/bench].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Fewer tolerances and steps (a smoke test of the diagram).
+        #[arg(long)]
+        quick: bool,
     },
 }
 
@@ -120,6 +133,14 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
                 for f in &report.files {
                     println!("wrote {}", f.display());
                 }
+            }
+            Ok(())
+        }
+        Command::Bench { scene, out, quick } => {
+            let report = bench::bench(&scene, out.as_deref(), quick)?;
+            println!("{} runs; reference final-state error ~{:.1e} bohr", report.trials.len(), report.reference_error);
+            for f in &report.files {
+                println!("wrote {}", f.display());
             }
             Ok(())
         }

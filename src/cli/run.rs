@@ -160,6 +160,11 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
     }
 }
 
+/// The system every command integrates for molecule `m`: one place to choose the formulation.
+pub fn production_system<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M) -> HamiltonianSystem<'_, M, N, NA> {
+    HamiltonianSystem::new(m)
+}
+
 struct Run<'a> {
     scene: &'a Scene,
     out_dir: &'a Path,
@@ -174,7 +179,7 @@ impl MoleculeVisitor for Run<'_> {
         let start = initial_state(&m, scene)?;
         // Fail before writing anything if the initial state is not valid.
         hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
-        let mut system = HamiltonianSystem::new(&m);
+        let mut system = production_system(&m);
         let mut y0 = vec![0.0; 2 * N + 6];
         start.state.write_to(&mut y0).map_err(|e| CliError::context("the initial state", e))?;
 
