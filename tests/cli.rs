@@ -92,3 +92,19 @@ fn eval_errors_are_one_line() {
     let err = stderr_line(&rovib(&["eval", "--molecule", "h2o", "--state", "/nonexistent/state.json"], None));
     assert!(err.starts_with("error: cannot read /nonexistent/state.json"), "{err}");
 }
+
+#[test]
+fn a_closed_pipe_ends_output_quietly() {
+    // `rovib list | head -1`: the reader goes away; rovib must not panic.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["eval", "--molecule", "h2o"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.success(), "{err}");
+}

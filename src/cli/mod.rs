@@ -109,20 +109,18 @@ impl CliError {
 pub fn execute(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::List => {
-            print!("{}", list::list());
-            Ok(())
+            say(&list::list())
         }
         Command::Eval { molecule, state } => {
             let json = eval::eval(&molecule, state.as_deref())?;
-            println!("{json}");
-            Ok(())
+            say(&format!("{json}\n"))
         }
         Command::Run { scene, out, quiet } => {
             let report = run::run(&scene, out.as_deref(), quiet)?;
             if !quiet {
                 let c = &report.conservation;
-                println!(
-                    "{} steps ({} rejected), {} right-hand sides, {:.3} s; max relative energy error {:.2e}, max |J| change {:.2e} hbar",
+                let mut text = format!(
+                    "{} steps ({} rejected), {} right-hand sides, {:.3} s; max relative energy error {:.2e}, max |J| change {:.2e} hbar\n",
                     report.stats.steps,
                     report.stats.rejected,
                     report.stats.rhs_evals,
@@ -131,19 +129,31 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
                     c.max_j_change
                 );
                 for f in &report.files {
-                    println!("wrote {}", f.display());
+                    text.push_str(&format!("wrote {}\n", f.display()));
                 }
+                say(&text)?;
             }
             Ok(())
         }
         Command::Bench { scene, out, quick } => {
             let report = bench::bench(&scene, out.as_deref(), quick)?;
-            println!("{} runs; reference final-state error ~{:.1e} bohr", report.trials.len(), report.reference_error);
+            let mut text = format!("{} runs; reference final-state error ~{:.1e} bohr\n", report.trials.len(), report.reference_error);
             for f in &report.files {
-                println!("wrote {}", f.display());
+                text.push_str(&format!("wrote {}\n", f.display()));
             }
-            Ok(())
+            say(&text)
         }
+    }
+}
+
+/// Writes to stdout. A closed pipe (`rovib list | head -1`) ends the output quietly instead of
+/// panicking as `println!` would.
+fn say(text: &str) -> Result<(), CliError> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(CliError::context("cannot write to stdout", e)),
+        _ => Ok(()),
     }
 }
 
