@@ -172,7 +172,7 @@ fn a_failed_run_keeps_its_output_and_says_where_it_stopped() {
     assert!(err.contains(" fs)") && err.contains("last state"), "{err}");
     let csv = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
     let rows = csv.lines().count() - 1;
-    assert!(rows >= 1 && rows < 21, "{rows} rows kept");
+    assert!((1..21).contains(&rows), "{rows} rows kept");
     assert!(csv.ends_with('\n'), "the last row is complete");
     let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["status"], "failed");

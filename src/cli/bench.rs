@@ -181,10 +181,11 @@ impl MoleculeVisitor for Bench<'_> {
             trials.push(trial);
         }
 
-        let mut files = Vec::new();
-        files.push(write_csv(self.out_dir, &trials)?);
-        files.push(write_svg(self.out_dir, scene, &trials, reference_error)?);
-        files.push(write_markdown(self.out_dir, scene, m.name(), &trials, reference_error, &ref_stats)?);
+        let files = vec![
+            write_csv(self.out_dir, &trials)?,
+            write_svg(self.out_dir, scene, &trials, reference_error)?,
+            write_markdown(self.out_dir, scene, m.name(), &trials, reference_error, &ref_stats)?,
+        ];
         Ok(BenchReport { trials, reference_error, files })
     }
 }

@@ -97,4 +97,5 @@ pub fn richardson_derivative(y: &[f64], i: usize, h: f64, f: &mut dyn FnMut(&[f6
     let (d1, d2) = (d(h), d(h / 2.0));
     d2 + (d2 - d1) / 15.0
 }
+pub mod cartesian;
 pub mod internal_coordinates;
