@@ -195,3 +195,54 @@ fn every_shipped_scene_parses_and_binds_to_its_molecule() {
     }
     assert!(count >= 1);
 }
+
+/// The lab form of a scene: positions (Å) and velocities (Å/fs) of a state made with `to_lab`
+/// bind back to that state, with the centre-of-mass motion split off.
+#[test]
+fn lab_frame_positions_and_velocities_bind_back_to_the_same_state() {
+    use rovib::runtime::frames::{CentreOfMass, to_lab};
+    use rovib::runtime::hamiltonian::PhaseState;
+    use rovib::runtime::nalgebra::Vector3;
+    let state = PhaseState::<3> {
+        q: [1.9, 1.75, 1.7].into(),
+        p: [0.4, -0.3, 1.5].into(),
+        euler: [0.3, 1.1, -0.6].into(),
+        pe: [4.0, -2.0, 3.0].into(),
+    };
+    let com = CentreOfMass { position: Vector3::new(1.0, -2.0, 0.5), velocity: Vector3::new(1e-4, 0.0, -2e-4) };
+    let lab = to_lab(&H2o, &state, &com).unwrap();
+    let (l, v) = (BOHR_IN_ANGSTROM, BOHR_IN_ANGSTROM / AU_TIME_IN_FS);
+    let mut table = String::new();
+    for (key, m, scale) in [("positions", &lab.positions, l), ("velocities", &lab.velocities, v)] {
+        let entries: Vec<String> = ["O", "H1", "H2"]
+            .iter()
+            .enumerate()
+            .map(|(i, label)| format!("{label} = [{:?}, {:?}, {:?}]", m[(0, i)] * scale, m[(1, i)] * scale, m[(2, i)] * scale))
+            .collect();
+        table.push_str(&format!("{key} = {{ {} }}\n", entries.join(", ")));
+    }
+    let s = parse_scene("lab.toml", &scene(&table)).unwrap();
+    let start = initial_state(&H2o, &s).unwrap();
+    let back = start.state;
+    assert!((back.q - state.q).amax() < 1e-12, "{:?}", back.q);
+    assert!((back.p - state.p).amax() < 1e-10, "{:?}", back.p);
+    assert!((back.euler - state.euler).amax() < 1e-12, "{:?}", back.euler);
+    assert!((back.pe - state.pe).amax() < 1e-10, "{:?}", back.pe);
+    assert!((start.com_position - com.position).amax() < 1e-12);
+    assert!((start.com_velocity - com.velocity).amax() < 1e-15);
+}
+
+#[test]
+fn lab_frame_errors_name_the_atoms() {
+    let e = scene_error(&scene("positions = { O = [0, 0, 0], H1 = [0.9, 0, 0] }"));
+    assert_eq!(e.message, "the lab-frame positions do not give atom H2");
+    assert_eq!(e.line, 9);
+    let e = scene_error(&scene("positions = { O = [0, 0, 0], H1 = [0.9, 0, 0], H3 = [0, 0.9, 0] }"));
+    assert_eq!(e.message, "h2o has no atom `H3` (in positions)");
+    assert!(e.help.contains("O, H1, H2"));
+    let e = scene_error(&scene("positions = { O = [0, 0, 0], H1 = [0.9, 0, 0], H2 = [0, 0.9, 0] }\nq = { r1 = 1.0 }"));
+    assert!(e.message.starts_with("the initial condition mixes the lab form"), "{}", e.message);
+    // Collinear atoms: the metric of the fit is singular.
+    let e = scene_error(&scene("positions = { O = [0, 0, 0], H1 = [0.9, 0, 0], H2 = [-0.9, 0, 0] }"));
+    assert!(e.message.starts_with("the lab-frame positions cannot start a run of h2o: "), "{}", e.message);
+}

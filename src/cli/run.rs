@@ -12,6 +12,7 @@ use super::{CliError, unknown_molecule};
 use crate::molecules;
 use crate::output::{Conservation, LabXyz, TrajectoryCsv, write_summary};
 use crate::runtime::diagnostic::FileError;
+use crate::runtime::frames::{FitOptions, LabState, from_lab};
 use crate::runtime::hamiltonian::{
     HamiltonianSystem, PhaseState, euler_momenta_from_angular_momentum, hamiltonian, rotation_matrix,
     w_matrix,
@@ -152,11 +153,45 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
             };
             Ok(Start { state: PhaseState { q: qv, p: pv, euler, pe }, com_position: Vector3::zeros(), com_velocity: Vector3::zeros() })
         }
-        Initial::Lab { span, .. } => Err(src.error(
-            span.clone(),
-            "lab-frame initial conditions are not available in this build",
-            "give the initial condition in internal form (q, p or qdot, euler, pe or j)",
-        )),
+        Initial::Lab { positions, velocities, span } => {
+            let atoms = m.atoms();
+            let atom_index = |label: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
+                atoms.iter().position(|a| a.label == label.get_ref()).ok_or_else(|| {
+                    let known: Vec<&str> = atoms.iter().map(|a| a.label).collect();
+                    src.error(
+                        label.span(),
+                        format!("{} has no atom `{}` (in {what})", m.name(), label.get_ref()),
+                        format!("the atoms of {} are {}", m.name(), known.join(", ")),
+                    )
+                })
+            };
+            let mut lab = LabState::<NA> { positions: SMatrix::zeros(), velocities: SMatrix::zeros() };
+            let mut given = [false; NA];
+            for (label, x) in positions {
+                let i = atom_index(label, "positions")?;
+                lab.positions.set_column(i, &Vector3::from(*x));
+                given[i] = true;
+            }
+            let missing: Vec<&str> = (0..NA).filter(|&i| !given[i]).map(|i| atoms[i].label).collect();
+            if !missing.is_empty() {
+                return Err(src.error(
+                    span.clone(),
+                    format!("the lab-frame positions do not give atom{} {}", if missing.len() == 1 { "" } else { "s" }, missing.join(", ")),
+                    "give the position of every atom, keyed by its label",
+                ));
+            }
+            for (label, v) in velocities {
+                lab.velocities.set_column(atom_index(label, "velocities")?, &Vector3::from(*v));
+            }
+            let (state, com, _) = from_lab(m, &lab, &FitOptions::default()).map_err(|e| {
+                src.error(
+                    span.clone(),
+                    format!("the lab-frame positions cannot start a run of {}: {e}", m.name()),
+                    "check the atom positions and their units; rotate the input if θ is at 0 or π",
+                )
+            })?;
+            Ok(Start { state, com_position: com.position, com_velocity: com.velocity })
+        }
     }
 }
 
