@@ -141,9 +141,7 @@ pub fn jacobian(x: &[[f64; 3]], q_of_x: impl Fn(&[V3<Dual>]) -> Vec<Dual>) -> (V
     let n_atoms = x.len();
     let lift = |seed: Option<(usize, usize)>| -> Vec<V3<Dual>> {
         (0..n_atoms)
-            .map(|i| {
-                [0, 1, 2].map(|a| Dual { v: x[i][a], d: if seed == Some((i, a)) { 1.0 } else { 0.0 } })
-            })
+            .map(|i| [0, 1, 2].map(|a| Dual { v: x[i][a], d: if seed == Some((i, a)) { 1.0 } else { 0.0 } }))
             .collect()
     };
     let q: Vec<f64> = q_of_x(&lift(None)).iter().map(|d| d.v).collect();
@@ -158,3 +156,54 @@ pub fn jacobian(x: &[[f64; 3]], q_of_x: impl Fn(&[V3<Dual>]) -> Vec<Dual>) -> (V
     (q, jac)
 }
 
+/// Carbon dioxide: (r1, r2, α) = (|O1 − C|, |O2 − C|, ∠O1–C–O2), atoms in the order C, O1, O2.
+/// α is in [0, π]; the linear equilibrium is α = π.
+pub fn co2<T: Real>(x: &[V3<T>]) -> Vec<T> {
+    vec![distance(x[1], x[0]), distance(x[2], x[0]), angle(x[1], x[0], x[2])]
+}
+
+/// Hydrogen peroxide: (r_OO, r1, r2, θ1, θ2, τ) = (|O2 − O1|, |H1 − O1|, |H2 − O2|,
+/// ∠O2–O1–H1, ∠O1–O2–H2, dihedral H1–O1–O2–H2 with the IUPAC sign), atoms in the order
+/// O1, O2, H1, H2.
+pub fn h2o2<T: Real>(x: &[V3<T>]) -> Vec<T> {
+    vec![
+        distance(x[1], x[0]),
+        distance(x[2], x[0]),
+        distance(x[3], x[1]),
+        angle(x[1], x[0], x[2]),
+        angle(x[0], x[1], x[3]),
+        dihedral(x[2], x[0], x[1], x[3]),
+    ]
+}
+
+/// Ammonia: (r1, r2, r3, α12, α13, α23) with ri = |Hi − N| and αij = ∠Hi–N–Hj, atoms in the
+/// order N, H1, H2, H3. Which side of the plane N, H1, H2 the atom H3 is on is not a
+/// coordinate: the molecule's parametrization fixes it (one umbrella side).
+pub fn nh3<T: Real>(x: &[V3<T>]) -> Vec<T> {
+    vec![
+        distance(x[1], x[0]),
+        distance(x[2], x[0]),
+        distance(x[3], x[0]),
+        angle(x[1], x[0], x[2]),
+        angle(x[1], x[0], x[3]),
+        angle(x[2], x[0], x[3]),
+    ]
+}
+
+/// Methane: (r1, r2, r3, r4, α12, α13, α23, α14, α24) with ri = |Hi − C| and αij = ∠Hi–C–Hj,
+/// atoms in the order C, H1, H2, H3, H4. The sixth angle α34 is not a coordinate (it depends on
+/// the others); the handedness of the labelled geometry is fixed by the parametrization.
+pub fn ch4<T: Real>(x: &[V3<T>]) -> Vec<T> {
+    let c = x[0];
+    vec![
+        distance(x[1], c),
+        distance(x[2], c),
+        distance(x[3], c),
+        distance(x[4], c),
+        angle(x[1], c, x[2]),
+        angle(x[1], c, x[3]),
+        angle(x[2], c, x[3]),
+        angle(x[1], c, x[4]),
+        angle(x[2], c, x[4]),
+    ]
+}
