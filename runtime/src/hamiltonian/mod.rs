@@ -51,6 +51,7 @@
 //! building an error does.
 
 pub mod euler;
+pub mod fast;
 pub mod metric;
 mod state;
 
@@ -63,6 +64,7 @@ pub use euler::{
     MIN_SIN_THETA, WMatrices, angular_momentum_from_euler_momenta, angular_velocity_matrix,
     euler_momenta_from_angular_momentum, rotation_matrix, w_matrix,
 };
+pub use fast::{FastSystem, MetricFactor, ReducedSystem, Reduction, ReductionError, Rotation};
 pub use metric::{GMatrices, InverseMetric, MetricBlock, PIVOT_TOLERANCE};
 pub use state::PhaseState;
 

@@ -1,0 +1,934 @@
+//! The fast right-hand side: the same Hamilton's equations as the seed path ([`super::rhs`]),
+//! evaluated from one block factorization of the kinetic metric and one generated
+//! kinetic-energy gradient, with no G matrices, no derivative of any inverse and no
+//! `kinetic_jacobian`; plus reduced systems that skip what a scene does not need (J = 0,
+//! frozen internal coordinates).
+//!
+//! # What it computes
+//!
+//! Per evaluation, at `(q, p, Ω_e, p_e)`:
+//!
+//! 1. `J = W p_e` (eq. 2), from `sin`/`cos` of θ and ψ directly (no `∂W/∂Ω_e` matrices);
+//! 2. `a`, `A`, `I` ([`Molecule::kinetic`]) and the block factorization of the full metric
+//!    `M = [[I, A], [Aᵀ, a]]` ([`MetricFactor`]): `I⁻¹` (3 × 3, closed form), `Y = I⁻¹A`, and the
+//!    Schur complement `S = a − Aᵀ I⁻¹ A = a − AᵀY = G22⁻¹ = L D Lᵀ` (Cholesky without square
+//!    roots);
+//! 3. the velocities `v = (ω, q̇) = M⁻¹ (J, p)`: `q̇ = S⁻¹ (p − YᵀJ)`, `ω = I⁻¹J − Y q̇`;
+//! 4. `∂T/∂q` at fixed `(ω, q̇)` ([`Molecule::kinetic_energy_gradient`]) and `∂U/∂q`
+//!    ([`Molecule::potential_gradient`]).
+//!
+//! Then
+//!
+//! ```text
+//! q̇   = the solve above                      (= G12ᵀ J + G22 p, eq. 8)
+//! ṗ   = ∂T/∂q|_(ω, q̇) − ∂U/∂q                (= −∂H/∂q, eq. 16; derivation below)
+//! Ω̇_e = Wᵀ ω                                 (eq. 6)
+//! ṗ_e = −((∂W/∂Ω_e) p_e) · ω,  ṗ_φ = +0.0     (eq. 5)
+//! ```
+//!
+//! # Why `∂H/∂q_k = −½ vᵀ (∂M/∂q_k) v + ∂U/∂q_k`
+//!
+//! ```text
+//! Eq. (1) with M⁻¹ = [[G11, G12], [G12ᵀ, G22]] (eq. 3) is
+//!
+//!     H(q, p, Ω_e, p_e) = ½ bᵀ M(q)⁻¹ b + U(q),    b = (J, p),  J = W(Ω_e) p_e.
+//!
+//! b does not depend on q (W depends on the Euler angles only, and q and p are independent
+//! phase-space coordinates), so only M⁻¹ is differentiated, and by eq. (9)
+//!
+//!     ∂H/∂q_k = ½ bᵀ (∂M⁻¹/∂q_k) b + ∂U/∂q_k
+//!             = −½ bᵀ M⁻¹ (∂M/∂q_k) M⁻¹ b + ∂U/∂q_k          (M symmetric: (M⁻¹b)ᵀ = bᵀM⁻¹)
+//!             = −½ vᵀ (∂M/∂q_k) v + ∂U/∂q_k,                  v = M⁻¹ b.
+//!
+//! v = M⁻¹ b is (ω, q̇): its blocks are G11 J + G12 p = ω and G12ᵀ J + G22 p = ∂H/∂p = q̇
+//! (eqs. 6, 8). And with T(q, v) = ½ vᵀ M(q) v = ½ Σ m_i |ω × R_i + Σ_j ∂R_i/∂q_j q̇_j|², the
+//! kinetic energy as a function of the velocities,
+//!
+//!     ½ vᵀ (∂M/∂q_k) v = ∂T/∂q_k |_(ω, q̇ fixed),
+//!
+//! which is exactly what Molecule::kinetic_energy_gradient returns. Hence
+//!
+//!     ṗ_k = −∂H/∂q_k = ∂T/∂q_k|_(ω, q̇) − ∂U/∂q_k.
+//!
+//! (This is the Legendre-transform identity ∂H/∂q|_p = −∂L/∂q|_q̇ for L = T − U.) Eqs. (10)–(16)
+//! compute the same number as −½ vᵀ ∂M v by expanding ∂M⁻¹ block by block; the fast path
+//! never forms M⁻¹, so it needs neither ∂G nor the N matrices ∂a/∂q_k, ∂A/∂q_k, ∂I/∂q_k.
+//! Likewise ∂H/∂Ω_e = (∂b/∂Ω_e)ᵀ M⁻¹ b = ((∂W/∂Ω_e) p_e) · ω, which in closed form is
+//!
+//!     ∂H/∂φ = 0,
+//!     ∂H/∂θ = (p_ψ − cos θ p_φ) / sin²θ · (sin ψ ω_x + cos ψ ω_y),
+//!     ∂H/∂ψ = J_y ω_x − J_x ω_y               ((∂W/∂ψ) p_e = (J_y, −J_x, 0)).
+//! ```
+//!
+//! # What it skips
+//!
+//! Compared with the seed path: the N `kinetic_jacobian` matrices (O(N³) numbers), the
+//! factorization of `a` and of `G11⁻¹`, the explicit inverses G11 and G22, and the N
+//! derivative products of eqs. (10)–(14), each O(N³). What remains is O(N³/3) for the one
+//! factorization of S and generated straight-line code for `kinetic`, `kinetic_energy_gradient`
+//! and `potential_gradient`.
+//!
+//! The [`ReducedSystem`]s skip further, by scene:
+//!
+//! * **J = 0** ([`Rotation::ZeroAngularMomentum`]): `ṗ_e` is linear in `p_e`, so `p_e = 0` stays
+//!   exactly 0 and need not be integrated; `v = M⁻¹ (0, p)` skips the `I⁻¹J` and `YᵀJ`
+//!   products, and there is no `∂W` work at all (no Euler-angle work either unless the
+//!   orientation is integrated). The orientation is integrated only when asked for (lab-frame
+//!   output): with `J = 0` the molecule still turns as it vibrates (`ω = −I⁻¹ A q̇ ≠ 0`), by
+//!   `Ω̇_e = Wᵀ ω`.
+//! * **Frozen internal coordinates** (a run-time mask): the kinetic metric is reduced on the
+//!   *Lagrangian* side, i.e. the frozen rows and columns of `M` are dropped (a frozen
+//!   coordinate has `q̇ = 0`, so it contributes nothing to `T = ½ vᵀ M v`). Inside the fixed-size
+//!   N block this is done by replacing those rows and columns of `a` and those columns of `A`
+//!   with identity/zero, so the same factorization gives `q̇_frozen = 0` exactly and the active
+//!   block is `M_red⁻¹ (J, p_active)`. (Dropping rows and columns of `M⁻¹` instead would be a
+//!   different and wrong model: it would keep the frozen coordinates moving.) The gradients
+//!   come from the same generated functions (they evaluate every coordinate; the unused ones
+//!   cost little because the generated code shares its subexpressions).
+//!
+//! # Equivalence and errors
+//!
+//! [`rhs`] returns the seed's numbers to rounding (tests: 1e-12 relative per block). It fails
+//! with the same [`HamiltonianError`]s as the seed, checked in the same order: non-finite state,
+//! gimbal lock ([`HamiltonianError::EulerSingular`]), non-finite kinetic matrices, a singular or
+//! not positive definite metric ([`HamiltonianError::SingularMetric`]), non-finite potential
+//! gradient, non-finite result. (Where the seed reports non-finite `∂a/∂q, ∂A/∂q, ∂I/∂q`, which
+//! the fast path never computes, it reports a non-finite `∂T/∂q` instead.) For a metric that fails, the factorization only sees `I` and `S`;
+//! on that (cold) path the seed's [`InverseMetric::new`] is run to name the block exactly as
+//! the seed would (`I`, `a`, `G11⁻¹`, `G22⁻¹`). `M` is positive definite iff `I` and `S` are,
+//! and then `a` and `G11⁻¹` are too, so the two paths can disagree only for a metric within
+//! [`PIVOT_TOLERANCE`] of singular in `a` or `G11⁻¹` but not in `I` or `S`, where the fast path
+//! returns numbers and the seed an error.
+//!
+//! # Allocation
+//!
+//! None: everything is fixed-size and on the stack (about `8 (2N² + 9N + 20)` bytes for the
+//! kinetic matrices and the factor), so the systems need no workspace; only building an error
+//! allocates. `N = 0` (a rigid molecule) works: every N-sized block is empty.
+//!
+//! # Cost
+//!
+//! Water (N = 3), one evaluation through [`OdeSystem::rhs`], on the development machine (a
+//! shared 2-core AMD EPYC VM at 2.6 GHz; `benches/rhs.rs`): seed ≈ 1.37 µs (10 500
+//! instructions), fast ≈ 0.20 µs (2 300 instructions). Of the fast path, the generated
+//! `kinetic` (39 ns), `kinetic_energy_gradient` (48 ns) and `potential_gradient` (12 ns) are
+//! about half, the two Euler-angle `sin_cos` a tenth, the factorization and solve (38 ns) a
+//! fifth. The generated `kinetic` and `kinetic_energy_gradient` recompute the same position
+//! terms, including the same `sin_cos`; a generated pair that shares them (prototyped by hand in
+//! `benches/rhs.rs`, `fused`) measured 10 % fewer instructions and 14 % less time for water,
+//! and would save more for molecules with more angles (each `sin_cos` is paid twice today).
+//!
+//! # Tests
+//!
+//! `tests/fast_path.rs` (for every shipped molecule): [`rhs`] against the seed's [`super::rhs`]
+//! at random states; the J = 0 system against the seed restricted to `p_e = 0`; the frozen
+//! system against central finite differences of its own Hamiltonian built independently (the
+//! reduced metric with `DMatrix` and a general inverse); no allocation; and a DOP853 trajectory
+//! of [`FastSystem`] against one of the seed's [`super::HamiltonianSystem`].
+
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+
+use super::metric::{InverseMetric, MetricBlock, PIVOT_TOLERANCE};
+use super::{HamiltonianError, MIN_SIN_THETA, PhaseState};
+use crate::integrate::OdeSystem;
+use crate::molecule::{KineticMatrices, Molecule};
+
+/// The block factorization of the full kinetic metric `M = [[I, A], [Aᵀ, a]]`:
+///
+/// ```text
+/// M = [[1, 0], [Yᵀ, 1]] · [[I, 0], [0, S]] · [[1, Y], [0, 1]],   Y = I⁻¹ A,
+/// S = a − Aᵀ I⁻¹ A = a − Aᵀ Y = G22⁻¹,
+/// ```
+///
+/// with `I⁻¹` in closed form (adjugate over determinant) and `S` factored as `L D Lᵀ` (unit
+/// lower-triangular `L`, diagonal `D`: the square-root-free form of Cholesky, with the same
+/// pivots `D_jj = L_jj²`). Then
+///
+/// ```text
+/// M⁻¹ (J, p):   q̇ = S⁻¹ (p − Yᵀ J),   ω = I⁻¹ J − Y q̇.
+/// ```
+///
+/// `M` is positive definite iff `I` and `S` are, so these two are the whole
+/// positive-definiteness check. Pivots are tested against [`PIVOT_TOLERANCE`] with the seed's
+/// scales (`trace I` for `I`, `a_jj` for `S`); `I`'s Cholesky pivots are ratios of its leading
+/// principal minors, `D₁ = m₁`, `D₂ = m₂/m₁`, `D₃ = m₃/m₂`, so they are tested as
+/// `m_j > tol · scale · m_{j−1}` without dividing.
+///
+/// Why this form: on these tiny blocks the cost is latency, not flops, and a division or square
+/// root costs ~15–20 cycles of latency against ~4 for a multiplication. A textbook Cholesky
+/// with triangular solves put some 25 dependent divisions and square roots on water's critical
+/// path (measured: ~180 ns of a ~400 ns evaluation); here `I` costs one division, `S` one per
+/// pivot, and the solves none. (For a 3 × 3 symmetric positive definite `I` the adjugate
+/// formula's error grows with the condition number like that of any inverse, and its
+/// cofactors do not cancel catastrophically unless `I` is close to singular, which the pivot
+/// test rejects; the tests compare the result with the seed's Cholesky-based path to 1e-12
+/// for every shipped molecule.)
+#[derive(Copy, Clone, Debug)]
+pub struct MetricFactor<const N: usize> {
+    /// `I⁻¹`.
+    i_inv: Matrix3<f64>,
+    /// `Y = I⁻¹ A` (3 × N).
+    y: SMatrix<f64, 3, N>,
+    /// `S = L₂ D₂ L₂ᵀ`: `L₂` in the strict lower triangle (the rest is never read).
+    l2: SMatrix<f64, N, N>,
+    /// `1 / D₂`.
+    d2_inv: SVector<f64, N>,
+}
+
+impl<const N: usize> MetricFactor<N> {
+    /// Factors the metric of `k`; `q` only goes into the error.
+    ///
+    /// Fails with [`HamiltonianError::NonFinite`] for non-finite matrices and
+    /// [`HamiltonianError::SingularMetric`] (naming the block as the seed's
+    /// [`InverseMetric::new`] does) when `M` is singular or not positive definite.
+    // Always inlined: called once per evaluation, and inlining lets the factor live in
+    // registers instead of being copied out through the `Result` (measured ~5 % of water's rhs).
+    #[inline(always)]
+    pub fn new(k: &KineticMatrices<N>, q: &SVector<f64, N>) -> Result<Self, HamiltonianError> {
+        if !(all_finite(k.a.as_slice()) & all_finite(k.coriolis.as_slice()) & all_finite(k.inertia.as_slice())) {
+            return Err(HamiltonianError::NonFinite { quantity: "kinetic matrices a, A, I" });
+        }
+        let Some(i_inv) = inverse_spd3(&k.inertia) else {
+            return Err(singular_metric(k, q, MetricBlock::Inertia));
+        };
+        let y = i_inv * k.coriolis;
+        // S = a − Aᵀ Y, lower triangle only (the factorization reads nothing else).
+        let mut l2 = k.a;
+        let a = &k.coriolis;
+        for j in 0..N {
+            for i in j..N {
+                l2[(i, j)] -= a[(0, i)] * y[(0, j)] + a[(1, i)] * y[(1, j)] + a[(2, i)] * y[(2, j)];
+            }
+        }
+        let Some(d2_inv) = ldl_in_place(&mut l2, |j| k.a[(j, j)]) else {
+            return Err(singular_metric(k, q, MetricBlock::G22Inverse));
+        };
+        Ok(Self { i_inv, y, l2, d2_inv })
+    }
+
+    /// `v = (ω, q̇) = M⁻¹ (j, p)`.
+    #[inline]
+    pub fn solve(&self, j: &Vector3<f64>, p: &SVector<f64, N>) -> (Vector3<f64>, SVector<f64, N>) {
+        let i_inv_j = self.i_inv * j;
+        let qdot = ldl_solve(&self.l2, &self.d2_inv, p - self.y.transpose() * j);
+        (i_inv_j - self.y * qdot, qdot)
+    }
+
+    /// `v = (ω, q̇) = M⁻¹ (0, p)`: [`MetricFactor::solve`] for `J = 0`, without the `I⁻¹ J`
+    /// and `Yᵀ J` terms.
+    #[inline]
+    pub fn solve_zero_j(&self, p: &SVector<f64, N>) -> (Vector3<f64>, SVector<f64, N>) {
+        let qdot = ldl_solve(&self.l2, &self.d2_inv, *p);
+        (-(self.y * qdot), qdot)
+    }
+}
+
+/// Cold path of [`MetricFactor::new`]: names the block as the seed would (it checks `I`, `a`,
+/// `G11⁻¹`, `G22⁻¹` in that order), falling back to the block this factorization tripped on
+/// when the seed's tolerance tests happen to pass.
+#[cold]
+#[inline(never)]
+fn singular_metric<const N: usize>(
+    k: &KineticMatrices<N>,
+    q: &SVector<f64, N>,
+    found: MetricBlock,
+) -> HamiltonianError {
+    match InverseMetric::new(k, q) {
+        Err(e) => e,
+        Ok(_) => HamiltonianError::SingularMetric { matrix: found, q: q.as_slice().to_vec() },
+    }
+}
+
+/// The inverse of a symmetric 3 × 3 matrix by adjugate and determinant, or `None` unless it
+/// is positive definite with every Cholesky pivot above [`PIVOT_TOLERANCE`] times its trace
+/// (the seed's test for `I`). Reads the lower triangle only.
+#[inline]
+fn inverse_spd3(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    let (m00, m10, m20, m11, m21, m22) = (m[(0, 0)], m[(1, 0)], m[(2, 0)], m[(1, 1)], m[(2, 1)], m[(2, 2)]);
+    let c00 = m11 * m22 - m21 * m21;
+    let c10 = m20 * m21 - m10 * m22;
+    let c20 = m10 * m21 - m20 * m11;
+    let c11 = m00 * m22 - m20 * m20;
+    let c21 = m10 * m20 - m00 * m21;
+    let c22 = m00 * m11 - m10 * m10;
+    let det = m00 * c00 + m10 * c10 + m20 * c20;
+    // Leading principal minors m00, c22, det; pivot_j = minor_j / minor_{j−1} > tol · trace.
+    // Written as `a > b` so that NaN fails.
+    let tol = PIVOT_TOLERANCE * (m00 + m11 + m22);
+    let positive = (m00 > tol) & (c22 > tol * m00) & (det > tol * c22);
+    if !positive {
+        return None;
+    }
+    let r = 1.0 / det;
+    #[rustfmt::skip]
+    let inv = Matrix3::new(
+        c00 * r, c10 * r, c20 * r,
+        c10 * r, c11 * r, c21 * r,
+        c20 * r, c21 * r, c22 * r,
+    );
+    Some(inv)
+}
+
+/// In-place `m = L D Lᵀ` of a symmetric matrix, reading the lower triangle only and writing
+/// `L` (unit diagonal, not stored) into the strict lower triangle; returns `1 / D`, or `None`
+/// unless every pivot `D_jj` exceeds [`PIVOT_TOLERANCE`] times `scale(j)` (NaN fails too).
+///
+/// Row by row: with `v_k = L_jk D_k`, `v_k = m_jk − Σ_{l<k} L_kl v_l`, `L_jk = v_k / D_k`,
+/// `D_j = m_jj − Σ_{k<j} L_jk v_k`. Hand-written rather than `nalgebra::Cholesky` because with
+/// constant bounds it unrolls into straight-line code, and for the reciprocal pivots.
+#[inline]
+fn ldl_in_place<const D: usize>(m: &mut SMatrix<f64, D, D>, scale: impl Fn(usize) -> f64) -> Option<SVector<f64, D>> {
+    let mut d_inv = SVector::<f64, D>::zeros();
+    let mut v = SVector::<f64, D>::zeros();
+    for j in 0..D {
+        let mut d = m[(j, j)];
+        for k in 0..j {
+            let mut vk = m[(j, k)];
+            for l in 0..k {
+                vk -= m[(k, l)] * v[l];
+            }
+            v[k] = vk;
+            let ljk = vk * d_inv[k];
+            m[(j, k)] = ljk;
+            d -= ljk * vk;
+        }
+        if d.is_nan() || d <= PIVOT_TOLERANCE * scale(j) {
+            return None;
+        }
+        d_inv[j] = 1.0 / d;
+    }
+    Some(d_inv)
+}
+
+/// `x = L⁻ᵀ D⁻¹ L⁻¹ b` for a factor from [`ldl_in_place`]: multiplications only.
+#[inline]
+fn ldl_solve<const D: usize>(
+    l: &SMatrix<f64, D, D>,
+    d_inv: &SVector<f64, D>,
+    mut x: SVector<f64, D>,
+) -> SVector<f64, D> {
+    for i in 0..D {
+        for k in 0..i {
+            x[i] -= l[(i, k)] * x[k];
+        }
+    }
+    for i in 0..D {
+        x[i] *= d_inv[i];
+    }
+    for i in (0..D).rev() {
+        for k in i + 1..D {
+            x[i] -= l[(k, i)] * x[k];
+        }
+    }
+    x
+}
+
+/// Whether every element is finite: `x · 0` is `±0` for finite `x` and NaN for ±∞ and NaN, so
+/// the sum is NaN iff some element is not finite.
+///
+/// Why not `iter().all(is_finite)`: short-circuiting costs ~16 instructions per element
+/// (callgrind: a third of the factorization's instructions went to this check), and the
+/// branch-free `fold(true, |ok, x| ok & x.is_finite())` is vectorized into 16-byte loads of
+/// values just written by 8-byte stores, which stalls on store-to-load forwarding (perf: half
+/// the cycles of the output check). A scalar sum has neither problem, and nothing waits for
+/// it but a well-predicted branch.
+#[inline]
+fn all_finite(v: &[f64]) -> bool {
+    !v.iter().fold(0.0, |acc, &x| acc + x * 0.0).is_nan()
+}
+
+/// Whether every component of a state is finite; inlined so that the values are checked where
+/// they are computed instead of being reloaded from memory.
+#[inline(always)]
+fn state_is_finite<const N: usize>(s: &PhaseState<N>) -> bool {
+    all_finite(s.q.as_slice())
+        & all_finite(s.p.as_slice())
+        & all_finite(s.euler.as_slice())
+        & all_finite(s.pe.as_slice())
+}
+
+/// [`PhaseState::check_finite`] with the fast check first; the seed's check (which names the
+/// block) only runs when something is not finite.
+#[inline(always)]
+fn check_state<const N: usize>(s: &PhaseState<N>) -> Result<(), HamiltonianError> {
+    if state_is_finite(s) { Ok(()) } else { cold_check_state(s) }
+}
+
+#[cold]
+#[inline(never)]
+fn cold_check_state<const N: usize>(s: &PhaseState<N>) -> Result<(), HamiltonianError> {
+    s.check_finite()
+}
+
+/// `sin`/`cos` of θ and ψ: everything W, Wᵀ and ∂W need (W does not depend on φ), with
+/// `1 / sin θ` computed once (one division instead of three).
+#[derive(Copy, Clone, Debug)]
+struct Euler {
+    inv_st: f64,
+    ct: f64,
+    sp: f64,
+    cp: f64,
+}
+
+impl Euler {
+    /// Fails like [`super::WMatrices::new`]: non-finite angles, then `|sin θ| <` [`MIN_SIN_THETA`].
+    #[inline]
+    fn new(euler: &Vector3<f64>) -> Result<Self, HamiltonianError> {
+        if !all_finite(euler.as_slice()) {
+            return Err(HamiltonianError::NonFinite { quantity: "Euler angles (φ, θ, ψ)" });
+        }
+        let theta = euler[1];
+        let (st, ct) = theta.sin_cos();
+        if st.abs() < MIN_SIN_THETA {
+            return Err(HamiltonianError::EulerSingular { theta });
+        }
+        let (sp, cp) = euler[2].sin_cos();
+        Ok(Self { inv_st: 1.0 / st, ct, sp, cp })
+    }
+
+    /// `J = W p_e` (eq. 2).
+    #[inline]
+    fn j(&self, pe: &Vector3<f64>) -> Vector3<f64> {
+        let g = (pe[0] - self.ct * pe[2]) * self.inv_st;
+        Vector3::new(self.sp * g + self.cp * pe[1], self.cp * g - self.sp * pe[1], pe[2])
+    }
+
+    /// `Ω̇_e = Wᵀ ω` (eq. 6).
+    #[inline]
+    fn euler_rates(&self, omega: &Vector3<f64>) -> Vector3<f64> {
+        let phi_dot = (self.sp * omega[0] + self.cp * omega[1]) * self.inv_st;
+        Vector3::new(phi_dot, self.cp * omega[0] - self.sp * omega[1], omega[2] - self.ct * phi_dot)
+    }
+
+    /// `ṗ_e = −((∂W/∂Ω_e) p_e) · ω` (eqs. 5, 7) with `ṗ_φ` a literal `+0.0` (H does not depend
+    /// on φ; negating a computed zero could give −0.0), given `J = W p_e`.
+    #[inline]
+    fn euler_momenta_rates(&self, pe: &Vector3<f64>, j: &Vector3<f64>, omega: &Vector3<f64>) -> Vector3<f64> {
+        let dh_dtheta =
+            (pe[2] - self.ct * pe[0]) * (self.inv_st * self.inv_st) * (self.sp * omega[0] + self.cp * omega[1]);
+        let dh_dpsi = j[1] * omega[0] - j[0] * omega[1];
+        Vector3::new(0.0, -dh_dtheta, -dh_dpsi)
+    }
+}
+
+/// `ṗ = ∂T/∂q|_(ω, q̇) − ∂U/∂q` with the seed's finiteness checks. (The `T` that
+/// `kinetic_energy_gradient` returns is not needed: where T is, `½ v · b` is cheaper.)
+#[inline]
+fn internal_force<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    q: &SVector<f64, N>,
+    omega: &Vector3<f64>,
+    qdot: &SVector<f64, N>,
+) -> Result<SVector<f64, N>, HamiltonianError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    let mut du = SVector::zeros();
+    molecule.potential_gradient(q, &mut du);
+    if !all_finite(du.as_slice()) {
+        return Err(HamiltonianError::NonFinite { quantity: "potential gradient ∂U/∂q" });
+    }
+    let mut dt = SVector::zeros();
+    molecule.kinetic_energy_gradient(q, omega, qdot, &mut dt);
+    if !all_finite(dt.as_slice()) {
+        return Err(HamiltonianError::NonFinite { quantity: "kinetic energy gradient ∂T/∂q" });
+    }
+    Ok(dt - du)
+}
+
+fn finite(x: f64, quantity: &'static str) -> Result<f64, HamiltonianError> {
+    if x.is_finite() { Ok(x) } else { Err(HamiltonianError::NonFinite { quantity }) }
+}
+
+#[inline(always)]
+fn check_rhs<const N: usize>(out: &PhaseState<N>) -> Result<(), HamiltonianError> {
+    if state_is_finite(out) { Ok(()) } else { Err(non_finite_rhs()) }
+}
+
+#[cold]
+#[inline(never)]
+fn non_finite_rhs() -> HamiltonianError {
+    HamiltonianError::NonFinite { quantity: "right-hand side of Hamilton's equations" }
+}
+
+/// The right-hand side of Hamilton's equations, `(q̇, ṗ, Ω̇_e, ṗ_e)`, by the fast path (see the
+/// module docs): the seed's [`super::rhs`] to rounding, with the same errors, no workspace and
+/// no allocation unless it fails. `ṗ_φ` is exactly `+0.0`.
+pub fn rhs<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    state: &PhaseState<N>,
+) -> Result<PhaseState<N>, HamiltonianError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    rhs_inline(molecule, state)
+}
+
+/// [`rhs`], always inlined so that [`FastSystem`] stores the results straight into the caller's
+/// slice (returned through memory and copied with 16-byte loads, they stalled on
+/// store-to-load forwarding: ~10 % of water's evaluation).
+#[inline(always)]
+fn rhs_inline<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    state: &PhaseState<N>,
+) -> Result<PhaseState<N>, HamiltonianError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    check_state(state)?;
+    let e = Euler::new(&state.euler)?;
+    let j = e.j(&state.pe);
+    let mut k = KineticMatrices::default();
+    molecule.kinetic(&state.q, &mut k);
+    let (omega, qdot) = MetricFactor::new(&k, &state.q)?.solve(&j, &state.p);
+    let pdot = internal_force(molecule, &state.q, &omega, &qdot)?;
+    let out =
+        PhaseState { q: qdot, p: pdot, euler: e.euler_rates(&omega), pe: e.euler_momenta_rates(&state.pe, &j, &omega) };
+    check_rhs(&out)?;
+    Ok(out)
+}
+
+/// `H` by the fast path: `T = ½ v · (J, p) = ½ (ω · J + q̇ · p)` plus `U`, in hartree.
+pub fn hamiltonian<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    state: &PhaseState<N>,
+) -> Result<f64, HamiltonianError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    check_state(state)?;
+    let j = Euler::new(&state.euler)?.j(&state.pe);
+    let mut k = KineticMatrices::default();
+    molecule.kinetic(&state.q, &mut k);
+    let (omega, qdot) = MetricFactor::new(&k, &state.q)?.solve(&j, &state.p);
+    let t = 0.5 * (omega.dot(&j) + qdot.dot(&state.p));
+    let u = finite(molecule.potential(&state.q), "potential U(q)")?;
+    finite(t + u, "Hamiltonian H")
+}
+
+/// The fast path as an [`OdeSystem`] on the seed's flat layout
+/// `[q, p, φ, θ, ψ, p_φ, p_θ, p_ψ]` (dimension `2N + 6`): a drop-in replacement for
+/// [`super::HamiltonianSystem`] that needs no workspace.
+pub struct FastSystem<'a, M: ?Sized, const N: usize, const NA: usize> {
+    molecule: &'a M,
+}
+
+impl<'a, M, const N: usize, const NA: usize> FastSystem<'a, M, N, NA>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    /// The system of `molecule` (allocates nothing).
+    pub fn new(molecule: &'a M) -> Self {
+        Self { molecule }
+    }
+
+    /// The molecule.
+    pub fn molecule(&self) -> &'a M {
+        self.molecule
+    }
+
+    /// `H` of the flat state `y`, in hartree.
+    pub fn energy(&self, y: &[f64]) -> Result<f64, HamiltonianError> {
+        hamiltonian(self.molecule, &PhaseState::read_from(y)?)
+    }
+}
+
+impl<M, const N: usize, const NA: usize> OdeSystem for FastSystem<'_, M, N, NA>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    type Error = HamiltonianError;
+
+    fn dim(&self) -> usize {
+        PhaseState::<N>::DIM
+    }
+
+    /// `dydt = (q̇, ṗ, Ω̇_e, ṗ_e)` by [`rhs`]; `t` is unused.
+    fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), HamiltonianError> {
+        let d = rhs_inline(self.molecule, &PhaseState::read_from(y)?)?;
+        write_state(&d, dydt)
+    }
+}
+
+/// [`PhaseState::write_to`] element by element (see [`rhs_inline`] for why).
+#[inline(always)]
+fn write_state<const N: usize>(s: &PhaseState<N>, y: &mut [f64]) -> Result<(), HamiltonianError> {
+    if y.len() != PhaseState::<N>::DIM {
+        return Err(HamiltonianError::DimensionMismatch { expected: PhaseState::<N>::DIM, found: y.len() });
+    }
+    for i in 0..N {
+        y[i] = s.q[i];
+        y[N + i] = s.p[i];
+    }
+    for i in 0..3 {
+        y[2 * N + i] = s.euler[i];
+        y[2 * N + 3 + i] = s.pe[i];
+    }
+    Ok(())
+}
+
+/// What a [`ReducedSystem`] integrates of the overall rotation.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum Rotation {
+    /// Everything: the Euler angles and their momenta.
+    Free,
+    /// Zero angular momentum: `p_e = 0` exactly for all time (ṗ_e is linear in p_e), so p_e is
+    /// not stored; the Euler angles are integrated (`Ω̇_e = Wᵀ ω`) only if `orientation` is
+    /// true, for lab-frame output.
+    ZeroAngularMomentum {
+        /// Whether to integrate the Euler angles.
+        orientation: bool,
+    },
+}
+
+/// Which parts of phase space a [`ReducedSystem`] integrates, chosen at run time.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub struct Reduction<const N: usize> {
+    /// `active[k]` is false for an internal coordinate frozen at its value (zero velocity).
+    pub active: [bool; N],
+    /// What is integrated of the overall rotation.
+    pub rotation: Rotation,
+}
+
+impl<const N: usize> Reduction<N> {
+    /// Nothing reduced: the same equations as [`FastSystem`].
+    pub fn none() -> Self {
+        Self { active: [true; N], rotation: Rotation::Free }
+    }
+
+    /// `J = 0`, all internal coordinates active; the orientation integrated if asked for.
+    pub fn zero_angular_momentum(orientation: bool) -> Self {
+        Self { active: [true; N], rotation: Rotation::ZeroAngularMomentum { orientation } }
+    }
+
+    /// The coordinates with `active[k] == false` frozen, rotation free.
+    pub fn frozen(active: [bool; N]) -> Self {
+        Self { active, rotation: Rotation::Free }
+    }
+
+    /// The coordinates called `frozen` (names as in [`Molecule::coordinates`]) frozen, rotation
+    /// free: how a scene that names coordinates picks them at run time.
+    pub fn freezing<M, const NA: usize>(molecule: &M, frozen: &[&str]) -> Result<Self, ReductionError>
+    where
+        M: Molecule<N, NA> + ?Sized,
+    {
+        let coords = molecule.coordinates();
+        let mut active = [true; N];
+        for name in frozen {
+            let k = coords.iter().position(|c| c.name == *name).ok_or_else(|| ReductionError::UnknownCoordinate {
+                name: (*name).to_owned(),
+                known: coords.iter().map(|c| c.name).collect(),
+            })?;
+            active[k] = false;
+        }
+        Ok(Self::frozen(active))
+    }
+
+    /// The number of active internal coordinates.
+    pub fn active_count(&self) -> usize {
+        self.active.iter().filter(|&&a| a).count()
+    }
+
+    fn orientation(&self) -> bool {
+        matches!(self.rotation, Rotation::Free | Rotation::ZeroAngularMomentum { orientation: true })
+    }
+
+    /// The dimension of the flat state: `2 n_active + 3 (orientation) + 3 (p_e)`.
+    pub fn dim(&self) -> usize {
+        2 * self.active_count()
+            + if self.orientation() { 3 } else { 0 }
+            + if self.rotation == Rotation::Free { 3 } else { 0 }
+    }
+}
+
+/// Why a [`Reduction`] cannot be built, or a full [`PhaseState`] cannot be mapped onto a
+/// [`ReducedSystem`]'s flat state.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ReductionError {
+    /// The flat slice has the wrong length.
+    #[error("the reduced state has {found} components, expected {expected}")]
+    DimensionMismatch {
+        /// The system's dimension.
+        expected: usize,
+        /// The length that was passed.
+        found: usize,
+    },
+    /// A J = 0 system was given a state with non-zero Euler momenta.
+    #[error("the state has Euler momenta p_e = {pe:?}, but this system has zero angular momentum")]
+    NonzeroAngularMomentum {
+        /// The state's `(p_φ, p_θ, p_ψ)`.
+        pe: [f64; 3],
+    },
+    /// [`Reduction::freezing`] was given a name the molecule has no coordinate of.
+    #[error("no internal coordinate is called {name:?} (the coordinates are {known:?})")]
+    UnknownCoordinate {
+        /// The name that was given.
+        name: String,
+        /// The molecule's coordinate names.
+        known: Vec<&'static str>,
+    },
+    /// A frozen coordinate of the state differs from the value the system holds it at.
+    #[error("frozen coordinate q[{index}] is {found} in the state but held at {held}")]
+    FrozenCoordinateMoved {
+        /// Its index in q.
+        index: usize,
+        /// Its value in the state.
+        found: f64,
+        /// The value the system holds.
+        held: f64,
+    },
+}
+
+/// Hamilton's equations restricted by a [`Reduction`], as an [`OdeSystem`]; the fast path's
+/// numerics otherwise.
+///
+/// # Flat layout
+///
+/// ```text
+/// [ q_a … | p_a … | φ θ ψ (if the orientation is integrated) | p_φ p_θ p_ψ (if Rotation::Free) ]
+/// ```
+///
+/// where `q_a`, `p_a` are the active coordinates and their momenta in coordinate order
+/// (dimension [`Reduction::dim`]). Frozen coordinates stay at the values of the `template`
+/// state given to [`ReducedSystem::new`] with zero velocity; when the orientation is not
+/// integrated, [`ReducedSystem::expand`] reports the template's.
+///
+/// # The reduced Hamiltonian
+///
+/// `H_red = ½ bᵀ M_red⁻¹ b + U(q)` with `b = (J, p_a)` (`J = 0` for a J = 0 system) and `M_red`
+/// the full metric with the frozen rows and columns deleted: the Legendre transform of the
+/// Lagrangian with the frozen velocities set to zero. Its `p_a` and `p_e` are the full
+/// system's momenta at those velocities.
+#[derive(Clone, Debug)]
+pub struct ReducedSystem<'a, M: ?Sized, const N: usize, const NA: usize> {
+    molecule: &'a M,
+    reduction: Reduction<N>,
+    /// Frozen q values, and the orientation when it is not integrated.
+    template: PhaseState<N>,
+    /// `index[s]` for `s < n_active`: the coordinate stored in slot `s`.
+    index: [usize; N],
+    n_active: usize,
+    all_active: bool,
+}
+
+/// Where the blocks of a reduced flat state start.
+#[derive(Copy, Clone)]
+struct Offsets {
+    p: usize,
+    euler: Option<usize>,
+    pe: Option<usize>,
+    dim: usize,
+}
+
+impl<'a, M, const N: usize, const NA: usize> ReducedSystem<'a, M, N, NA>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    /// The reduced system of `molecule`; `template` supplies the frozen coordinates' values and
+    /// the orientation reported when it is not integrated (its momenta are not used).
+    pub fn new(molecule: &'a M, reduction: Reduction<N>, template: &PhaseState<N>) -> Self {
+        let mut index = [0; N];
+        let mut n_active = 0;
+        for k in 0..N {
+            if reduction.active[k] {
+                index[n_active] = k;
+                n_active += 1;
+            }
+        }
+        Self { molecule, reduction, template: *template, index, n_active, all_active: n_active == N }
+    }
+
+    /// The molecule.
+    pub fn molecule(&self) -> &'a M {
+        self.molecule
+    }
+
+    /// The reduction.
+    pub fn reduction(&self) -> &Reduction<N> {
+        &self.reduction
+    }
+
+    fn offsets(&self) -> Offsets {
+        let p = self.n_active;
+        let mut next = 2 * self.n_active;
+        let euler = self.reduction.orientation().then(|| {
+            next += 3;
+            next - 3
+        });
+        let pe = (self.reduction.rotation == Rotation::Free).then(|| {
+            next += 3;
+            next - 3
+        });
+        Offsets { p, euler, pe, dim: next }
+    }
+
+    /// The full `q`, `p` (zero for frozen coordinates), Euler angles and `p_e` of a flat state.
+    #[inline]
+    fn unpack(&self, y: &[f64], o: &Offsets) -> PhaseState<N> {
+        let mut s =
+            PhaseState { q: self.template.q, p: SVector::zeros(), euler: self.template.euler, pe: Vector3::zeros() };
+        for (slot, &k) in self.index[..self.n_active].iter().enumerate() {
+            s.q[k] = y[slot];
+            s.p[k] = y[o.p + slot];
+        }
+        if let Some(e) = o.euler {
+            s.euler = Vector3::new(y[e], y[e + 1], y[e + 2]);
+        }
+        if let Some(e) = o.pe {
+            s.pe = Vector3::new(y[e], y[e + 1], y[e + 2]);
+        }
+        s
+    }
+
+    /// Kinetic matrices with the frozen rows and columns of `M` replaced by those of the
+    /// identity: `a_fj = a_jf = δ_fj`, `A_·f = 0`. The metric is then block diagonal (after a
+    /// permutation) as `M_red ⊕ 1`, so `M⁻¹ (J, p)` with `p_f = 0` gives `q̇_f = 0` exactly and
+    /// the active block `M_red⁻¹ (J, p_a)`.
+    #[inline]
+    fn mask(&self, k: &mut KineticMatrices<N>) {
+        if self.all_active {
+            return;
+        }
+        for f in 0..N {
+            if !self.reduction.active[f] {
+                for j in 0..N {
+                    k.a[(f, j)] = 0.0;
+                    k.a[(j, f)] = 0.0;
+                }
+                k.a[(f, f)] = 1.0;
+                for r in 0..3 {
+                    k.coriolis[(r, f)] = 0.0;
+                }
+            }
+        }
+    }
+
+    /// Everything the right-hand side and the energy share: the unpacked state, the Euler
+    /// sines (if the orientation matters), `J`, and the velocities.
+    #[allow(clippy::type_complexity)]
+    fn kinematics(
+        &self,
+        y: &[f64],
+        o: &Offsets,
+    ) -> Result<(PhaseState<N>, Option<Euler>, Vector3<f64>, Vector3<f64>, SVector<f64, N>), HamiltonianError> {
+        if y.len() != o.dim {
+            return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: y.len() });
+        }
+        let s = self.unpack(y, o);
+        check_state(&s)?;
+        let e = match o.euler {
+            Some(_) => Some(Euler::new(&s.euler)?),
+            None => None,
+        };
+        let mut k = KineticMatrices::default();
+        self.molecule.kinetic(&s.q, &mut k);
+        self.mask(&mut k);
+        let factor = MetricFactor::new(&k, &s.q)?;
+        let (j, (omega, qdot)) = match (o.pe, &e) {
+            (Some(_), Some(e)) => {
+                let j = e.j(&s.pe);
+                (j, factor.solve(&j, &s.p))
+            }
+            _ => (Vector3::zeros(), factor.solve_zero_j(&s.p)),
+        };
+        Ok((s, e, j, omega, qdot))
+    }
+
+    /// `H_red` of the flat state `y`, in hartree: `½ (ω · J + q̇_a · p_a) + U`.
+    pub fn energy(&self, y: &[f64]) -> Result<f64, HamiltonianError> {
+        let o = self.offsets();
+        let (s, _, j, omega, qdot) = self.kinematics(y, &o)?;
+        let t = 0.5 * (omega.dot(&j) + qdot.dot(&s.p));
+        let u = finite(self.molecule.potential(&s.q), "potential U(q)")?;
+        finite(t + u, "Hamiltonian H")
+    }
+
+    /// Writes the reduced flat state of a full state into `y`: active q and p, and (as the
+    /// reduction keeps them) the Euler angles and `p_e`. The momenta of frozen coordinates are
+    /// not used (the constraint determines them; see [`ReducedSystem::expand`]).
+    ///
+    /// Fails if `y` has the wrong length, if the state has `p_e ≠ 0` for a J = 0 system, or if
+    /// a frozen coordinate differs from the value the system holds it at.
+    pub fn reduce(&self, state: &PhaseState<N>, y: &mut [f64]) -> Result<(), ReductionError> {
+        let o = self.offsets();
+        if y.len() != o.dim {
+            return Err(ReductionError::DimensionMismatch { expected: o.dim, found: y.len() });
+        }
+        if o.pe.is_none() && state.pe != Vector3::zeros() {
+            return Err(ReductionError::NonzeroAngularMomentum { pe: state.pe.into() });
+        }
+        for k in 0..N {
+            let held = self.template.q[k];
+            if !self.reduction.active[k] && state.q[k] != held {
+                return Err(ReductionError::FrozenCoordinateMoved { index: k, found: state.q[k], held });
+            }
+        }
+        for (slot, &k) in self.index[..self.n_active].iter().enumerate() {
+            y[slot] = state.q[k];
+            y[o.p + slot] = state.p[k];
+        }
+        if let Some(e) = o.euler {
+            y[e..e + 3].copy_from_slice(state.euler.as_slice());
+        }
+        if let Some(e) = o.pe {
+            y[e..e + 3].copy_from_slice(state.pe.as_slice());
+        }
+        Ok(())
+    }
+
+    /// The full state of a reduced flat state, for output: frozen coordinates at their held
+    /// values, `p_e = 0` for a J = 0 system, the template's orientation if it is not
+    /// integrated, and each frozen coordinate's momentum the full system's
+    /// `p_f = ∂T/∂q̇_f = (Aᵀ ω + a q̇)_f` at the reduced velocities (so that the seed path at
+    /// the expanded state gives the same ω and q̇, with `q̇_f = 0`).
+    pub fn expand(&self, y: &[f64]) -> Result<PhaseState<N>, HamiltonianError> {
+        let o = self.offsets();
+        let (mut s, _, _, omega, qdot) = self.kinematics(y, &o)?;
+        if !self.all_active {
+            let mut k = KineticMatrices::default();
+            self.molecule.kinetic(&s.q, &mut k);
+            let p_full = k.coriolis.transpose() * omega + k.a * qdot;
+            for f in 0..N {
+                if !self.reduction.active[f] {
+                    s.p[f] = p_full[f];
+                }
+            }
+        }
+        Ok(s)
+    }
+}
+
+impl<M, const N: usize, const NA: usize> OdeSystem for ReducedSystem<'_, M, N, NA>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    type Error = HamiltonianError;
+
+    fn dim(&self) -> usize {
+        self.offsets().dim
+    }
+
+    /// `dydt` in the reduced layout: `(q̇_a, ṗ_a, Ω̇_e, ṗ_e)` as the reduction keeps them.
+    fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), HamiltonianError> {
+        let o = self.offsets();
+        if dydt.len() != o.dim {
+            return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: dydt.len() });
+        }
+        let (s, e, j, omega, qdot) = self.kinematics(y, &o)?;
+        let pdot = internal_force(self.molecule, &s.q, &omega, &qdot)?;
+        for (slot, &k) in self.index[..self.n_active].iter().enumerate() {
+            dydt[slot] = qdot[k];
+            dydt[o.p + slot] = pdot[k];
+        }
+        if let (Some(i), Some(e)) = (o.euler, &e) {
+            dydt[i..i + 3].copy_from_slice(e.euler_rates(&omega).as_slice());
+            if let Some(i) = o.pe {
+                dydt[i..i + 3].copy_from_slice(e.euler_momenta_rates(&s.pe, &j, &omega).as_slice());
+            }
+        }
+        if !all_finite(dydt) {
+            return Err(HamiltonianError::NonFinite { quantity: "right-hand side of Hamilton's equations" });
+        }
+        Ok(())
+    }
+}
