@@ -155,6 +155,9 @@ pub struct Scene {
     pub outputs: Outputs,
     /// Internal coordinates held fixed (names, checked against the molecule later).
     pub frozen: Vec<Spanned<String>>,
+    /// The smallest relative pivot of the kinetic metric a run accepts before it stops as
+    /// ill-conditioned (see `ReducedSystem::with_min_pivot`).
+    pub min_metric_pivot: f64,
 }
 
 impl Scene {
@@ -222,10 +225,14 @@ struct RawRun {
     outputs: Option<Spanned<Vec<Spanned<String>>>>,
     #[serde(default)]
     frozen: Vec<Spanned<String>>,
+    min_metric_pivot: Option<Spanned<f64>>,
 }
 
 /// The default integrator: DOP853 at rtol = atol = 1e-10.
 pub const DEFAULT_TOLERANCE: f64 = 1e-10;
+
+/// The default smallest relative pivot of the kinetic metric (see `STABILITY.md`).
+pub const DEFAULT_MIN_METRIC_PIVOT: f64 = 1e-12;
 
 /// Parses and validates a scene file. `path` names it in messages.
 pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
@@ -307,6 +314,10 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         units: CoordinateScale { length: l, angle: a, time: t },
         outputs,
         frozen: run.frozen.clone(),
+        min_metric_pivot: match &run.min_metric_pivot {
+            Some(x) => positive(&src, x, "run.min_metric_pivot")?,
+            None => DEFAULT_MIN_METRIC_PIVOT,
+        },
     })
 }
 

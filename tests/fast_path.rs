@@ -11,10 +11,10 @@ use common::{Rng, random_state, richardson_derivative};
 use rovib::molecules::{self, H2o};
 use rovib::runtime::hamiltonian::fast::{self, FastSystem, ReducedSystem, Reduction, ReductionError, Rotation};
 use rovib::runtime::hamiltonian::{
-    self as seed, HamiltonianError, HamiltonianSystem, MetricBlock, PhaseState, Workspace, w_matrix,
+    self as seed, HamiltonianError, HamiltonianSystem, MetricBlock, PhaseState, WMatrices, Workspace, rotation_matrix,
 };
 use rovib::runtime::integrate::{Dop853, Dop853Options, OdeSystem};
-use rovib::runtime::nalgebra::{DMatrix, DVector, SVector, Vector3};
+use rovib::runtime::nalgebra::{DMatrix, DVector, Quaternion, SVector, UnitQuaternion, Vector3};
 use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
 
 const STATES: usize = 40;
@@ -49,6 +49,27 @@ fn flat<const N: usize>(s: &PhaseState<N>) -> Vec<f64> {
     let mut y = vec![0.0; PhaseState::<N>::DIM];
     s.write_to(&mut y).unwrap();
     y
+}
+
+/// The body-formulation rates `(J̇, ς̇)` implied by a seed right-hand side `ds` at `s`, by the
+/// chain rule through the Euler angles: `J̇ = (∂W/∂θ θ̇ + ∂W/∂ψ ψ̇) p_e + W ṗ_e` and
+/// `ς̇ = Σ ∂ς/∂Ω_i Ω̇_i` with `ς = exp(φ ẑ/2) exp(θ x̂/2) exp(ψ ẑ/2)`. Independent of the
+/// reduced system's own formulas (`J × ω`, `½ ς ⊗ (0, ω)`).
+fn body_rates<const N: usize>(s: &PhaseState<N>, ds: &PhaseState<N>) -> (Vector3<f64>, Quaternion<f64>) {
+    let w = WMatrices::new(&s.euler).unwrap();
+    let jdot = (w.dw_dtheta * ds.euler[1] + w.dw_dpsi * ds.euler[2]) * s.pe + w.w * ds.pe;
+    let half = |axis: Vector3<f64>| Quaternion::from_imag(axis * 0.5);
+    let qz = |a: f64| *UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a).quaternion();
+    let qx = |a: f64| *UnitQuaternion::from_axis_angle(&Vector3::x_axis(), a).quaternion();
+    let (a, b, c) = (qz(s.euler[0]), qx(s.euler[1]), qz(s.euler[2]));
+    let qdot = a * half(Vector3::z()) * b * c * ds.euler[0]
+        + a * b * half(Vector3::x()) * c * ds.euler[1]
+        + a * b * c * half(Vector3::z()) * ds.euler[2];
+    (jdot, qdot)
+}
+
+fn quaternion_slice(q: &Quaternion<f64>) -> [f64; 4] {
+    [q.w, q.i, q.j, q.k]
 }
 
 /// The fast rhs equals the seed rhs block by block to 1e-12 relative; so does H; ṗ_φ is +0.
@@ -230,7 +251,7 @@ impl MoleculeVisitor for ZeroJEqualsSeed {
             for orientation in [true, false] {
                 let mut system = ReducedSystem::new(&m, Reduction::zero_angular_momentum(orientation), &s);
                 let dim = system.dim();
-                assert_eq!(dim, 2 * N + if orientation { 3 } else { 0 });
+                assert_eq!(dim, 2 * N + if orientation { 4 } else { 0 });
                 let mut y = vec![0.0; dim];
                 system.reduce(&s, &mut y).unwrap();
                 let mut dy = vec![0.0; dim];
@@ -238,17 +259,19 @@ impl MoleculeVisitor for ZeroJEqualsSeed {
                 worst[0] = worst[0].max(block_rel(&dy[..N], reference.q.as_slice()));
                 worst[1] = worst[1].max(block_rel(&dy[N..2 * N], reference.p.as_slice()));
                 if orientation {
-                    worst[2] = worst[2].max(block_rel(&dy[2 * N..], reference.euler.as_slice()));
+                    let (_, qdot) = body_rates(&s, &reference);
+                    worst[2] = worst[2].max(block_rel(&dy[2 * N..], &quaternion_slice(&qdot)));
                 }
                 let e = system.expand(&y).unwrap();
                 assert_eq!(e.pe, Vector3::zeros());
-                assert_eq!((e.q, e.p, e.euler), (s.q, s.p, s.euler));
+                assert_eq!((e.q, e.p), (s.q, s.p));
+                assert!((rotation_matrix(&e.euler) - rotation_matrix(&s.euler)).amax() < 1e-14);
                 let h = seed::hamiltonian(&m, &s).unwrap();
                 assert!((system.energy(&y).unwrap() - h).abs() <= 1e-13 * h.abs(), "{}", m.name());
             }
         }
         eprintln!(
-            "{}: J = 0 system vs seed at p_e = 0, worst block-relative difference q̇ {:.1e}, ṗ {:.1e}, Ω̇ {:.1e}",
+            "{}: J = 0 system vs seed at p_e = 0, worst block-relative difference q̇ {:.1e}, ṗ {:.1e}, ς̇ {:.1e}",
             m.name(),
             worst[0],
             worst[1],
@@ -305,7 +328,8 @@ impl MoleculeVisitor for ZeroJTrajectory {
             let e = system.expand(y).unwrap();
             assert_eq!(e.pe, Vector3::zeros());
             let d = state_rel(&e, reference);
-            worst = worst.max(d[0]).max(d[1]).max(d[2]);
+            let rotation = (rotation_matrix(&e.euler) - rotation_matrix(&reference.euler)).amax();
+            worst = worst.max(d[0]).max(d[1]).max(rotation);
         }
         eprintln!("{}: J = 0 trajectory vs seed (p_e = 0): worst block-relative difference {worst:.1e}", m.name());
         assert!(worst < 1e-9, "{}: J = 0 trajectory vs seed: {worst:e}", m.name());
@@ -336,12 +360,12 @@ fn reduced_hamiltonian<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         q[k] = y[s];
         p_a[s] = y[na + s];
     }
+    // Body layout: [q_a, p_a, quaternion (4) if the orientation is integrated, J (3) if free].
     let j = if free {
-        let euler = Vector3::new(y[2 * na], y[2 * na + 1], y[2 * na + 2]);
-        let pe = Vector3::new(y[2 * na + 3], y[2 * na + 4], y[2 * na + 5]);
-        w_matrix(&euler).unwrap() * pe
+        let at = 2 * na + 4;
+        Vector3::new(y[at], y[at + 1], y[at + 2])
     } else {
-        assert_eq!(y.len(), 2 * na + if orientation { 3 } else { 0 });
+        assert_eq!(y.len(), 2 * na + if orientation { 4 } else { 0 });
         Vector3::zeros()
     };
     let mut k = KineticMatrices::<N>::default();
@@ -357,6 +381,11 @@ fn reduced_hamiltonian<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let b = DVector::from_iterator(3 + na, j.iter().copied().chain(p_a.iter().copied()));
     let v = &inverse * &b;
     (0.5 * b.dot(&v) + m.potential(&q), Vector3::new(v[0], v[1], v[2]))
+}
+
+/// The quaternion of a state's Euler angles.
+fn seed_quaternion<const N: usize>(s: &PhaseState<N>) -> Quaternion<f64> {
+    *fast::quaternion_of_euler(&s.euler).quaternion()
 }
 
 /// Masks to try: each coordinate frozen alone, everything frozen, and a few mixed ones.
@@ -402,7 +431,7 @@ impl MoleculeVisitor for FrozenIsHamiltonian {
                     let mut system = ReducedSystem::new(&m, Reduction { active, rotation }, &s);
                     let dim = system.dim();
                     let na = active.iter().filter(|&&a| a).count();
-                    assert_eq!(dim, 2 * na + if free { 6 } else { 3 });
+                    assert_eq!(dim, 2 * na + if free { 7 } else { 4 });
                     let mut y = vec![0.0; dim];
                     system.reduce(&s, &mut y).unwrap();
                     let mut dy = vec![0.0; dim];
@@ -414,11 +443,9 @@ impl MoleculeVisitor for FrozenIsHamiltonian {
                     let e = system.energy(&y).unwrap();
                     assert!((e - h).abs() <= 1e-12 * h.abs(), "{}: energy {e} vs {h}", m.name());
 
-                    // Conjugate pairs: (q_a, p_a), and (Ω_e, p_e) when p_e is integrated.
-                    let mut pairs: Vec<(usize, usize)> = (0..na).map(|s| (s, na + s)).collect();
-                    if free {
-                        pairs.extend((0..3).map(|a| (2 * na + a, 2 * na + 3 + a)));
-                    }
+                    // Conjugate pairs (q_a, p_a); the rotation (quaternion, J) is not a canonical pair
+                    // and is checked below against ω of the independent reduced metric.
+                    let pairs: Vec<(usize, usize)> = (0..na).map(|s| (s, na + s)).collect();
                     let coord_blocks: Vec<usize> = pairs.iter().map(|&(x, _)| x).collect();
                     let momentum_blocks: Vec<usize> = pairs.iter().map(|&(_, p)| p).collect();
                     let scale = |idx: &[usize]| idx.iter().fold(1e-12_f64, |acc, &i| acc.max(dy[i].abs()));
@@ -430,10 +457,14 @@ impl MoleculeVisitor for FrozenIsHamiltonian {
                         let dh_dx = richardson_derivative(&y, x, hx, &mut h_of);
                         worst_fd = worst_fd.max((dy[x] - dh_dp).abs() / scale_x).max((dy[p] + dh_dx).abs() / scale_p);
                     }
-                    if !free {
-                        // Ω̇ = Wᵀ ω with ω from the independent reduced metric.
-                        let rates = w_matrix(&s.euler).unwrap().transpose() * omega;
-                        worst_fd = worst_fd.max(block_rel(&dy[2 * na..], rates.as_slice()));
+                    // ς̇ = ½ ς ⊗ (0, ω) and J̇ = J × ω, with ω from the independent reduced metric.
+                    let at = 2 * na;
+                    let quaternion = Quaternion::new(y[at], y[at + 1], y[at + 2], y[at + 3]);
+                    let qdot = quaternion * Quaternion::from_imag(omega) * 0.5;
+                    worst_fd = worst_fd.max(block_rel(&dy[at..at + 4], &quaternion_slice(&qdot)));
+                    if free {
+                        let j = Vector3::new(y[at + 4], y[at + 5], y[at + 6]);
+                        worst_fd = worst_fd.max(block_rel(&dy[at + 4..], j.cross(&omega).as_slice()));
                     }
 
                     // The expanded full state: the seed sees the same motion, with q̇_f = 0.
@@ -448,9 +479,13 @@ impl MoleculeVisitor for FrozenIsHamiltonian {
                         let expected = if active[k] { dy[active[..k].iter().filter(|&&a| a).count()] } else { 0.0 };
                         worst_seed = worst_seed.max((reference.q[k] - expected).abs() / qdot_scale);
                     }
-                    worst_seed = worst_seed.max(block_rel(&dy[2 * na..2 * na + 3], reference.euler.as_slice()));
+                    // The seed's rotation rates, carried into the body formulation by the chain
+                    // rule (the expanded Euler angles give ±ς: the same rotation).
+                    let (jdot, qdot) = body_rates(&full, &reference);
+                    let sign = quaternion.dot(&seed_quaternion(&full)).signum();
+                    worst_seed = worst_seed.max(block_rel(&dy[at..at + 4], &quaternion_slice(&(qdot * sign))));
                     if free {
-                        worst_seed = worst_seed.max(block_rel(&dy[2 * na + 3..], reference.pe.as_slice()));
+                        worst_seed = worst_seed.max(block_rel(&dy[at + 4..], jdot.as_slice()));
                     }
                 }
             }
@@ -470,7 +505,8 @@ fn frozen_coordinate_system_is_hamiltonian_in_its_own_reduced_metric() {
     for_each_molecule(FrozenIsHamiltonian);
 }
 
-/// With nothing frozen the reduced system is the fast path, to the bit.
+/// With nothing frozen the reduced system moves as the fast path: q̇ and ṗ to the bit, the
+/// rotation through the chain rule to rounding.
 #[derive(Copy, Clone)]
 struct NothingFrozen;
 impl MoleculeVisitor for NothingFrozen {
@@ -481,18 +517,26 @@ impl MoleculeVisitor for NothingFrozen {
             let s = random_state(&m, &mut rng);
             let mut system = ReducedSystem::new(&m, Reduction::none(), &s);
             let mut explicit = ReducedSystem::new(&m, Reduction::frozen([true; N]), &s);
-            let y = flat(&s);
-            let mut y_reduced = vec![0.0; system.dim()];
-            system.reduce(&s, &mut y_reduced).unwrap();
-            assert_eq!(y_reduced, y, "with nothing frozen the layout is the seed's");
+            let mut y = vec![0.0; system.dim()];
+            system.reduce(&s, &mut y).unwrap();
+            assert_eq!(y.len(), 2 * N + 7);
             let mut dy = vec![0.0; y.len()];
             system.rhs(0.0, &y, &mut dy).unwrap();
-            assert_eq!(dy, flat(&fast::rhs(&m, &s).unwrap()), "{}", m.name());
+            // J = W p_e comes from the same code as the fast path's, so q̇ and ṗ are the same bits.
+            let reference = fast::rhs(&m, &s).unwrap();
+            assert_eq!(&dy[..N], reference.q.as_slice(), "{}", m.name());
+            assert_eq!(&dy[N..2 * N], reference.p.as_slice(), "{}", m.name());
+            let (jdot, qdot) = body_rates(&s, &reference);
+            assert!(block_rel(&dy[2 * N..2 * N + 4], &quaternion_slice(&qdot)) < 1e-12, "{}: ς̇", m.name());
+            assert!(block_rel(&dy[2 * N + 4..], jdot.as_slice()) < 1e-12, "{}: J̇", m.name());
             let mut dy2 = vec![0.0; y.len()];
             explicit.rhs(0.0, &y, &mut dy2).unwrap();
             assert_eq!(dy2, dy);
             assert_eq!(system.energy(&y).unwrap(), fast::hamiltonian(&m, &s).unwrap());
-            assert_eq!(system.expand(&y).unwrap(), s);
+            let e = system.expand(&y).unwrap();
+            assert_eq!((e.q, e.p), (s.q, s.p));
+            assert!((rotation_matrix(&e.euler) - rotation_matrix(&s.euler)).amax() < 1e-14);
+            assert!(block_rel(e.pe.as_slice(), s.pe.as_slice()) < 1e-13, "{}: p_e {:?} vs {:?}", m.name(), e.pe, s.pe);
         }
     }
 }
@@ -508,7 +552,8 @@ fn reduce_rejects_states_the_system_cannot_hold() {
     let s = random_state(&m, &mut Rng::new(108));
     let zero_j = ReducedSystem::new(&m, Reduction::zero_angular_momentum(false), &s);
     let mut y = vec![0.0; zero_j.dim()];
-    assert_eq!(zero_j.reduce(&s, &mut y), Err(ReductionError::NonzeroAngularMomentum { pe: s.pe.into() }));
+    let j = fast::BodyState::from_phase(&s).unwrap().j;
+    assert_eq!(zero_j.reduce(&s, &mut y), Err(ReductionError::NonzeroAngularMomentum { j: j.into() }));
     assert_eq!(zero_j.reduce(&s, &mut [0.0; 3]), Err(ReductionError::DimensionMismatch { expected: 6, found: 3 }));
     let by_name = Reduction::freezing(&m, &["alpha"]).unwrap();
     assert_eq!(by_name, Reduction::frozen([true, true, false]));
@@ -520,7 +565,7 @@ fn reduce_rejects_states_the_system_cannot_hold() {
     let mut moved = s;
     moved.q[2] += 0.1;
     let mut y = vec![0.0; frozen.dim()];
-    assert_eq!(frozen.dim(), 10);
+    assert_eq!(frozen.dim(), 2 * 2 + 4 + 3, "active q and p, quaternion, J");
     assert_eq!(
         frozen.reduce(&moved, &mut y),
         Err(ReductionError::FrozenCoordinateMoved { index: 2, found: moved.q[2], held: s.q[2] })
@@ -572,14 +617,15 @@ impl MoleculeVisitor for NoAllocation {
                 .collect()
         };
         let (y_zero_j, y_oriented, y_frozen) = (reduced(&zero_j), reduced(&zero_j_oriented), reduced(&frozen));
-        let mut dy = vec![0.0; PhaseState::<N>::DIM];
+        // Large enough for every layout (the body layout of a free system has 2N + 7).
+        let mut dy = vec![0.0; PhaseState::<N>::DIM + 1];
         let mut sum = 0.0;
         let info = allocation_counter::measure(|| {
             for _ in 0..10 {
                 for (i, s) in states.iter().enumerate() {
                     sum += fast::rhs(&m, s).unwrap().pe[2];
                     sum += fast::hamiltonian(&m, s).unwrap();
-                    fast_system.rhs(0.0, &flats[i], &mut dy).unwrap();
+                    fast_system.rhs(0.0, &flats[i], &mut dy[..PhaseState::<N>::DIM]).unwrap();
                     sum += dy[0] + fast_system.energy(&flats[i]).unwrap();
                     for (sys, y) in [
                         (&mut zero_j, &y_zero_j[i]),

@@ -24,7 +24,8 @@ use super::run::{initial_state, production_system};
 use crate::molecules;
 use crate::output::OutputFile;
 use crate::plot::{Panel, Series, svg};
-use crate::runtime::hamiltonian::{PhaseState, hamiltonian, rotation_matrix};
+use crate::runtime::hamiltonian::fast::ReducedSystem;
+use crate::runtime::hamiltonian::hamiltonian;
 use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4Options, Stats, solve};
 use crate::runtime::nalgebra::SMatrix;
 use crate::runtime::{Molecule, MoleculeVisitor};
@@ -81,11 +82,14 @@ struct Bench<'a> {
 }
 
 /// Lab-frame positions (centre of mass at the origin) of a flat state, bohr.
-fn lab_positions<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, y: &[f64]) -> Option<SMatrix<f64, 3, NA>> {
-    let s = PhaseState::<N>::read_from(y).ok()?;
+fn lab_positions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    system: &ReducedSystem<'_, M, N, NA>,
+    y: &[f64],
+) -> Option<SMatrix<f64, 3, NA>> {
+    let body = system.expand_body(y).ok()?;
     let mut r = SMatrix::<f64, 3, NA>::zeros();
-    m.positions(&s.q, &mut r);
-    Some(rotation_matrix(&s.euler) * r)
+    system.molecule().positions(&body.q, &mut r);
+    Some(body.rotation() * r)
 }
 
 impl MoleculeVisitor for Bench<'_> {
@@ -94,9 +98,8 @@ impl MoleculeVisitor for Bench<'_> {
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         let scene = self.scene;
         let start = initial_state(&m, scene)?;
-        let mut y0 = vec![0.0; 2 * N + 6];
-        start.state.write_to(&mut y0).map_err(|e| CliError::context("the initial state", e))?;
         let h0 = hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
+        let (system, y0) = production_system(&m, scene, &start.state)?;
 
         // One timed run: the states at output times, the work counters, the best wall time.
         let run = |method: &Method| -> (Result<Vec<f64>, String>, Stats, f64) {
@@ -109,7 +112,7 @@ impl MoleculeVisitor for Bench<'_> {
                     states.extend_from_slice(y);
                     ControlFlow::Continue(())
                 };
-                let mut system = production_system(&m);
+                let mut system = system.clone();
                 let begin = Instant::now();
                 let result = solve(&mut system, method, 0.0, &y0, scene.t_end, scene.output_interval, &mut observer);
                 let wall = begin.elapsed().as_secs_f64();
@@ -131,8 +134,9 @@ impl MoleculeVisitor for Bench<'_> {
         let check = check.map_err(|e| CliError::context("the reference check (DOP853 at 1e-13) failed", e))?;
         let dim = y0.len();
         let last = |states: &[f64]| states[states.len() - dim..].to_vec();
-        let ref_final = lab_positions(&m, &last(&reference)).ok_or_else(|| CliError::Message("bad reference state".into()))?;
-        let final_error = |states: &[f64]| lab_positions(&m, &last(states)).map_or(f64::INFINITY, |x| (x - ref_final).amax());
+        let ref_final = lab_positions(&system, &last(&reference)).ok_or_else(|| CliError::Message("bad reference state".into()))?;
+        let final_error =
+            |states: &[f64]| lab_positions(&system, &last(states)).map_or(f64::INFINITY, |x| (x - ref_final).amax());
         let reference_error = final_error(&check);
 
         // Fixed steps: from twice DOP853's mean step at a loose tolerance, halving. Fixed-step
@@ -170,9 +174,9 @@ impl MoleculeVisitor for Bench<'_> {
                 Ok(states) => {
                     let energy_error = states
                         .chunks(dim)
-                        .map(|y| match PhaseState::<N>::read_from(y).ok().and_then(|s| hamiltonian(&m, &s).ok()) {
-                            Some(h) => ((h - h0) / h0).abs(),
-                            None => f64::INFINITY,
+                        .map(|y| match system.energy(y) {
+                            Ok(h) => ((h - h0) / h0).abs(),
+                            Err(_) => f64::INFINITY,
                         })
                         .fold(0.0, f64::max);
                     Trial { method: name, parameter, status: Ok(()), wall_time, stats, final_error: final_error(&states), energy_error }

@@ -13,15 +13,13 @@ use crate::molecules;
 use crate::output::{Conservation, LabXyz, TrajectoryCsv, write_summary};
 use crate::runtime::diagnostic::FileError;
 use crate::runtime::frames::{FitOptions, LabState, from_lab};
-use crate::runtime::hamiltonian::{
-    HamiltonianSystem, PhaseState, euler_momenta_from_angular_momentum, hamiltonian, rotation_matrix,
-    w_matrix,
-};
-use crate::runtime::integrate::{Method, Observer, Stats, solve};
+use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction, ReductionError, Rotation};
+use crate::runtime::hamiltonian::{HamiltonianError, PhaseState, euler_momenta_from_angular_momentum, hamiltonian, w_matrix};
+use crate::runtime::integrate::{Method, OdeSystem, Observer, Stats, solve};
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use crate::runtime::units::CoordinateUnit;
 use crate::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
-use crate::scene::{Initial, Momenta, Rotation, Scene, parse_scene};
+use crate::scene::{Initial, Momenta, Rotation as InitialRotation, Scene, parse_scene};
 
 /// What a finished run reports on the terminal.
 pub struct RunReport {
@@ -116,8 +114,8 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
                         pv[index(name, "p")?] = *value;
                     }
                     let pe = match rot {
-                        Rotation::Pe(pe) => Vector3::from(*pe),
-                        Rotation::J(j) => euler_momenta_from_angular_momentum(&euler, &Vector3::from(*j)),
+                        InitialRotation::Pe(pe) => Vector3::from(*pe),
+                        InitialRotation::J(j) => euler_momenta_from_angular_momentum(&euler, &Vector3::from(*j)),
                     };
                     (pv, pe)
                 }
@@ -129,8 +127,8 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
                     }
                     // J is given (or follows from p_e); then ω = I⁻¹(J − A q̇) and p = Aᵀω + a q̇.
                     let j = match rot {
-                        Rotation::J(j) => Vector3::from(*j),
-                        Rotation::Pe(pe) => w_matrix(&euler)
+                        InitialRotation::J(j) => Vector3::from(*j),
+                        InitialRotation::Pe(pe) => w_matrix(&euler)
                             .map_err(|e| src.whole_file(format!("the initial orientation: {e}"), "choose θ away from 0 and π"))?
                             * Vector3::from(*pe),
                     };
@@ -145,8 +143,8 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
                     let omega = inertia.solve(&(j - k.coriolis * qdot));
                     let pv = k.coriolis.transpose() * omega + k.a * qdot;
                     let pe = match rot {
-                        Rotation::Pe(pe) => Vector3::from(*pe),
-                        Rotation::J(_) => euler_momenta_from_angular_momentum(&euler, &j),
+                        InitialRotation::Pe(pe) => Vector3::from(*pe),
+                        InitialRotation::J(_) => euler_momenta_from_angular_momentum(&euler, &j),
                     };
                     (pv, pe)
                 }
@@ -195,9 +193,33 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
     }
 }
 
-/// The system every command integrates for molecule `m`: one place to choose the formulation.
-pub fn production_system<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M) -> HamiltonianSystem<'_, M, N, NA> {
-    HamiltonianSystem::new(m)
+/// The system every command integrates, chosen from the scene: the body formulation (no
+/// gimbal lock) on the fast path, reduced to what the scene needs: frozen coordinates as it
+/// names them, `J = 0` when the initial angular momentum is exactly zero (then `J` stays
+/// zero), and the orientation only when an output needs it. Returns the system and the
+/// initial flat state.
+pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &'m M,
+    scene: &Scene,
+    start: &PhaseState<N>,
+) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), CliError> {
+    let names: Vec<&str> = scene.frozen.iter().map(|s| s.get_ref().as_str()).collect();
+    let mut reduction = Reduction::freezing(m, &names).map_err(|e| {
+        let at = match &e {
+            ReductionError::UnknownCoordinate { name, .. } => {
+                scene.frozen.iter().find(|s| s.get_ref() == name).map_or(0..0, |s| s.span())
+            }
+            _ => 0..0,
+        };
+        scene.source().error(at, e.to_string(), "name coordinates from `rovib list` in run.frozen")
+    })?;
+    if start.pe == Vector3::zeros() {
+        reduction.rotation = Rotation::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
+    }
+    let system = ReducedSystem::new(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
+    let mut y0 = vec![0.0; system.dim()];
+    system.reduce(start, &mut y0).map_err(|e| CliError::context("the initial state", e))?;
+    Ok((system, y0))
 }
 
 struct Run<'a> {
@@ -214,19 +236,18 @@ impl MoleculeVisitor for Run<'_> {
         let start = initial_state(&m, scene)?;
         // Fail before writing anything if the initial state is not valid.
         hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
-        let mut system = production_system(&m);
-        let mut y0 = vec![0.0; 2 * N + 6];
-        start.state.write_to(&mut y0).map_err(|e| CliError::context("the initial state", e))?;
+        let (mut system, y0) = production_system(&m, scene, &start.state)?;
 
         let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
         let mut recorder = Recorder::<M, N, NA> {
-            molecule: &m,
+            system: system.clone(),
             trajectory: if scene.outputs.trajectory { Some(TrajectoryCsv::create(self.out_dir, &names)?) } else { None },
             lab: if scene.outputs.lab {
                 Some(LabXyz::create(self.out_dir, m.atoms().iter().map(|a| a.element).collect(), scene.time_unit.name())?)
             } else {
                 None
             },
+            diagnostics: scene.outputs.summary,
             conservation: Conservation::default(),
             time_scale: scene.time_unit.in_au(),
             com: (start.com_position, start.com_velocity),
@@ -254,7 +275,7 @@ impl MoleculeVisitor for Run<'_> {
                     message.push_str(&format!(" (at t = {t} {})", scene.time_unit.name()));
                 }
                 if let Some(y) = e.state() {
-                    message.push_str(&format!("; last state [q, p, euler, pe] = {y:?}"));
+                    message.push_str(&format!("; last state {} = {y:?}", layout(system.reduction(), &m)));
                 }
                 (Stats::default(), Some(message))
             }
@@ -273,6 +294,11 @@ impl MoleculeVisitor for Run<'_> {
                 "status": if failure.is_some() { "failed" } else { "completed" },
                 "error": failure,
                 "method": method_json(&scene.method),
+                "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
+                "state_layout": layout(system.reduction(), &m),
+                "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
+                "zero_angular_momentum": system.reduction().rotation != Rotation::Free,
+                "min_metric_pivot": scene.min_metric_pivot,
                 "t_end": scene.t_end / scene.time_unit.in_au(),
                 "output_interval": scene.output_interval / scene.time_unit.in_au(),
                 "time_unit": scene.time_unit.name(),
@@ -318,12 +344,29 @@ fn progress_bar(scene: &Scene) -> ProgressBar {
     bar
 }
 
-/// Writes each output time and accumulates the diagnostics; remembers the first I/O error and
-/// stops the run there.
+/// The flat layout of a system's state, for messages: `[q_a, p_a, quaternion, J]`.
+fn layout<M: Molecule<N, NA>, const N: usize, const NA: usize>(r: &Reduction<N>, m: &M) -> String {
+    let coords = m.coordinates();
+    let active: Vec<&str> = (0..N).filter(|&k| r.active[k]).map(|k| coords[k].name).collect();
+    let mut parts: Vec<String> = active.iter().map(|c| (*c).to_owned()).collect();
+    parts.extend(active.iter().map(|c| format!("p_{c}")));
+    if r.orientation() {
+        parts.extend(["quaternion w", "x", "y", "z"].map(str::to_owned));
+    }
+    if r.rotation == Rotation::Free {
+        parts.extend(["J_x", "J_y", "J_z"].map(str::to_owned));
+    }
+    format!("[{}]", parts.join(", "))
+}
+
+/// Writes each output time and accumulates the diagnostics (only what the scene asks for);
+/// remembers the first error and stops the run there.
 struct Recorder<'m, M, const N: usize, const NA: usize> {
-    molecule: &'m M,
+    /// A copy of the integrated system, to expand states and evaluate H at output times.
+    system: ReducedSystem<'m, M, N, NA>,
     trajectory: Option<TrajectoryCsv>,
     lab: Option<LabXyz>,
+    diagnostics: bool,
     conservation: Conservation,
     time_scale: f64,
     com: (Vector3<f64>, Vector3<f64>),
@@ -333,19 +376,23 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
     fn record(&mut self, t: f64, y: &[f64]) -> Result<(), String> {
-        let s = PhaseState::<N>::read_from(y).map_err(|e| e.to_string())?;
-        let energy = hamiltonian(self.molecule, &s).map_err(|e| format!("at t = {t}: {e}"))?;
-        let j = w_matrix(&s.euler).map_err(|e| format!("at t = {t}: {e}"))? * s.pe;
-        let rotation = rotation_matrix(&s.euler);
-        let lab_l = rotation * j;
-        self.conservation.record(energy, j.norm(), s.pe[0], lab_l.into());
+        let at = |e: HamiltonianError| format!("at t = {t}: {e}");
+        let body = self.system.expand_body(y).map_err(at)?;
+        let needs_energy = self.diagnostics || self.trajectory.is_some() || self.lab.is_some();
+        let energy = if needs_energy { self.system.energy(y).map_err(at)? } else { f64::NAN };
+        let rotation = body.rotation();
+        let phase = body.to_phase();
+        if self.diagnostics {
+            self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
+        }
         let t_out = t / self.time_scale;
         if let Some(csv) = &mut self.trajectory {
-            csv.row(t_out, s.q.iter().chain(s.p.iter()).chain(s.euler.iter()).chain(s.pe.iter()).copied().chain([energy]))?;
+            let values = phase.q.iter().chain(phase.p.iter()).chain(phase.euler.iter()).chain(phase.pe.iter());
+            csv.row(t_out, values.copied().chain([energy]))?;
         }
         if let Some(xyz) = &mut self.lab {
             let mut r = SMatrix::<f64, 3, NA>::zeros();
-            self.molecule.positions(&s.q, &mut r);
+            self.system.molecule().positions(&body.q, &mut r);
             let com = self.com.0 + self.com.1 * t;
             let lab = rotation * r;
             xyz.frame(t_out, energy, (0..NA).map(|i| (lab.column(i) + com).into()))?;

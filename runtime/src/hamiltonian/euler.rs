@@ -137,3 +137,26 @@ mod tests {
         assert_eq!(w_matrix(&Vector3::new(0.3, 0.0, -2.0)), Err(HamiltonianError::EulerSingular { theta: 0.0 }));
     }
 }
+
+/// The Euler angles `(φ, θ, ψ)` of a rotation matrix `R = Rz(φ) Rx(θ) Rz(ψ)`, with `θ ∈ [0, π]`
+/// and `φ, ψ ∈ (−π, π]`; the inverse of [`rotation_matrix`] wherever `sin θ ≠ 0`.
+///
+/// From `R₃₁ = sin θ sin ψ`, `R₃₂ = sin θ cos ψ`, `R₁₃ = sin φ sin θ`, `R₂₃ = −cos φ sin θ`,
+/// `R₃₃ = cos θ`. θ comes from `atan2(sin θ, cos θ)` rather than `acos(R₃₃)`, which loses half
+/// the digits near 0 and π. At `sin θ = 0` only `φ ± ψ` is defined; this returns `ψ = 0` there,
+/// and the caller decides whether that is acceptable (see `frames::FrameError::EulerSingular`).
+pub fn euler_angles(rotation: &Matrix3<f64>) -> Vector3<f64> {
+    let r = rotation;
+    // sin θ from both the third row and the third column (equal for an exact rotation).
+    let sin_theta = 0.5 * (r[(2, 0)].hypot(r[(2, 1)]) + r[(0, 2)].hypot(r[(1, 2)]));
+    let theta = sin_theta.atan2(r[(2, 2)]);
+    if sin_theta > 0.0 {
+        let psi = r[(2, 0)].atan2(r[(2, 1)]);
+        let phi = r[(0, 2)].atan2(-r[(1, 2)]);
+        Vector3::new(phi, theta, psi)
+    } else {
+        // R = Rz(φ ± ψ) (with a flip for θ = π): put it all into φ.
+        let phi = r[(1, 0)].atan2(r[(0, 0)]);
+        Vector3::new(phi, theta, 0.0)
+    }
+}

@@ -126,10 +126,10 @@
 //! reduced metric with `DMatrix` and a general inverse); no allocation; and a DOP853 trajectory
 //! of [`FastSystem`] against one of the seed's [`super::HamiltonianSystem`].
 
-use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
 use super::metric::{InverseMetric, MetricBlock, PIVOT_TOLERANCE};
-use super::{HamiltonianError, MIN_SIN_THETA, PhaseState};
+use super::{HamiltonianError, MIN_SIN_THETA, PhaseState, angular_velocity_matrix, euler_angles};
 use crate::integrate::OdeSystem;
 use crate::molecule::{KineticMatrices, Molecule};
 
@@ -185,11 +185,23 @@ impl<const N: usize> MetricFactor<N> {
     // registers instead of being copied out through the `Result` (measured ~5 % of water's rhs).
     #[inline(always)]
     pub fn new(k: &KineticMatrices<N>, q: &SVector<f64, N>) -> Result<Self, HamiltonianError> {
+        Self::with_tolerance(k, q, PIVOT_TOLERANCE)
+    }
+
+    /// [`MetricFactor::new`] with a stricter test of the pivots: every relative pivot (pivot
+    /// over `trace I` for `I`, over `a_jj` for `S`) must exceed `min_pivot`. A metric that
+    /// passes [`PIVOT_TOLERANCE`] but not `min_pivot` fails with
+    /// [`HamiltonianError::IllConditionedMetric`], which names the block and its smallest
+    /// relative pivot: how a run stops when a molecule approaches a singular geometry (a
+    /// triatomic bending to linear) before the equations lose accuracy.
+    #[inline(always)]
+    pub fn with_tolerance(k: &KineticMatrices<N>, q: &SVector<f64, N>, min_pivot: f64) -> Result<Self, HamiltonianError> {
+        let tol = min_pivot.max(PIVOT_TOLERANCE);
         if !(all_finite(k.a.as_slice()) & all_finite(k.coriolis.as_slice()) & all_finite(k.inertia.as_slice())) {
             return Err(HamiltonianError::NonFinite { quantity: "kinetic matrices a, A, I" });
         }
-        let Some(i_inv) = inverse_spd3(&k.inertia) else {
-            return Err(singular_metric(k, q, MetricBlock::Inertia));
+        let Some(i_inv) = inverse_spd3(&k.inertia, tol) else {
+            return Err(metric_failure(k, q, MetricBlock::Inertia, tol));
         };
         let y = i_inv * k.coriolis;
         // S = a − Aᵀ Y, lower triangle only (the factorization reads nothing else).
@@ -200,8 +212,8 @@ impl<const N: usize> MetricFactor<N> {
                 l2[(i, j)] -= a[(0, i)] * y[(0, j)] + a[(1, i)] * y[(1, j)] + a[(2, i)] * y[(2, j)];
             }
         }
-        let Some(d2_inv) = ldl_in_place(&mut l2, |j| k.a[(j, j)]) else {
-            return Err(singular_metric(k, q, MetricBlock::G22Inverse));
+        let Some(d2_inv) = ldl_in_place(&mut l2, |j| k.a[(j, j)], tol) else {
+            return Err(metric_failure(k, q, MetricBlock::G22Inverse, tol));
         };
         Ok(Self { i_inv, y, l2, d2_inv })
     }
@@ -223,27 +235,50 @@ impl<const N: usize> MetricFactor<N> {
     }
 }
 
-/// Cold path of [`MetricFactor::new`]: names the block as the seed would (it checks `I`, `a`,
-/// `G11⁻¹`, `G22⁻¹` in that order), falling back to the block this factorization tripped on
-/// when the seed's tolerance tests happen to pass.
+/// Cold path of [`MetricFactor::with_tolerance`]. A metric singular within
+/// [`PIVOT_TOLERANCE`] is named as the seed would name it (it checks `I`, `a`, `G11⁻¹`, `G22⁻¹`
+/// in that order), falling back to the block this factorization tripped on when the seed's
+/// tests happen to pass; a metric that only fails the stricter `tol` is ill-conditioned.
 #[cold]
 #[inline(never)]
-fn singular_metric<const N: usize>(
+fn metric_failure<const N: usize>(
     k: &KineticMatrices<N>,
     q: &SVector<f64, N>,
     found: MetricBlock,
+    tol: f64,
 ) -> HamiltonianError {
-    match InverseMetric::new(k, q) {
-        Err(e) => e,
+    let singular = match InverseMetric::new(k, q) {
+        Err(e) => return e,
         Ok(_) => HamiltonianError::SingularMetric { matrix: found, q: q.as_slice().to_vec() },
+    };
+    if tol <= PIVOT_TOLERANCE {
+        return singular;
     }
+    // Positive definite within PIVOT_TOLERANCE: report the smallest relative pivot of the block.
+    let inertia = inverse_spd3(&k.inertia, tol).is_none();
+    let pivot = if inertia {
+        let m = &k.inertia;
+        let trace = m.trace();
+        let minor2 = m[(0, 0)] * m[(1, 1)] - m[(1, 0)] * m[(1, 0)];
+        let pivots = [m[(0, 0)], minor2 / m[(0, 0)], m.determinant() / minor2];
+        pivots.iter().fold(f64::INFINITY, |acc, p| acc.min(p / trace))
+    } else {
+        let y = k.inertia.try_inverse().unwrap_or_else(Matrix3::zeros) * k.coriolis;
+        let mut schur = k.a - k.coriolis.transpose() * y;
+        match ldl_in_place(&mut schur, |j| k.a[(j, j)], f64::NEG_INFINITY) {
+            Some(d_inv) => (0..N).fold(f64::INFINITY, |acc, j| acc.min(1.0 / (d_inv[j] * k.a[(j, j)]))),
+            None => return singular,
+        }
+    };
+    let matrix = if inertia { MetricBlock::Inertia } else { MetricBlock::G22Inverse };
+    HamiltonianError::IllConditionedMetric { matrix, q: q.as_slice().to_vec(), pivot, threshold: tol }
 }
 
 /// The inverse of a symmetric 3 × 3 matrix by adjugate and determinant, or `None` unless it
-/// is positive definite with every Cholesky pivot above [`PIVOT_TOLERANCE`] times its trace
-/// (the seed's test for `I`). Reads the lower triangle only.
+/// is positive definite with every Cholesky pivot above `tol` times its trace (the seed's test
+/// for `I` with `tol` = [`PIVOT_TOLERANCE`]). Reads the lower triangle only.
 #[inline]
-fn inverse_spd3(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+fn inverse_spd3(m: &Matrix3<f64>, tol: f64) -> Option<Matrix3<f64>> {
     let (m00, m10, m20, m11, m21, m22) = (m[(0, 0)], m[(1, 0)], m[(2, 0)], m[(1, 1)], m[(2, 1)], m[(2, 2)]);
     let c00 = m11 * m22 - m21 * m21;
     let c10 = m20 * m21 - m10 * m22;
@@ -254,7 +289,7 @@ fn inverse_spd3(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     let det = m00 * c00 + m10 * c10 + m20 * c20;
     // Leading principal minors m00, c22, det; pivot_j = minor_j / minor_{j−1} > tol · trace.
     // Written as `a > b` so that NaN fails.
-    let tol = PIVOT_TOLERANCE * (m00 + m11 + m22);
+    let tol = tol * (m00 + m11 + m22);
     let positive = (m00 > tol) & (c22 > tol * m00) & (det > tol * c22);
     if !positive {
         return None;
@@ -271,13 +306,17 @@ fn inverse_spd3(m: &Matrix3<f64>) -> Option<Matrix3<f64>> {
 
 /// In-place `m = L D Lᵀ` of a symmetric matrix, reading the lower triangle only and writing
 /// `L` (unit diagonal, not stored) into the strict lower triangle; returns `1 / D`, or `None`
-/// unless every pivot `D_jj` exceeds [`PIVOT_TOLERANCE`] times `scale(j)` (NaN fails too).
+/// unless every pivot `D_jj` exceeds `tol` times `scale(j)` (NaN fails too).
 ///
 /// Row by row: with `v_k = L_jk D_k`, `v_k = m_jk − Σ_{l<k} L_kl v_l`, `L_jk = v_k / D_k`,
 /// `D_j = m_jj − Σ_{k<j} L_jk v_k`. Hand-written rather than `nalgebra::Cholesky` because with
 /// constant bounds it unrolls into straight-line code, and for the reciprocal pivots.
 #[inline]
-fn ldl_in_place<const D: usize>(m: &mut SMatrix<f64, D, D>, scale: impl Fn(usize) -> f64) -> Option<SVector<f64, D>> {
+fn ldl_in_place<const D: usize>(
+    m: &mut SMatrix<f64, D, D>,
+    scale: impl Fn(usize) -> f64,
+    tol: f64,
+) -> Option<SVector<f64, D>> {
     let mut d_inv = SVector::<f64, D>::zeros();
     let mut v = SVector::<f64, D>::zeros();
     for j in 0..D {
@@ -292,7 +331,7 @@ fn ldl_in_place<const D: usize>(m: &mut SMatrix<f64, D, D>, scale: impl Fn(usize
             m[(j, k)] = ljk;
             d -= ljk * vk;
         }
-        if d.is_nan() || d <= PIVOT_TOLERANCE * scale(j) {
+        if d.is_nan() || d <= tol * scale(j) {
             return None;
         }
         d_inv[j] = 1.0 / d;
@@ -567,16 +606,62 @@ fn write_state<const N: usize>(s: &PhaseState<N>, y: &mut [f64]) -> Result<(), H
     Ok(())
 }
 
+/// The state of the body formulation that [`ReducedSystem`] integrates: internal coordinates and
+/// momenta, the orientation as a unit quaternion (body → lab, `R = Rz(φ) Rx(θ) Rz(ψ)` of the
+/// Euler angles) and the body-frame angular momentum `J = W p_e`.
+///
+/// Unlike `(Ω_e, p_e)` it has no singular orientation: Euler angles are derived only for output
+/// ([`BodyState::to_phase`]), where `p_e = Mᵀ J` is defined even at `θ = 0`.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct BodyState<const N: usize> {
+    /// Internal coordinates (bohr, rad).
+    pub q: SVector<f64, N>,
+    /// Their conjugate momenta.
+    pub p: SVector<f64, N>,
+    /// Body → lab rotation.
+    pub orientation: UnitQuaternion<f64>,
+    /// Body-frame angular momentum, ħ.
+    pub j: Vector3<f64>,
+}
+
+impl<const N: usize> BodyState<N> {
+    /// From a phase-space state: the quaternion of the Euler angles and `J = W p_e`; fails at
+    /// gimbal lock, where `p_e` does not determine `J`.
+    pub fn from_phase(s: &PhaseState<N>) -> Result<Self, HamiltonianError> {
+        let j = Euler::new(&s.euler)?.j(&s.pe);
+        Ok(Self { q: s.q, p: s.p, orientation: quaternion_of_euler(&s.euler), j })
+    }
+
+    /// To a phase-space state, for output: Euler angles of the rotation (`θ ∈ [0, π]`; at
+    /// `sin θ = 0` the split of `φ ± ψ` is arbitrary) and `p_e = Mᵀ J`, which needs no division.
+    pub fn to_phase(&self) -> PhaseState<N> {
+        let euler = euler_angles(self.orientation.to_rotation_matrix().matrix());
+        PhaseState { q: self.q, p: self.p, euler, pe: angular_velocity_matrix(&euler).transpose() * self.j }
+    }
+
+    /// The body → lab rotation matrix.
+    pub fn rotation(&self) -> Matrix3<f64> {
+        *self.orientation.to_rotation_matrix().matrix()
+    }
+}
+
+/// The unit quaternion of `R = Rz(φ) Rx(θ) Rz(ψ)`.
+pub fn quaternion_of_euler(euler: &Vector3<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), euler[0])
+        * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), euler[1])
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), euler[2])
+}
+
 /// What a [`ReducedSystem`] integrates of the overall rotation.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum Rotation {
-    /// Everything: the Euler angles and their momenta.
+    /// Everything: the orientation (a quaternion) and the body-frame angular momentum `J`.
     Free,
-    /// Zero angular momentum: `p_e = 0` exactly for all time (ṗ_e is linear in p_e), so p_e is
-    /// not stored; the Euler angles are integrated (`Ω̇_e = Wᵀ ω`) only if `orientation` is
-    /// true, for lab-frame output.
+    /// Zero angular momentum: `J = 0` exactly for all time (`J̇ = J × ω`), so `J` is not stored;
+    /// the orientation is integrated only if `orientation` is true, for lab-frame output (a
+    /// molecule with `J = 0` still turns as it vibrates).
     ZeroAngularMomentum {
-        /// Whether to integrate the Euler angles.
+        /// Whether to integrate the orientation.
         orientation: bool,
     },
 }
@@ -591,7 +676,7 @@ pub struct Reduction<const N: usize> {
 }
 
 impl<const N: usize> Reduction<N> {
-    /// Nothing reduced: the same equations as [`FastSystem`].
+    /// Nothing reduced: the same motion as [`FastSystem`], in the body formulation.
     pub fn none() -> Self {
         Self { active: [true; N], rotation: Rotation::Free }
     }
@@ -629,19 +714,20 @@ impl<const N: usize> Reduction<N> {
         self.active.iter().filter(|&&a| a).count()
     }
 
-    fn orientation(&self) -> bool {
+    /// Whether the orientation is integrated.
+    pub fn orientation(&self) -> bool {
         matches!(self.rotation, Rotation::Free | Rotation::ZeroAngularMomentum { orientation: true })
     }
 
-    /// The dimension of the flat state: `2 n_active + 3 (orientation) + 3 (p_e)`.
+    /// The dimension of the flat state: `2 n_active + 4 (orientation) + 3 (J)`.
     pub fn dim(&self) -> usize {
         2 * self.active_count()
-            + if self.orientation() { 3 } else { 0 }
+            + if self.orientation() { 4 } else { 0 }
             + if self.rotation == Rotation::Free { 3 } else { 0 }
     }
 }
 
-/// Why a [`Reduction`] cannot be built, or a full [`PhaseState`] cannot be mapped onto a
+/// Why a [`Reduction`] cannot be built, or a full state cannot be mapped onto a
 /// [`ReducedSystem`]'s flat state.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum ReductionError {
@@ -653,11 +739,11 @@ pub enum ReductionError {
         /// The length that was passed.
         found: usize,
     },
-    /// A J = 0 system was given a state with non-zero Euler momenta.
-    #[error("the state has Euler momenta p_e = {pe:?}, but this system has zero angular momentum")]
+    /// A J = 0 system was given a state with non-zero angular momentum.
+    #[error("the state has angular momentum J = {j:?}, but this system has zero angular momentum")]
     NonzeroAngularMomentum {
-        /// The state's `(p_φ, p_θ, p_ψ)`.
-        pe: [f64; 3],
+        /// The state's body-frame `J`.
+        j: [f64; 3],
     },
     /// [`Reduction::freezing`] was given a name the molecule has no coordinate of.
     #[error("no internal coordinate is called {name:?} (the coordinates are {known:?})")]
@@ -677,15 +763,36 @@ pub enum ReductionError {
         /// The value the system holds.
         held: f64,
     },
+    /// A phase-space state at gimbal lock, whose `p_e` does not determine `J`.
+    #[error(transparent)]
+    Hamiltonian(#[from] HamiltonianError),
 }
 
-/// Hamilton's equations restricted by a [`Reduction`], as an [`OdeSystem`]; the fast path's
-/// numerics otherwise.
+/// Hamilton's equations in the body formulation, restricted by a [`Reduction`], as an
+/// [`OdeSystem`]: the production path, free of the Euler-angle singularity.
+///
+/// # Equations
+///
+/// With `J` the body-frame angular momentum and `ς` the unit quaternion of the orientation,
+///
+/// ```text
+/// (ω, q̇) = M(q)⁻¹ (J, p)                 the fast path's factorization
+/// ṗ      = ∂T/∂q|_(ω, q̇) − ∂U/∂q          as in the fast path (J does not depend on q)
+/// J̇      = J × ω                          L = R J is constant in the lab: 0 = Ṙ J + R J̇, Ṙ = R [ω]×
+/// ς̇      = ½ ς ⊗ (0, ω)                   the same Ṙ = R [ω]× for quaternions
+/// ```
+///
+/// These are the seed's equations with `(Ω_e, p_e)` replaced by `(ς, J = W p_e)`: the
+/// Hamiltonian `H = ½ (J, p)ᵀ M⁻¹ (J, p) + U` is the same function, and the tests compare both
+/// the right-hand side (through the chain rule) and trajectories with the seed path. The
+/// quaternion never feeds back into `q`, `p` or `J`, so its norm (conserved by the exact flow,
+/// to the tolerance by DOP853, to rounding by Gauss–Legendre, for which `|ς|²` and `|J|²` are
+/// quadratic invariants) only affects the orientation, which is always normalised before use.
 ///
 /// # Flat layout
 ///
 /// ```text
-/// [ q_a … | p_a … | φ θ ψ (if the orientation is integrated) | p_φ p_θ p_ψ (if Rotation::Free) ]
+/// [ q_a … | p_a … | ς_w ς_x ς_y ς_z (if the orientation is integrated) | J_x J_y J_z (if Rotation::Free) ]
 /// ```
 ///
 /// where `q_a`, `p_a` are the active coordinates and their momenta in coordinate order
@@ -697,27 +804,52 @@ pub enum ReductionError {
 ///
 /// `H_red = ½ bᵀ M_red⁻¹ b + U(q)` with `b = (J, p_a)` (`J = 0` for a J = 0 system) and `M_red`
 /// the full metric with the frozen rows and columns deleted: the Legendre transform of the
-/// Lagrangian with the frozen velocities set to zero. Its `p_a` and `p_e` are the full
-/// system's momenta at those velocities.
-#[derive(Clone, Debug)]
+/// Lagrangian with the frozen velocities set to zero. Its `p_a` and `J` are the full system's
+/// momenta at those velocities.
+///
+/// # Conditioning
+///
+/// [`ReducedSystem::with_min_pivot`] sets the smallest relative pivot of the metric the system
+/// accepts (default [`PIVOT_TOLERANCE`]); below it every evaluation fails with
+/// [`HamiltonianError::IllConditionedMetric`] naming the block and q, so a run stops, with the
+/// time, before a near-singular geometry degrades the numbers.
+#[derive(Debug)]
 pub struct ReducedSystem<'a, M: ?Sized, const N: usize, const NA: usize> {
     molecule: &'a M,
     reduction: Reduction<N>,
     /// Frozen q values, and the orientation when it is not integrated.
-    template: PhaseState<N>,
+    template: BodyState<N>,
     /// `index[s]` for `s < n_active`: the coordinate stored in slot `s`.
     index: [usize; N],
     n_active: usize,
     all_active: bool,
+    min_pivot: f64,
 }
+
+// By hand: a derive would require `M: Clone`, but only a reference to the molecule is held.
+impl<M: ?Sized, const N: usize, const NA: usize> Clone for ReducedSystem<'_, M, N, NA> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<M: ?Sized, const N: usize, const NA: usize> Copy for ReducedSystem<'_, M, N, NA> {}
 
 /// Where the blocks of a reduced flat state start.
 #[derive(Copy, Clone)]
 struct Offsets {
     p: usize,
-    euler: Option<usize>,
-    pe: Option<usize>,
+    quaternion: Option<usize>,
+    j: Option<usize>,
     dim: usize,
+}
+
+/// An unpacked reduced state: full-length q and p, the (not necessarily unit) quaternion, J.
+struct Unpacked<const N: usize> {
+    q: SVector<f64, N>,
+    p: SVector<f64, N>,
+    quaternion: Quaternion<f64>,
+    j: Vector3<f64>,
 }
 
 impl<'a, M, const N: usize, const NA: usize> ReducedSystem<'a, M, N, NA>
@@ -725,8 +857,20 @@ where
     M: Molecule<N, NA> + ?Sized,
 {
     /// The reduced system of `molecule`; `template` supplies the frozen coordinates' values and
-    /// the orientation reported when it is not integrated (its momenta are not used).
+    /// the orientation reported when it is not integrated (its momenta are not used, and its
+    /// Euler angles may be at gimbal lock).
     pub fn new(molecule: &'a M, reduction: Reduction<N>, template: &PhaseState<N>) -> Self {
+        let template = BodyState {
+            q: template.q,
+            p: SVector::zeros(),
+            orientation: quaternion_of_euler(&template.euler),
+            j: Vector3::zeros(),
+        };
+        Self::from_body(molecule, reduction, &template)
+    }
+
+    /// [`ReducedSystem::new`] with a body-formulation template.
+    pub fn from_body(molecule: &'a M, reduction: Reduction<N>, template: &BodyState<N>) -> Self {
         let mut index = [0; N];
         let mut n_active = 0;
         for k in 0..N {
@@ -735,7 +879,22 @@ where
                 n_active += 1;
             }
         }
-        Self { molecule, reduction, template: *template, index, n_active, all_active: n_active == N }
+        Self {
+            molecule,
+            reduction,
+            template: *template,
+            index,
+            n_active,
+            all_active: n_active == N,
+            min_pivot: PIVOT_TOLERANCE,
+        }
+    }
+
+    /// The same system, failing with [`HamiltonianError::IllConditionedMetric`] wherever a
+    /// relative pivot of the metric is below `min_pivot` (see [`MetricFactor::with_tolerance`]).
+    pub fn with_min_pivot(mut self, min_pivot: f64) -> Self {
+        self.min_pivot = min_pivot;
+        self
     }
 
     /// The molecule.
@@ -751,33 +910,37 @@ where
     fn offsets(&self) -> Offsets {
         let p = self.n_active;
         let mut next = 2 * self.n_active;
-        let euler = self.reduction.orientation().then(|| {
+        let quaternion = self.reduction.orientation().then(|| {
+            next += 4;
+            next - 4
+        });
+        let j = (self.reduction.rotation == Rotation::Free).then(|| {
             next += 3;
             next - 3
         });
-        let pe = (self.reduction.rotation == Rotation::Free).then(|| {
-            next += 3;
-            next - 3
-        });
-        Offsets { p, euler, pe, dim: next }
+        Offsets { p, quaternion, j, dim: next }
     }
 
-    /// The full `q`, `p` (zero for frozen coordinates), Euler angles and `p_e` of a flat state.
+    /// The full `q`, `p` (zero for frozen coordinates), quaternion and `J` of a flat state.
     #[inline]
-    fn unpack(&self, y: &[f64], o: &Offsets) -> PhaseState<N> {
-        let mut s =
-            PhaseState { q: self.template.q, p: SVector::zeros(), euler: self.template.euler, pe: Vector3::zeros() };
+    fn unpack(&self, y: &[f64], o: &Offsets) -> Unpacked<N> {
+        let mut u = Unpacked {
+            q: self.template.q,
+            p: SVector::zeros(),
+            quaternion: *self.template.orientation.quaternion(),
+            j: Vector3::zeros(),
+        };
         for (slot, &k) in self.index[..self.n_active].iter().enumerate() {
-            s.q[k] = y[slot];
-            s.p[k] = y[o.p + slot];
+            u.q[k] = y[slot];
+            u.p[k] = y[o.p + slot];
         }
-        if let Some(e) = o.euler {
-            s.euler = Vector3::new(y[e], y[e + 1], y[e + 2]);
+        if let Some(i) = o.quaternion {
+            u.quaternion = Quaternion::new(y[i], y[i + 1], y[i + 2], y[i + 3]);
         }
-        if let Some(e) = o.pe {
-            s.pe = Vector3::new(y[e], y[e + 1], y[e + 2]);
+        if let Some(i) = o.j {
+            u.j = Vector3::new(y[i], y[i + 1], y[i + 2]);
         }
-        s
+        u
     }
 
     /// Kinetic matrices with the frozen rows and columns of `M` replaced by those of the
@@ -803,59 +966,49 @@ where
         }
     }
 
-    /// Everything the right-hand side and the energy share: the unpacked state, the Euler
-    /// sines (if the orientation matters), `J`, and the velocities.
-    #[allow(clippy::type_complexity)]
-    fn kinematics(
-        &self,
-        y: &[f64],
-        o: &Offsets,
-    ) -> Result<(PhaseState<N>, Option<Euler>, Vector3<f64>, Vector3<f64>, SVector<f64, N>), HamiltonianError> {
+    /// The unpacked state and the velocities `(ω, q̇)`.
+    #[inline]
+    fn kinematics(&self, y: &[f64], o: &Offsets) -> Result<(Unpacked<N>, Vector3<f64>, SVector<f64, N>), HamiltonianError> {
         if y.len() != o.dim {
             return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: y.len() });
         }
-        let s = self.unpack(y, o);
-        check_state(&s)?;
-        let e = match o.euler {
-            Some(_) => Some(Euler::new(&s.euler)?),
-            None => None,
-        };
+        if !all_finite(y) {
+            return Err(HamiltonianError::NonFinite { quantity: "state (q, p, orientation, J)" });
+        }
+        let u = self.unpack(y, o);
         let mut k = KineticMatrices::default();
-        self.molecule.kinetic(&s.q, &mut k);
+        self.molecule.kinetic(&u.q, &mut k);
         self.mask(&mut k);
-        let factor = MetricFactor::new(&k, &s.q)?;
-        let (j, (omega, qdot)) = match (o.pe, &e) {
-            (Some(_), Some(e)) => {
-                let j = e.j(&s.pe);
-                (j, factor.solve(&j, &s.p))
-            }
-            _ => (Vector3::zeros(), factor.solve_zero_j(&s.p)),
+        let factor = MetricFactor::with_tolerance(&k, &u.q, self.min_pivot)?;
+        let (omega, qdot) = match o.j {
+            Some(_) => factor.solve(&u.j, &u.p),
+            None => factor.solve_zero_j(&u.p),
         };
-        Ok((s, e, j, omega, qdot))
+        Ok((u, omega, qdot))
     }
 
     /// `H_red` of the flat state `y`, in hartree: `½ (ω · J + q̇_a · p_a) + U`.
     pub fn energy(&self, y: &[f64]) -> Result<f64, HamiltonianError> {
         let o = self.offsets();
-        let (s, _, j, omega, qdot) = self.kinematics(y, &o)?;
-        let t = 0.5 * (omega.dot(&j) + qdot.dot(&s.p));
-        let u = finite(self.molecule.potential(&s.q), "potential U(q)")?;
-        finite(t + u, "Hamiltonian H")
+        let (u, omega, qdot) = self.kinematics(y, &o)?;
+        let t = 0.5 * (omega.dot(&u.j) + qdot.dot(&u.p));
+        let v = finite(self.molecule.potential(&u.q), "potential U(q)")?;
+        finite(t + v, "Hamiltonian H")
     }
 
-    /// Writes the reduced flat state of a full state into `y`: active q and p, and (as the
-    /// reduction keeps them) the Euler angles and `p_e`. The momenta of frozen coordinates are
-    /// not used (the constraint determines them; see [`ReducedSystem::expand`]).
+    /// Writes the reduced flat state of a body-formulation state into `y`: active q and p, and
+    /// (as the reduction keeps them) the orientation and `J`. The momenta of frozen coordinates
+    /// are not used (the constraint determines them; see [`ReducedSystem::expand`]).
     ///
-    /// Fails if `y` has the wrong length, if the state has `p_e ≠ 0` for a J = 0 system, or if
-    /// a frozen coordinate differs from the value the system holds it at.
-    pub fn reduce(&self, state: &PhaseState<N>, y: &mut [f64]) -> Result<(), ReductionError> {
+    /// Fails if `y` has the wrong length, if the state has `J ≠ 0` for a J = 0 system, or if a
+    /// frozen coordinate differs from the value the system holds it at.
+    pub fn reduce_body(&self, state: &BodyState<N>, y: &mut [f64]) -> Result<(), ReductionError> {
         let o = self.offsets();
         if y.len() != o.dim {
             return Err(ReductionError::DimensionMismatch { expected: o.dim, found: y.len() });
         }
-        if o.pe.is_none() && state.pe != Vector3::zeros() {
-            return Err(ReductionError::NonzeroAngularMomentum { pe: state.pe.into() });
+        if o.j.is_none() && state.j != Vector3::zeros() {
+            return Err(ReductionError::NonzeroAngularMomentum { j: state.j.into() });
         }
         for k in 0..N {
             let held = self.template.q[k];
@@ -867,34 +1020,54 @@ where
             y[slot] = state.q[k];
             y[o.p + slot] = state.p[k];
         }
-        if let Some(e) = o.euler {
-            y[e..e + 3].copy_from_slice(state.euler.as_slice());
+        if let Some(i) = o.quaternion {
+            let q = state.orientation.quaternion();
+            y[i..i + 4].copy_from_slice(&[q.w, q.i, q.j, q.k]);
         }
-        if let Some(e) = o.pe {
-            y[e..e + 3].copy_from_slice(state.pe.as_slice());
+        if let Some(i) = o.j {
+            y[i..i + 3].copy_from_slice(state.j.as_slice());
         }
         Ok(())
     }
 
-    /// The full state of a reduced flat state, for output: frozen coordinates at their held
-    /// values, `p_e = 0` for a J = 0 system, the template's orientation if it is not
-    /// integrated, and each frozen coordinate's momentum the full system's
-    /// `p_f = ∂T/∂q̇_f = (Aᵀ ω + a q̇)_f` at the reduced velocities (so that the seed path at
-    /// the expanded state gives the same ω and q̇, with `q̇_f = 0`).
-    pub fn expand(&self, y: &[f64]) -> Result<PhaseState<N>, HamiltonianError> {
+    /// [`ReducedSystem::reduce_body`] of a phase-space state (`J = W p_e`: fails at gimbal lock).
+    pub fn reduce(&self, state: &PhaseState<N>, y: &mut [f64]) -> Result<(), ReductionError> {
+        // A J = 0 system needs no W, so a state at gimbal lock with p_e = 0 is fine.
+        let body = if state.pe == Vector3::zeros() {
+            BodyState { q: state.q, p: state.p, orientation: quaternion_of_euler(&state.euler), j: Vector3::zeros() }
+        } else {
+            BodyState::from_phase(state)?
+        };
+        self.reduce_body(&body, y)
+    }
+
+    /// The body-formulation state of a reduced flat state, for output: frozen coordinates at
+    /// their held values, `J = 0` for a J = 0 system, the template's orientation if it is not
+    /// integrated (the integrated quaternion normalised otherwise), and each frozen coordinate's
+    /// momentum the full system's `p_f = ∂T/∂q̇_f = (Aᵀ ω + a q̇)_f` at the reduced velocities
+    /// (so that the full system at the expanded state moves the same way, with `q̇_f = 0`).
+    pub fn expand_body(&self, y: &[f64]) -> Result<BodyState<N>, HamiltonianError> {
         let o = self.offsets();
-        let (mut s, _, _, omega, qdot) = self.kinematics(y, &o)?;
+        let (u, omega, qdot) = self.kinematics(y, &o)?;
+        let mut p = u.p;
         if !self.all_active {
             let mut k = KineticMatrices::default();
-            self.molecule.kinetic(&s.q, &mut k);
+            self.molecule.kinetic(&u.q, &mut k);
             let p_full = k.coriolis.transpose() * omega + k.a * qdot;
             for f in 0..N {
                 if !self.reduction.active[f] {
-                    s.p[f] = p_full[f];
+                    p[f] = p_full[f];
                 }
             }
         }
-        Ok(s)
+        let orientation = UnitQuaternion::try_new(u.quaternion, 0.0)
+            .ok_or(HamiltonianError::NonFinite { quantity: "orientation quaternion (zero norm)" })?;
+        Ok(BodyState { q: u.q, p, orientation, j: u.j })
+    }
+
+    /// [`ReducedSystem::expand_body`] as a phase-space state ([`BodyState::to_phase`]).
+    pub fn expand(&self, y: &[f64]) -> Result<PhaseState<N>, HamiltonianError> {
+        Ok(self.expand_body(y)?.to_phase())
     }
 }
 
@@ -908,23 +1081,25 @@ where
         self.offsets().dim
     }
 
-    /// `dydt` in the reduced layout: `(q̇_a, ṗ_a, Ω̇_e, ṗ_e)` as the reduction keeps them.
+    /// `dydt` in the reduced layout: `(q̇_a, ṗ_a, ς̇, J̇)` as the reduction keeps them.
     fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), HamiltonianError> {
         let o = self.offsets();
         if dydt.len() != o.dim {
             return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: dydt.len() });
         }
-        let (s, e, j, omega, qdot) = self.kinematics(y, &o)?;
-        let pdot = internal_force(self.molecule, &s.q, &omega, &qdot)?;
+        let (u, omega, qdot) = self.kinematics(y, &o)?;
+        let pdot = internal_force(self.molecule, &u.q, &omega, &qdot)?;
         for (slot, &k) in self.index[..self.n_active].iter().enumerate() {
             dydt[slot] = qdot[k];
             dydt[o.p + slot] = pdot[k];
         }
-        if let (Some(i), Some(e)) = (o.euler, &e) {
-            dydt[i..i + 3].copy_from_slice(e.euler_rates(&omega).as_slice());
-            if let Some(i) = o.pe {
-                dydt[i..i + 3].copy_from_slice(e.euler_momenta_rates(&s.pe, &j, &omega).as_slice());
-            }
+        if let Some(i) = o.quaternion {
+            // ς̇ = ½ ς ⊗ (0, ω).
+            let d = u.quaternion * Quaternion::from_imag(omega) * 0.5;
+            dydt[i..i + 4].copy_from_slice(&[d.w, d.i, d.j, d.k]);
+        }
+        if let Some(i) = o.j {
+            dydt[i..i + 3].copy_from_slice(u.j.cross(&omega).as_slice());
         }
         if !all_finite(dydt) {
             return Err(HamiltonianError::NonFinite { quantity: "right-hand side of Hamilton's equations" });

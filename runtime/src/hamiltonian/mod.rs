@@ -61,7 +61,7 @@ use crate::integrate::OdeSystem;
 use crate::molecule::{KineticMatrices, Molecule};
 
 pub use euler::{
-    MIN_SIN_THETA, WMatrices, angular_momentum_from_euler_momenta, angular_velocity_matrix,
+    MIN_SIN_THETA, WMatrices, angular_momentum_from_euler_momenta, angular_velocity_matrix, euler_angles,
     euler_momenta_from_angular_momentum, rotation_matrix, w_matrix,
 };
 pub use fast::{FastSystem, MetricFactor, ReducedSystem, Reduction, ReductionError, Rotation};
@@ -89,6 +89,24 @@ pub enum HamiltonianError {
         /// The internal coordinates, in atomic units.
         q: Vec<f64>,
     },
+    /// A block of the kinetic metric is positive definite but close enough to singular that the
+    /// equations of motion lose accuracy: one of its relative Cholesky pivots (pivot over the
+    /// block's scale, see [`PIVOT_TOLERANCE`]) is below the threshold a system was given (for
+    /// example a triatomic bending to a linear geometry).
+    #[error(
+        "the {matrix} is ill-conditioned at q = {q:?}: a relative pivot is {pivot:.2e}, below the threshold \
+         {threshold:.0e} (a near-linear or otherwise degenerate geometry)"
+    )]
+    IllConditionedMetric {
+        /// Which block.
+        matrix: MetricBlock,
+        /// The internal coordinates, in atomic units.
+        q: Vec<f64>,
+        /// The smallest relative pivot of that block.
+        pivot: f64,
+        /// The threshold it fell below.
+        threshold: f64,
+    },
     /// An input or an intermediate result is NaN or infinite.
     #[error("non-finite {quantity}")]
     NonFinite {
@@ -96,7 +114,7 @@ pub enum HamiltonianError {
         quantity: &'static str,
     },
     /// A flat state slice has the wrong length.
-    #[error("state has {found} components, expected 2N + 6 = {expected}")]
+    #[error("state has {found} components, expected {expected}")]
     DimensionMismatch {
         /// `2N + 6`.
         expected: usize,
