@@ -100,6 +100,7 @@
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 pub use crate::hamiltonian::euler_angles;
+use crate::hamiltonian::fast::{BodyState, MetricFactor};
 use crate::hamiltonian::{
     HamiltonianError, InverseMetric, MIN_SIN_THETA, MetricBlock, PhaseState, body_angular_momentum,
     euler_momenta_from_angular_momentum, rotation_matrix, velocities,
@@ -380,15 +381,45 @@ pub fn to_lab<M, const N: usize, const NA: usize>(
 where
     M: Molecule<N, NA> + ?Sized,
 {
+    let (omega, qdot) = velocities(molecule, state)?;
+    lab_state(molecule, &state.q, &rotation_matrix(&state.euler), &omega, &qdot, com)
+}
+
+/// [`to_lab`] for a state of the body formulation ([`BodyState`]: orientation as a quaternion,
+/// body-frame `J`), which has no singular orientation: works through gimbal lock.
+pub fn to_lab_body<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    state: &BodyState<N>,
+    com: &CentreOfMass,
+) -> Result<LabState<NA>, FrameError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    let mut k = KineticMatrices::default();
+    molecule.kinetic(&state.q, &mut k);
+    let (omega, qdot) = MetricFactor::new(&k, &state.q)?.solve(&state.j, &state.p);
+    lab_state(molecule, &state.q, &state.rotation(), &omega, &qdot, com)
+}
+
+/// `x_i = X + R R_i(q)`, `v_i = V + R (ω × R_i + Σ_j ∂R_i/∂q_j q̇_j)`.
+fn lab_state<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    q: &SVector<f64, N>,
+    rotation: &Matrix3<f64>,
+    omega: &Vector3<f64>,
+    qdot: &SVector<f64, N>,
+    com: &CentreOfMass,
+) -> Result<LabState<NA>, FrameError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
     if !(com.position.iter().chain(com.velocity.iter()).all(|x| x.is_finite())) {
         return Err(FrameError::NonFinite { quantity: "centre-of-mass position or velocity" });
     }
-    let (omega, qdot) = velocities(molecule, state)?;
-    let rotation = rotation_matrix(&state.euler);
     let mut r = SMatrix::<f64, 3, NA>::zeros();
-    molecule.positions(&state.q, &mut r);
+    molecule.positions(q, &mut r);
     let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
-    molecule.positions_jacobian(&state.q, &mut dr);
+    molecule.positions_jacobian(q, &mut dr);
 
     let mut lab = LabState::<NA>::default();
     for i in 0..NA {

@@ -16,7 +16,7 @@ pub mod integrate;
 pub mod molecule;
 pub mod units;
 
-pub use frames::{CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, to_lab};
+pub use frames::{CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, to_lab, to_lab_body};
 pub use hamiltonian::{FastSystem, HamiltonianError, HamiltonianSystem, PhaseState};
 pub use molecule::{Atom, Coordinate, KineticMatrices, Molecule, MoleculeVisitor};
 pub use nalgebra;

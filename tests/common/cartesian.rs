@@ -21,7 +21,8 @@ use std::ops::ControlFlow;
 
 use super::internal_coordinates::{Dual, V3, jacobian};
 use rovib::runtime::Molecule;
-use rovib::runtime::frames::{CentreOfMass, LabState, to_lab};
+use rovib::runtime::frames::{CentreOfMass, LabState, to_lab, to_lab_body};
+use rovib::runtime::hamiltonian::fast::{BodyState, ReducedSystem, Reduction};
 use rovib::runtime::hamiltonian::{HamiltonianSystem, PhaseState, hamiltonian};
 use rovib::runtime::integrate::{Dop853Options, Method, OdeSystem, Stats, solve};
 use rovib::runtime::nalgebra::{SMatrix, SVector, Vector3};
@@ -113,13 +114,30 @@ pub struct CrossCheck {
     pub hamiltonian: Method,
     /// The integrator of the Cartesian side.
     pub cartesian: Method,
+    /// Which Hamiltonian formulation to integrate.
+    pub formulation: Formulation,
+}
+
+/// The Hamiltonian side of a cross-check.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum Formulation {
+    /// The seed path in Euler angles (`HamiltonianSystem`): singular at θ = 0, π.
+    Seed,
+    /// The production path: body-frame J and a unit quaternion on the fast right-hand side
+    /// (`ReducedSystem` with nothing reduced): regular at every orientation.
+    Production,
 }
 
 impl CrossCheck {
     /// DOP853 at the same tolerances on both sides.
     pub fn dop853(t_end: f64, output_interval: f64, rtol: f64, atol: f64) -> Self {
         let method = Method::Dop853(Dop853Options { rtol, atol, ..Dop853Options::default() });
-        Self { t_end, output_interval, hamiltonian: method, cartesian: method }
+        Self { t_end, output_interval, hamiltonian: method, cartesian: method, formulation: Formulation::Seed }
+    }
+
+    /// The same, integrating the production path.
+    pub fn production(self) -> Self {
+        Self { formulation: Formulation::Production, ..self }
     }
 }
 
@@ -146,6 +164,8 @@ pub struct CrossCheckReport<const N: usize> {
     pub max_displacement: f64,
     /// min |sin θ| over the Hamiltonian run's outputs.
     pub min_sin_theta: f64,
+    /// The closest approach of θ to 0 or π at the comparison times, rad.
+    pub min_theta: f64,
     /// q at each output time (Hamiltonian run).
     pub q: Vec<SVector<f64, N>>,
     /// Integrator work on each side.
@@ -183,28 +203,45 @@ pub fn cross_check_with_masses<M, const N: usize, const NA: usize>(
 where
     M: Molecule<N, NA>,
 {
-    // The Hamiltonian trajectory, kept as phase states at the output times.
-    let mut system = HamiltonianSystem::new(molecule);
-    let mut y0 = vec![0.0; PhaseState::<N>::DIM];
-    initial.write_to(&mut y0).unwrap();
-    let mut states = Vec::new();
+    // The Hamiltonian trajectory, kept as body-formulation states at the output times (the
+    // seed's phase states converted; the production path's directly, so that nothing on this
+    // side goes through Euler angles).
+    let mut states: Vec<BodyState<N>> = Vec::new();
+    let mut energies = Vec::new();
     let mut times = Vec::new();
-    let hamiltonian_stats = solve(
-        &mut system,
-        &settings.hamiltonian,
-        0.0,
-        &y0,
-        settings.t_end,
-        settings.output_interval,
-        &mut |t: f64, y: &[f64]| {
-            times.push(t);
-            states.push(PhaseState::<N>::read_from(y).unwrap());
-            ControlFlow::Continue(())
-        },
-    )
-    .unwrap_or_else(|e| {
-        panic!("{}: Hamiltonian run failed: {e} ({:?})", molecule.name(), std::error::Error::source(&e))
-    });
+    let failed = |e: &dyn std::error::Error| -> ! {
+        panic!("{}: Hamiltonian run failed: {e} ({:?})", molecule.name(), e.source())
+    };
+    let hamiltonian_stats = match settings.formulation {
+        Formulation::Seed => {
+            let mut system = HamiltonianSystem::new(molecule);
+            let mut y0 = vec![0.0; PhaseState::<N>::DIM];
+            initial.write_to(&mut y0).unwrap();
+            solve(&mut system, &settings.hamiltonian, 0.0, &y0, settings.t_end, settings.output_interval, &mut |t: f64,
+                                                                                                               y: &[f64]| {
+                let s = PhaseState::<N>::read_from(y).unwrap();
+                times.push(t);
+                states.push(BodyState::from_phase(&s).unwrap());
+                energies.push(hamiltonian(molecule, &s).unwrap());
+                ControlFlow::Continue(())
+            })
+            .unwrap_or_else(|e| failed(&e))
+        }
+        Formulation::Production => {
+            let mut system = ReducedSystem::new(molecule, Reduction::none(), initial);
+            let mut y0 = vec![0.0; system.dim()];
+            system.reduce(initial, &mut y0).unwrap();
+            let copy = system;
+            solve(&mut system, &settings.hamiltonian, 0.0, &y0, settings.t_end, settings.output_interval, &mut |t: f64,
+                                                                                                               y: &[f64]| {
+                times.push(t);
+                states.push(copy.expand_body(y).unwrap());
+                energies.push(copy.energy(y).unwrap());
+                ControlFlow::Continue(())
+            })
+            .unwrap_or_else(|e| failed(&e))
+        }
+    };
 
     // The Cartesian trajectory from the same lab-frame state.
     let lab0 = to_lab(molecule, initial, com).unwrap();
@@ -243,25 +280,30 @@ where
         max_displacement: 0.0,
         min_sin_theta: f64::INFINITY,
         q: states.iter().map(|s| s.q).collect(),
+        min_theta: f64::INFINITY,
         hamiltonian_stats,
         cartesian_stats,
     };
     // Compare with the centre of mass advanced to each output time.
-    for ((t, state), y) in report.times.clone().iter().zip(&states).zip(&labs) {
+    for (((t, state), energy), y) in report.times.clone().iter().zip(&states).zip(&energies).zip(&labs) {
         let moved = CentreOfMass { position: com.position + com.velocity * *t, velocity: com.velocity };
-        let from_h = to_lab(molecule, state, &moved).unwrap();
+        let from_h = to_lab_body(molecule, state, &moved).unwrap();
         let lab = LabState::<NA>::read_from(y);
         report.max_position_difference = report.max_position_difference.max((from_h.positions - lab.positions).amax());
         report.max_velocity_difference =
             report.max_velocity_difference.max((from_h.velocities - lab.velocities).amax());
         report.cartesian_energy_drift = report.cartesian_energy_drift.max((cartesian.energy(y) - e0_cart).abs());
-        report.hamiltonian_energy_drift =
-            report.hamiltonian_energy_drift.max((hamiltonian(molecule, state).unwrap() - e0_ham).abs());
+        report.hamiltonian_energy_drift = report.hamiltonian_energy_drift.max((energy - e0_ham).abs());
         report.cartesian_angular_momentum_drift =
             report.cartesian_angular_momentum_drift.max((cartesian.angular_momentum(y) - l0).amax());
         let drift = SMatrix::<f64, 3, NA>::from_fn(|axis, _| com.velocity[axis] * *t);
         report.max_displacement = report.max_displacement.max((lab.positions - lab0.positions - drift).amax());
-        report.min_sin_theta = report.min_sin_theta.min(state.euler[1].sin().abs());
+        // θ is the angle between the body and lab z axes: cos θ = R₃₃ (from the rotation itself,
+        // accurate near 0 through the length of the cross product).
+        let r = state.rotation();
+        let theta = r[(0, 2)].hypot(r[(1, 2)]).atan2(r[(2, 2)]);
+        report.min_sin_theta = report.min_sin_theta.min(theta.sin().abs());
+        report.min_theta = report.min_theta.min(theta.min(std::f64::consts::PI - theta));
     }
     report
 }
