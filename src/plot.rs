@@ -92,7 +92,11 @@ fn panel(svg: &mut String, p: &Panel, x0: f64) {
         let x = px(10f64.powi(d));
         let _ = write!(svg, r##"<line x1="{x:.1}" y1="{top}" x2="{x:.1}" y2="{bottom}" stroke="#ddd"/>"##);
         if (d - xlo) % label_step == 0 {
-            let _ = write!(svg, r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle" font-size="11">1e{d}</text>"#, bottom + 16.0);
+            let _ = write!(
+                svg,
+                r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle" font-size="11">1e{d}</text>"#,
+                bottom + 16.0
+            );
         }
     }
     let label_step = ((yhi - ylo) as f64 / 10.0).ceil().max(1.0) as i32;
@@ -100,7 +104,12 @@ fn panel(svg: &mut String, p: &Panel, x0: f64) {
         let y = py(10f64.powi(d));
         let _ = write!(svg, r##"<line x1="{left}" y1="{y:.1}" x2="{right}" y2="{y:.1}" stroke="#ddd"/>"##);
         if (d - ylo) % label_step == 0 {
-            let _ = write!(svg, r#"<text x="{:.1}" y="{:.1}" text-anchor="end" font-size="11">1e{d}</text>"#, left - 6.0, y + 4.0);
+            let _ = write!(
+                svg,
+                r#"<text x="{:.1}" y="{:.1}" text-anchor="end" font-size="11">1e{d}</text>"#,
+                left - 6.0,
+                y + 4.0
+            );
         }
     }
     let _ = write!(
@@ -109,7 +118,13 @@ fn panel(svg: &mut String, p: &Panel, x0: f64) {
         left + pw / 2.0,
         escape(&p.title)
     );
-    let _ = write!(svg, r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="12">{}</text>"#, left + pw / 2.0, H - 12.0, escape(&p.x_label));
+    let _ = write!(
+        svg,
+        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="12">{}</text>"#,
+        left + pw / 2.0,
+        H - 12.0,
+        escape(&p.x_label)
+    );
     let _ = write!(
         svg,
         r#"<text transform="translate({:.1},{:.1}) rotate(-90)" text-anchor="middle" font-size="12">{}</text>"#,
@@ -119,11 +134,19 @@ fn panel(svg: &mut String, p: &Panel, x0: f64) {
     );
     for (i, s) in p.series.iter().enumerate() {
         let colour = COLOURS[i % COLOURS.len()];
-        let pts: Vec<(f64, f64)> =
-            s.points.iter().filter(|(x, y)| x.is_finite() && y.is_finite() && *x > 0.0 && *y > 0.0).map(|&(x, y)| (px(x), py(y))).collect();
+        let pts: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .filter(|(x, y)| x.is_finite() && y.is_finite() && *x > 0.0 && *y > 0.0)
+            .map(|&(x, y)| (px(x), py(y)))
+            .collect();
         if pts.len() > 1 {
             let path: Vec<String> = pts.iter().map(|(x, y)| format!("{x:.1},{y:.1}")).collect();
-            let _ = write!(svg, r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="1.5"/>"#, path.join(" "));
+            let _ = write!(
+                svg,
+                r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="1.5"/>"#,
+                path.join(" ")
+            );
         }
         for (x, y) in &pts {
             svg.push_str(&marker(MARKERS[i % MARKERS.len()], *x, *y, colour));

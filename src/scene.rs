@@ -250,7 +250,8 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         }
     })?;
 
-    let length = unit(&src, raw.units.length.as_ref(), LengthUnit::Bohr, LengthUnit::parse, "length", "\"bohr\", \"angstrom\"")?;
+    let length =
+        unit(&src, raw.units.length.as_ref(), LengthUnit::Bohr, LengthUnit::parse, "length", "\"bohr\", \"angstrom\"")?;
     let angle = unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?;
     let time = unit(
         &src,
@@ -297,7 +298,9 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     };
 
     let method = match &raw.integrator {
-        None => Method::Dop853(Dop853Options { rtol: DEFAULT_TOLERANCE, atol: DEFAULT_TOLERANCE, ..Default::default() }),
+        None => {
+            Method::Dop853(Dop853Options { rtol: DEFAULT_TOLERANCE, atol: DEFAULT_TOLERANCE, ..Default::default() })
+        }
         Some(i) => integrator(&src, i, t)?,
     };
 
@@ -331,8 +334,9 @@ fn unit<U: Copy>(
 ) -> Result<U, FileError> {
     match given {
         None => Ok(default),
-        Some(s) => parse(s.get_ref())
-            .ok_or_else(|| src.error(s.span(), format!("unknown {what} unit `{}`", s.get_ref()), format!("use one of {allowed}"))),
+        Some(s) => parse(s.get_ref()).ok_or_else(|| {
+            src.error(s.span(), format!("unknown {what} unit `{}`", s.get_ref()), format!("use one of {allowed}"))
+        }),
     }
 }
 
@@ -341,7 +345,11 @@ fn positive(src: &Source<'_>, x: &Spanned<f64>, what: &str) -> Result<f64, FileE
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(src.error(x.span(), format!("`{what}` must be a positive finite number, got {v}"), "write a number greater than 0"))
+        Err(src.error(
+            x.span(),
+            format!("`{what}` must be a positive finite number, got {v}"),
+            "write a number greater than 0",
+        ))
     }
 }
 
@@ -357,7 +365,11 @@ fn finite(src: &Source<'_>, x: &Spanned<f64>, what: &str) -> Result<f64, FileErr
 fn triple(src: &Source<'_>, v: &Spanned<Vec<f64>>, what: &str, scale: f64) -> Result<[f64; 3], FileError> {
     let values = v.get_ref();
     if values.len() != 3 {
-        return Err(src.error(v.span(), format!("`{what}` has {} entries, expected 3", values.len()), format!("write {what} = [x, y, z]")));
+        return Err(src.error(
+            v.span(),
+            format!("`{what}` has {} entries, expected 3", values.len()),
+            format!("write {what} = [x, y, z]"),
+        ));
     }
     if values.iter().any(|x| !x.is_finite()) {
         return Err(src.error(v.span(), format!("`{what}` has a non-finite entry"), "write finite numbers"));
@@ -368,14 +380,15 @@ fn triple(src: &Source<'_>, v: &Spanned<Vec<f64>>, what: &str, scale: f64) -> Re
 /// A table of numbers by name, unscaled (the scale of each entry depends on the coordinate,
 /// which is known only with the molecule), checked finite.
 fn named_numbers(src: &Source<'_>, table: &RawTable<f64>, what: &str) -> Result<Vec<Named<f64>>, FileError> {
-    table
-        .get_ref()
-        .iter()
-        .map(|(k, v)| Ok((k.clone(), finite(src, v, &format!("{what}.{}", k.get_ref()))?)))
-        .collect()
+    table.get_ref().iter().map(|(k, v)| Ok((k.clone(), finite(src, v, &format!("{what}.{}", k.get_ref()))?))).collect()
 }
 
-fn named_triples(src: &Source<'_>, table: &RawTable<Vec<f64>>, what: &str, scale: f64) -> Result<Vec<Named<[f64; 3]>>, FileError> {
+fn named_triples(
+    src: &Source<'_>,
+    table: &RawTable<Vec<f64>>,
+    what: &str,
+    scale: f64,
+) -> Result<Vec<Named<[f64; 3]>>, FileError> {
     table
         .get_ref()
         .iter()
@@ -398,7 +411,8 @@ pub struct CoordinateScale {
 
 fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) -> Result<Initial, FileError> {
     let r = raw.get_ref();
-    let internal_keys = r.q.is_some() || r.p.is_some() || r.qdot.is_some() || r.euler.is_some() || r.pe.is_some() || r.j.is_some();
+    let internal_keys =
+        r.q.is_some() || r.p.is_some() || r.qdot.is_some() || r.euler.is_some() || r.pe.is_some() || r.j.is_some();
     if let Some(positions) = &r.positions {
         if internal_keys {
             return Err(src.error(
@@ -411,14 +425,26 @@ fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) 
             Some(v) => named_triples(src, v, "velocities", l / t)?,
             None => Vec::new(),
         };
-        return Ok(Initial::Lab { positions: named_triples(src, positions, "positions", l)?, velocities, span: positions.span() });
+        return Ok(Initial::Lab {
+            positions: named_triples(src, positions, "positions", l)?,
+            velocities,
+            span: positions.span(),
+        });
     }
     if let Some(v) = &r.velocities {
-        return Err(src.error(v.span(), "velocities without positions", "give the lab-frame positions of every atom too"));
+        return Err(src.error(
+            v.span(),
+            "velocities without positions",
+            "give the lab-frame positions of every atom too",
+        ));
     }
     let momenta = match (&r.p, &r.qdot) {
         (Some(_), Some(qd)) => {
-            return Err(src.error(qd.span(), "both p and qdot are given", "give the internal momenta p or the velocities qdot, not both"));
+            return Err(src.error(
+                qd.span(),
+                "both p and qdot are given",
+                "give the internal momenta p or the velocities qdot, not both",
+            ));
         }
         (_, Some(qd)) => Momenta::Qdot(named_numbers(src, qd, "qdot")?),
         (Some(p), None) => Momenta::P(named_numbers(src, p, "p")?),
@@ -426,7 +452,11 @@ fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) 
     };
     let rotation = match (&r.pe, &r.j) {
         (Some(_), Some(j)) => {
-            return Err(src.error(j.span(), "both pe and j are given", "give the Euler momenta pe or the body-frame angular momentum j, not both"));
+            return Err(src.error(
+                j.span(),
+                "both pe and j are given",
+                "give the Euler momenta pe or the body-frame angular momentum j, not both",
+            ));
         }
         (Some(pe), None) => Rotation::Pe(triple(src, pe, "pe", 1.0)?),
         (None, Some(j)) => Rotation::J(triple(src, j, "j", 1.0)?),
@@ -448,7 +478,11 @@ fn integrator(src: &Source<'_>, raw: &Spanned<RawIntegrator>, t: f64) -> Result<
     let r = raw.get_ref();
     let name = r.method.get_ref().as_str();
     let not_for = |key: &str, span: Range<usize>, method: &str| {
-        src.error(span, format!("`{key}` does not apply to the {method} method"), "remove it, or choose a method it applies to")
+        src.error(
+            span,
+            format!("`{key}` does not apply to the {method} method"),
+            "remove it, or choose a method it applies to",
+        )
     };
     let step = |required: bool| -> Result<f64, FileError> {
         match &r.step {

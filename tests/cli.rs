@@ -69,7 +69,8 @@ fn eval_prints_every_quantity_consistent_with_the_library() {
 
 #[test]
 fn eval_of_a_rigid_molecule_has_empty_vibrational_blocks() {
-    let out = rovib(&["eval", "--molecule", "h2o_rigid", "--state", "-"], Some(r#"{"euler": [0, 1, 0], "pe": [1, 2, 3]}"#));
+    let out =
+        rovib(&["eval", "--molecule", "h2o_rigid", "--state", "-"], Some(r#"{"euler": [0, 1, 0], "pe": [1, 2, 3]}"#));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["a"].as_array().unwrap().len(), 0);
@@ -86,9 +87,15 @@ fn eval_errors_are_one_line() {
     let err = stderr_line(&rovib(&["eval", "--molecule", "h2O", "--state", "-"], Some("{}")));
     assert!(err.starts_with("error: unknown molecule `h2O`; the compiled-in molecules are "), "{err}");
     assert!(err.contains(&rovib::molecules::NAMES.join(", ")), "{err}");
-    let err = stderr_line(&rovib(&["eval", "--molecule", "h2o", "--state", "-"], Some(r#"{"q": [1.8, 1.8, 1.8], "eular": [0, 1, 0]}"#)));
+    let err = stderr_line(&rovib(
+        &["eval", "--molecule", "h2o", "--state", "-"],
+        Some(r#"{"q": [1.8, 1.8, 1.8], "eular": [0, 1, 0]}"#),
+    ));
     assert!(err.contains("unknown field `eular`"), "{err}");
-    let err = stderr_line(&rovib(&["eval", "--molecule", "h2o", "--state", "-"], Some(r#"{"q": [1.8, 1.8, 1.8], "euler": [0, 0, 0]}"#)));
+    let err = stderr_line(&rovib(
+        &["eval", "--molecule", "h2o", "--state", "-"],
+        Some(r#"{"q": [1.8, 1.8, 1.8], "euler": [0, 0, 0]}"#),
+    ));
     assert!(err.contains("too close to 0 or π"), "{err}");
     let err = stderr_line(&rovib(&["eval", "--molecule", "h2o", "--state", "/nonexistent/state.json"], None));
     assert!(err.starts_with("error: cannot read /nonexistent/state.json"), "{err}");

@@ -8,13 +8,13 @@ use std::collections::HashMap;
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
-use rovib_codegen::expr::Graph;
-use rovib_codegen::parse::{Scope, parse_expression};
 use rovib::cli::run::initial_state;
 use rovib::molecules::H2o;
 use rovib::runtime::hamiltonian::hamiltonian;
 use rovib::scene::parse_scene;
+use rovib_codegen::expr::Graph;
 use rovib_codegen::generate_molecule;
+use rovib_codegen::parse::{Scope, parse_expression};
 
 fn cases(default: u32) -> u32 {
     std::env::var("ROVIB_FUZZ_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(default)
@@ -32,7 +32,9 @@ fn shipped() -> Vec<(String, String)> {
         .unwrap()
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .map(|p| (format!("molecules/{}", p.file_name().unwrap().to_str().unwrap()), std::fs::read_to_string(&p).unwrap()))
+        .map(|p| {
+            (format!("molecules/{}", p.file_name().unwrap().to_str().unwrap()), std::fs::read_to_string(&p).unwrap())
+        })
         .filter(|(_, text)| text.matches("[[coordinates]]").count() <= 3)
         .collect();
     files.sort();
@@ -41,10 +43,52 @@ fn shipped() -> Vec<(String, String)> {
 
 /// Pieces a mutation inserts: TOML and expression syntax, edge-case numbers, other keys.
 const PIECES: &[&str] = &[
-    "\"", "'", "\"\"\"", "[", "]", "{", "}", "=", ",", "\n", "#", "(", ")", "pow(", "sin(", "^", "**", "-", "+", "*",
-    "/", "0", "1e999", "nan", "inf", "-0.0", "1e-320", "pi", "alpha", "r1", "x", "é", "\\", "[[atoms]]",
-    "[[coordinates]]", "label = \"H1\"", "unit = \"deg\"", "mass = 0", "position = [0, 0]", "name = \"q\"",
-    "expression = \"\"", "atan2(", "ln(0)", "sqrt(-1)", "/ 0", "pow(0, -1)",
+    "\"",
+    "'",
+    "\"\"\"",
+    "[",
+    "]",
+    "{",
+    "}",
+    "=",
+    ",",
+    "\n",
+    "#",
+    "(",
+    ")",
+    "pow(",
+    "sin(",
+    "^",
+    "**",
+    "-",
+    "+",
+    "*",
+    "/",
+    "0",
+    "1e999",
+    "nan",
+    "inf",
+    "-0.0",
+    "1e-320",
+    "pi",
+    "alpha",
+    "r1",
+    "x",
+    "é",
+    "\\",
+    "[[atoms]]",
+    "[[coordinates]]",
+    "label = \"H1\"",
+    "unit = \"deg\"",
+    "mass = 0",
+    "position = [0, 0]",
+    "name = \"q\"",
+    "expression = \"\"",
+    "atan2(",
+    "ln(0)",
+    "sqrt(-1)",
+    "/ 0",
+    "pow(0, -1)",
 ];
 
 #[derive(Clone, Debug)]

@@ -44,8 +44,11 @@ fn temp_dir(name: &str) -> PathBuf {
 
 #[test]
 fn internal_coordinates_with_momenta_and_body_angular_momentum() {
-    let s = parse_scene("s.toml", &scene("q = { r1 = 1.0, alpha = 100.0 }\np = { r2 = 0.5 }\neuler = [10, 80, 20]\nj = [1, 2, 3]"))
-        .unwrap();
+    let s = parse_scene(
+        "s.toml",
+        &scene("q = { r1 = 1.0, alpha = 100.0 }\np = { r2 = 0.5 }\neuler = [10, 80, 20]\nj = [1, 2, 3]"),
+    )
+    .unwrap();
     let start = initial_state(&H2o, &s).unwrap().state;
     assert!((start.q[0] - 1.0 / BOHR_IN_ANGSTROM).abs() < 1e-15);
     assert!((start.q[1] - 0.95785 / BOHR_IN_ANGSTROM).abs() < 1e-15, "r2 from the reference geometry");
@@ -144,10 +147,15 @@ fn run_writes_the_three_outputs_consistently() {
     for f in [0, 7, 20] {
         let (o, h1) = (atom(frames[5 * f + 2]), atom(frames[5 * f + 3]));
         let d = ((o[0] - h1[0]).powi(2) + (o[1] - h1[1]).powi(2) + (o[2] - h1[2]).powi(2)).sqrt();
-        assert!((d / BOHR_IN_ANGSTROM - rows[f][1]).abs() < 1e-10, "frame {f}: |O–H1| = {d} Å vs r1 = {} bohr", rows[f][1]);
+        assert!(
+            (d / BOHR_IN_ANGSTROM - rows[f][1]).abs() < 1e-10,
+            "frame {f}: |O–H1| = {d} Å vs r1 = {} bohr",
+            rows[f][1]
+        );
     }
 
-    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["status"], "completed");
     assert!(summary["rhs_evaluations"].as_u64().unwrap() > 100);
     let c = &summary["conservation"];
@@ -175,7 +183,8 @@ fn a_failed_run_keeps_its_output_and_says_where_it_stopped() {
     let rows = csv.lines().count() - 1;
     assert!((1..21).contains(&rows), "{rows} rows kept");
     assert!(csv.ends_with('\n'), "the last row is complete");
-    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["status"], "failed");
     assert!(summary["error"].as_str().unwrap().contains("steps"));
     std::fs::remove_dir_all(&dir).unwrap();
@@ -218,7 +227,9 @@ fn lab_frame_positions_and_velocities_bind_back_to_the_same_state() {
         let entries: Vec<String> = ["O", "H1", "H2"]
             .iter()
             .enumerate()
-            .map(|(i, label)| format!("{label} = [{:?}, {:?}, {:?}]", m[(0, i)] * scale, m[(1, i)] * scale, m[(2, i)] * scale))
+            .map(|(i, label)| {
+                format!("{label} = [{:?}, {:?}, {:?}]", m[(0, i)] * scale, m[(1, i)] * scale, m[(2, i)] * scale)
+            })
             .collect();
         table.push_str(&format!("{key} = {{ {} }}\n", entries.join(", ")));
     }

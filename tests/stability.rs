@@ -59,7 +59,8 @@ fn a_trajectory_through_gimbal_lock_agrees_with_the_cartesian_propagation() {
     let (initial, t_half) = near_pass();
     assert!(initial.euler[1].sin() > 0.1, "the run starts far from gimbal lock: θ = {}", initial.euler[1]);
     let settings = CrossCheck::dop853(2.0 * t_half, 2.5, 1e-13, 1e-14);
-    let production = cross_check(&H2o, internal_coordinates::h2o, &initial, &CentreOfMass::AT_REST, &settings.production());
+    let production =
+        cross_check(&H2o, internal_coordinates::h2o, &initial, &CentreOfMass::AT_REST, &settings.production());
     // The seed path (Euler angles) on the same trajectory, for comparison: it survives this pass
     // (H does not depend on φ), but resolving the spin of φ and ψ near θ = 0 costs it steps.
     let seed = cross_check(&H2o, internal_coordinates::h2o, &initial, &CentreOfMass::AT_REST, &settings);

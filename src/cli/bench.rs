@@ -63,13 +63,15 @@ pub struct BenchReport {
 /// Runs the work-precision benchmark of the scene at `path` into `out_dir`
 /// (default `out/SCENE_NAME/bench`). `quick` uses fewer tolerances and steps.
 pub fn bench(path: &Path, out_dir: Option<&Path>, quick: bool) -> Result<BenchReport, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
     let scene = parse_scene(&path.display().to_string(), &text)?;
     let out_dir = match out_dir {
         Some(d) => d.to_owned(),
         None => Path::new("out").join(path.file_stem().unwrap_or_default()).join("bench"),
     };
-    std::fs::create_dir_all(&out_dir).map_err(|e| CliError::context(format!("cannot create {}", out_dir.display()), e))?;
+    std::fs::create_dir_all(&out_dir)
+        .map_err(|e| CliError::context(format!("cannot create {}", out_dir.display()), e))?;
     let name = scene.molecule.get_ref().clone();
     molecules::visit(&name, Bench { scene: &scene, out_dir: &out_dir, quick })
         .ok_or_else(|| super::unknown_molecule(&name))?
@@ -107,12 +109,13 @@ impl MoleculeVisitor for Bench<'_> {
             let mut spent = 0.0;
             let mut repeats = 0;
             loop {
-                let mut states: Vec<f64> = Vec::with_capacity(y0.len() * ((scene.t_end / scene.output_interval) as usize + 2));
+                let mut states: Vec<f64> =
+                    Vec::with_capacity(y0.len() * ((scene.t_end / scene.output_interval) as usize + 2));
                 let mut observer = |_t: f64, y: &[f64]| {
                     states.extend_from_slice(y);
                     ControlFlow::Continue(())
                 };
-                let mut system = system.clone();
+                let mut system = system;
                 let begin = Instant::now();
                 let result = solve(&mut system, method, 0.0, &y0, scene.t_end, scene.output_interval, &mut observer);
                 let wall = begin.elapsed().as_secs_f64();
@@ -134,7 +137,8 @@ impl MoleculeVisitor for Bench<'_> {
         let check = check.map_err(|e| CliError::context("the reference check (DOP853 at 1e-13) failed", e))?;
         let dim = y0.len();
         let last = |states: &[f64]| states[states.len() - dim..].to_vec();
-        let ref_final = lab_positions(&system, &last(&reference)).ok_or_else(|| CliError::Message("bad reference state".into()))?;
+        let ref_final =
+            lab_positions(&system, &last(&reference)).ok_or_else(|| CliError::Message("bad reference state".into()))?;
         let final_error =
             |states: &[f64]| lab_positions(&system, &last(states)).map_or(f64::INFINITY, |x| (x - ref_final).amax());
         let reference_error = final_error(&check);
@@ -150,11 +154,20 @@ impl MoleculeVisitor for Bench<'_> {
         } else {
             ((4..=13).map(|k| 10f64.powi(-k)).collect(), 8)
         };
-        let mut methods: Vec<(&'static str, f64, Method)> = tolerances.iter().map(|&tol| ("dop853", tol, tight(tol))).collect();
+        let mut methods: Vec<(&'static str, f64, Method)> =
+            tolerances.iter().map(|&tol| ("dop853", tol, tight(tol))).collect();
         for k in 0..halvings {
             let h = h_max / 2f64.powi(k as i32);
-            methods.push(("gauss-legendre-2", h, Method::GaussLegendre(GaussLegendreOptions { stages: 2, step: h, ..Default::default() })));
-            methods.push(("gauss-legendre-3", h, Method::GaussLegendre(GaussLegendreOptions { stages: 3, step: h, ..Default::default() })));
+            methods.push((
+                "gauss-legendre-2",
+                h,
+                Method::GaussLegendre(GaussLegendreOptions { stages: 2, step: h, ..Default::default() }),
+            ));
+            methods.push((
+                "gauss-legendre-3",
+                h,
+                Method::GaussLegendre(GaussLegendreOptions { stages: 3, step: h, ..Default::default() }),
+            ));
             methods.push(("rk4", h, Method::Rk4(Rk4Options { step: h, ..Default::default() })));
         }
 
@@ -179,7 +192,15 @@ impl MoleculeVisitor for Bench<'_> {
                             Err(_) => f64::INFINITY,
                         })
                         .fold(0.0, f64::max);
-                    Trial { method: name, parameter, status: Ok(()), wall_time, stats, final_error: final_error(&states), energy_error }
+                    Trial {
+                        method: name,
+                        parameter,
+                        status: Ok(()),
+                        wall_time,
+                        stats,
+                        final_error: final_error(&states),
+                        energy_error,
+                    }
                 }
             };
             trials.push(trial);
@@ -205,7 +226,14 @@ fn write_csv(dir: &Path, trials: &[Trial]) -> Result<PathBuf, CliError> {
         };
         f.line(&format!(
             "{},{:e},{unit},{status},{:e},{},{},{},{:e},{:e}",
-            t.method, t.parameter, t.wall_time, t.stats.rhs_evals, t.stats.steps, t.stats.rejected, t.final_error, t.energy_error
+            t.method,
+            t.parameter,
+            t.wall_time,
+            t.stats.rhs_evals,
+            t.stats.steps,
+            t.stats.rejected,
+            t.final_error,
+            t.energy_error
         ))?;
     }
     f.flush()?;
@@ -228,7 +256,11 @@ fn write_svg(dir: &Path, scene: &Scene, trials: &[Trial], reference_error: f64) 
             .into_iter()
             .map(|name| Series {
                 name: name.to_owned(),
-                points: trials.iter().filter(|t| t.method == name && t.status.is_ok()).map(|t| (t.wall_time, error(t))).collect(),
+                points: trials
+                    .iter()
+                    .filter(|t| t.method == name && t.status.is_ok())
+                    .map(|t| (t.wall_time, error(t)))
+                    .collect(),
             })
             .collect()
     };
@@ -258,7 +290,11 @@ fn fastest(trials: &[Trial], target: f64, error: fn(&Trial) -> f64) -> Option<&T
 }
 
 fn parameter_text(t: &Trial) -> String {
-    if t.method == "dop853" { format!("rtol = atol = {:.0e}", t.parameter) } else { format!("step = {:.4} a.u.", t.parameter) }
+    if t.method == "dop853" {
+        format!("rtol = atol = {:.0e}", t.parameter)
+    } else {
+        format!("step = {:.4} a.u.", t.parameter)
+    }
 }
 
 fn write_markdown(
@@ -282,7 +318,10 @@ fn write_markdown(
         scene.time_unit.name(),
         ref_stats.rhs_evals
     );
-    let _ = writeln!(s, "| method | parameter | wall time (s) | rhs evaluations | final position error (bohr) | max relative energy error |");
+    let _ = writeln!(
+        s,
+        "| method | parameter | wall time (s) | rhs evaluations | final position error (bohr) | max relative energy error |"
+    );
     let _ = writeln!(s, "| --- | --- | ---: | ---: | ---: | ---: |");
     for t in trials {
         match &t.status {

@@ -27,7 +27,11 @@ fn rows<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Value {
     Value::Array((0..R).map(|i| Value::from((0..C).map(|j| m[(i, j)]).collect::<Vec<f64>>())).collect())
 }
 
-fn vector<const K: usize>(field: &str, values: Option<&Vec<f64>>, default: SVector<f64, K>) -> Result<SVector<f64, K>, CliError> {
+fn vector<const K: usize>(
+    field: &str,
+    values: Option<&Vec<f64>>,
+    default: SVector<f64, K>,
+) -> Result<SVector<f64, K>, CliError> {
     let Some(values) = values else { return Ok(default) };
     if values.len() != K {
         return Err(CliError::Message(format!("`{field}` has {} entries, expected {K}", values.len())));
@@ -109,15 +113,22 @@ pub fn eval(molecule: &str, state_path: Option<&Path>) -> Result<String, CliErro
         Some(path) => {
             let text = if path.as_os_str() == "-" {
                 let mut s = String::new();
-                std::io::stdin().read_to_string(&mut s).map_err(|e| CliError::context("cannot read the state from stdin", e))?;
+                std::io::stdin()
+                    .read_to_string(&mut s)
+                    .map_err(|e| CliError::context("cannot read the state from stdin", e))?;
                 s
             } else {
-                std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?
+                std::fs::read_to_string(path)
+                    .map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?
             };
-            Some(serde_json::from_str(&text).map_err(|e| CliError::context(format!("invalid state file {}", path.display()), e))?)
+            Some(
+                serde_json::from_str(&text)
+                    .map_err(|e| CliError::context(format!("invalid state file {}", path.display()), e))?,
+            )
         }
     };
-    let fields = molecules::visit(molecule, Eval { state: state.as_ref() }).ok_or_else(|| unknown_molecule(molecule))??;
+    let fields =
+        molecules::visit(molecule, Eval { state: state.as_ref() }).ok_or_else(|| unknown_molecule(molecule))??;
     // One key per line, each value compact: matrices read as rows.
     let lines: Vec<String> = fields.iter().map(|(k, v)| format!("  {}: {v}", Value::from(*k))).collect();
     Ok(format!("{{\n{}\n}}", lines.join(",\n")))

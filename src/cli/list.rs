@@ -13,7 +13,8 @@ impl MoleculeVisitor for Describe {
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> String {
         let mut s = String::new();
         let _ = writeln!(s, "{} ({}): {NA} atoms, {N} internal coordinates", m.name(), m.source());
-        let atoms: Vec<String> = m.atoms().iter().map(|a| format!("{} ({}, {} Da)", a.label, a.element, a.mass_da)).collect();
+        let atoms: Vec<String> =
+            m.atoms().iter().map(|a| format!("{} ({}, {} Da)", a.label, a.element, a.mass_da)).collect();
         let _ = writeln!(s, "  atoms:       {}", atoms.join(", "));
         if N == 0 {
             let _ = writeln!(s, "  coordinates: none (rigid)");
@@ -21,7 +22,9 @@ impl MoleculeVisitor for Describe {
             let coords: Vec<String> = m
                 .coordinates()
                 .iter()
-                .map(|c| format!("{} [{} in the definition, {} at run time]", c.name, c.unit.name(), c.unit.atomic().name()))
+                .map(|c| {
+                    format!("{} [{} in the definition, {} at run time]", c.name, c.unit.name(), c.unit.atomic().name())
+                })
                 .collect();
             let _ = writeln!(s, "  coordinates: {}", coords.join(", "));
         }

@@ -108,9 +108,7 @@ impl CliError {
 /// Runs one command.
 pub fn execute(cli: Cli) -> Result<(), CliError> {
     match cli.command {
-        Command::List => {
-            say(&list::list())
-        }
+        Command::List => say(&list::list()),
         Command::Eval { molecule, state } => {
             let json = eval::eval(&molecule, state.as_deref())?;
             say(&format!("{json}\n"))
@@ -137,7 +135,11 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
         }
         Command::Bench { scene, out, quick } => {
             let report = bench::bench(&scene, out.as_deref(), quick)?;
-            let mut text = format!("{} runs; reference final-state error ~{:.1e} bohr\n", report.trials.len(), report.reference_error);
+            let mut text = format!(
+                "{} runs; reference final-state error ~{:.1e} bohr\n",
+                report.trials.len(),
+                report.reference_error
+            );
             for f in &report.files {
                 text.push_str(&format!("wrote {}\n", f.display()));
             }

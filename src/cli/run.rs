@@ -14,8 +14,10 @@ use crate::output::{Conservation, LabXyz, TrajectoryCsv, write_summary};
 use crate::runtime::diagnostic::FileError;
 use crate::runtime::frames::{FitOptions, LabState, from_lab};
 use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction, ReductionError, Rotation};
-use crate::runtime::hamiltonian::{HamiltonianError, PhaseState, euler_momenta_from_angular_momentum, hamiltonian, w_matrix};
-use crate::runtime::integrate::{Method, OdeSystem, Observer, Stats, solve};
+use crate::runtime::hamiltonian::{
+    HamiltonianError, PhaseState, euler_momenta_from_angular_momentum, hamiltonian, w_matrix,
+};
+use crate::runtime::integrate::{Method, Observer, OdeSystem, Stats, solve};
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use crate::runtime::units::CoordinateUnit;
 use crate::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
@@ -37,13 +39,15 @@ pub struct RunReport {
 
 /// Runs the scene at `path`, writing into `out_dir` (default `out/SCENE_NAME`).
 pub fn run(path: &Path, out_dir: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
     let scene = parse_scene(&path.display().to_string(), &text)?;
     let out_dir = match out_dir {
         Some(d) => d.to_owned(),
         None => Path::new("out").join(path.file_stem().unwrap_or_default()),
     };
-    std::fs::create_dir_all(&out_dir).map_err(|e| CliError::context(format!("cannot create {}", out_dir.display()), e))?;
+    std::fs::create_dir_all(&out_dir)
+        .map_err(|e| CliError::context(format!("cannot create {}", out_dir.display()), e))?;
     let name = scene.molecule.get_ref().clone();
     let visitor = Run { scene: &scene, out_dir: &out_dir, progress: !quiet && std::io::stderr().is_terminal() };
     molecules::visit(&name, visitor).ok_or_else(|| {
@@ -63,7 +67,10 @@ pub struct Start<const N: usize> {
 }
 
 /// Binds the scene's initial condition to molecule `m`: names to indices, units to atomic units.
-pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, scene: &Scene) -> Result<Start<N>, FileError> {
+pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+) -> Result<Start<N>, FileError> {
     let src = scene.source();
     let coords = m.coordinates();
     let index = |name: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
@@ -98,7 +105,11 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
                 let reference = m.reference_geometry().ok_or_else(|| {
                     src.error(
                         scene.molecule.span(),
-                        format!("the initial q does not give `{}` and {} has no reference geometry", coords[k].name, m.name()),
+                        format!(
+                            "the initial q does not give `{}` and {} has no reference geometry",
+                            coords[k].name,
+                            m.name()
+                        ),
                         format!("give every coordinate in q = {{ ... }}, or add `reference` values to {}", m.source()),
                     )
                 })?;
@@ -128,15 +139,21 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
                     // J is given (or follows from p_e); then ω = I⁻¹(J − A q̇) and p = Aᵀω + a q̇.
                     let j = match rot {
                         InitialRotation::J(j) => Vector3::from(*j),
-                        InitialRotation::Pe(pe) => w_matrix(&euler)
-                            .map_err(|e| src.whole_file(format!("the initial orientation: {e}"), "choose θ away from 0 and π"))?
-                            * Vector3::from(*pe),
+                        InitialRotation::Pe(pe) => {
+                            w_matrix(&euler).map_err(|e| {
+                                src.whole_file(format!("the initial orientation: {e}"), "choose θ away from 0 and π")
+                            })? * Vector3::from(*pe)
+                        }
                     };
                     let mut k = KineticMatrices::<N>::default();
                     m.kinetic(&qv, &mut k);
                     let inertia = k.inertia.cholesky().ok_or_else(|| {
                         src.whole_file(
-                            format!("the inertia tensor of {} is singular at the initial geometry q = {:?}", m.name(), qv.as_slice()),
+                            format!(
+                                "the inertia tensor of {} is singular at the initial geometry q = {:?}",
+                                m.name(),
+                                qv.as_slice()
+                            ),
                             "start from a geometry where the molecule is not linear",
                         )
                     })?;
@@ -149,7 +166,11 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
                     (pv, pe)
                 }
             };
-            Ok(Start { state: PhaseState { q: qv, p: pv, euler, pe }, com_position: Vector3::zeros(), com_velocity: Vector3::zeros() })
+            Ok(Start {
+                state: PhaseState { q: qv, p: pv, euler, pe },
+                com_position: Vector3::zeros(),
+                com_velocity: Vector3::zeros(),
+            })
         }
         Initial::Lab { positions, velocities, span } => {
             let atoms = m.atoms();
@@ -174,7 +195,11 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M,
             if !missing.is_empty() {
                 return Err(src.error(
                     span.clone(),
-                    format!("the lab-frame positions do not give atom{} {}", if missing.len() == 1 { "" } else { "s" }, missing.join(", ")),
+                    format!(
+                        "the lab-frame positions do not give atom{} {}",
+                        if missing.len() == 1 { "" } else { "s" },
+                        missing.join(", ")
+                    ),
                     "give the position of every atom, keyed by its label",
                 ));
             }
@@ -214,7 +239,8 @@ pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize
         scene.source().error(at, e.to_string(), "name coordinates from `rovib list` in run.frozen")
     })?;
     if start.pe == Vector3::zeros() {
-        reduction.rotation = Rotation::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
+        reduction.rotation =
+            Rotation::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
     }
     let system = ReducedSystem::new(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
     let mut y0 = vec![0.0; system.dim()];
@@ -240,10 +266,18 @@ impl MoleculeVisitor for Run<'_> {
 
         let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
         let mut recorder = Recorder::<M, N, NA> {
-            system: system.clone(),
-            trajectory: if scene.outputs.trajectory { Some(TrajectoryCsv::create(self.out_dir, &names)?) } else { None },
+            system,
+            trajectory: if scene.outputs.trajectory {
+                Some(TrajectoryCsv::create(self.out_dir, &names)?)
+            } else {
+                None
+            },
             lab: if scene.outputs.lab {
-                Some(LabXyz::create(self.out_dir, m.atoms().iter().map(|a| a.element).collect(), scene.time_unit.name())?)
+                Some(LabXyz::create(
+                    self.out_dir,
+                    m.atoms().iter().map(|a| a.element).collect(),
+                    scene.time_unit.name(),
+                )?)
             } else {
                 None
             },

@@ -217,14 +217,21 @@ where
             let mut system = HamiltonianSystem::new(molecule);
             let mut y0 = vec![0.0; PhaseState::<N>::DIM];
             initial.write_to(&mut y0).unwrap();
-            solve(&mut system, &settings.hamiltonian, 0.0, &y0, settings.t_end, settings.output_interval, &mut |t: f64,
-                                                                                                               y: &[f64]| {
-                let s = PhaseState::<N>::read_from(y).unwrap();
-                times.push(t);
-                states.push(BodyState::from_phase(&s).unwrap());
-                energies.push(hamiltonian(molecule, &s).unwrap());
-                ControlFlow::Continue(())
-            })
+            solve(
+                &mut system,
+                &settings.hamiltonian,
+                0.0,
+                &y0,
+                settings.t_end,
+                settings.output_interval,
+                &mut |t: f64, y: &[f64]| {
+                    let s = PhaseState::<N>::read_from(y).unwrap();
+                    times.push(t);
+                    states.push(BodyState::from_phase(&s).unwrap());
+                    energies.push(hamiltonian(molecule, &s).unwrap());
+                    ControlFlow::Continue(())
+                },
+            )
             .unwrap_or_else(|e| failed(&e))
         }
         Formulation::Production => {
@@ -232,13 +239,20 @@ where
             let mut y0 = vec![0.0; system.dim()];
             system.reduce(initial, &mut y0).unwrap();
             let copy = system;
-            solve(&mut system, &settings.hamiltonian, 0.0, &y0, settings.t_end, settings.output_interval, &mut |t: f64,
-                                                                                                               y: &[f64]| {
-                times.push(t);
-                states.push(copy.expand_body(y).unwrap());
-                energies.push(copy.energy(y).unwrap());
-                ControlFlow::Continue(())
-            })
+            solve(
+                &mut system,
+                &settings.hamiltonian,
+                0.0,
+                &y0,
+                settings.t_end,
+                settings.output_interval,
+                &mut |t: f64, y: &[f64]| {
+                    times.push(t);
+                    states.push(copy.expand_body(y).unwrap());
+                    energies.push(copy.energy(y).unwrap());
+                    ControlFlow::Continue(())
+                },
+            )
             .unwrap_or_else(|e| failed(&e))
         }
     };

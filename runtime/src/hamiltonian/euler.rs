@@ -121,23 +121,6 @@ pub fn euler_momenta_from_angular_momentum(euler: &Vector3<f64>, j: &Vector3<f64
     angular_velocity_matrix(euler).transpose() * j
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn w_is_the_inverse_transpose_of_m_and_undefined_at_gimbal_lock() {
-        let euler = Vector3::new(0.3, 1.1, -2.0);
-        let w = w_matrix(&euler).unwrap();
-        let m = angular_velocity_matrix(&euler);
-        assert!((w * m.transpose() - Matrix3::identity()).abs().max() < 1e-15);
-        let j = Vector3::new(1.0, -2.0, 0.5);
-        let pe = euler_momenta_from_angular_momentum(&euler, &j);
-        assert!((angular_momentum_from_euler_momenta(&euler, &pe).unwrap() - j).norm() < 1e-15);
-        assert_eq!(w_matrix(&Vector3::new(0.3, 0.0, -2.0)), Err(HamiltonianError::EulerSingular { theta: 0.0 }));
-    }
-}
-
 /// The Euler angles `(φ, θ, ψ)` of a rotation matrix `R = Rz(φ) Rx(θ) Rz(ψ)`, with `θ ∈ [0, π]`
 /// and `φ, ψ ∈ (−π, π]`; the inverse of [`rotation_matrix`] wherever `sin θ ≠ 0`.
 ///
@@ -158,5 +141,22 @@ pub fn euler_angles(rotation: &Matrix3<f64>) -> Vector3<f64> {
         // R = Rz(φ ± ψ) (with a flip for θ = π): put it all into φ.
         let phi = r[(1, 0)].atan2(r[(0, 0)]);
         Vector3::new(phi, theta, 0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn w_is_the_inverse_transpose_of_m_and_undefined_at_gimbal_lock() {
+        let euler = Vector3::new(0.3, 1.1, -2.0);
+        let w = w_matrix(&euler).unwrap();
+        let m = angular_velocity_matrix(&euler);
+        assert!((w * m.transpose() - Matrix3::identity()).abs().max() < 1e-15);
+        let j = Vector3::new(1.0, -2.0, 0.5);
+        let pe = euler_momenta_from_angular_momentum(&euler, &j);
+        assert!((angular_momentum_from_euler_momenta(&euler, &pe).unwrap() - j).norm() < 1e-15);
+        assert_eq!(w_matrix(&Vector3::new(0.3, 0.0, -2.0)), Err(HamiltonianError::EulerSingular { theta: 0.0 }));
     }
 }

@@ -195,7 +195,11 @@ impl<const N: usize> MetricFactor<N> {
     /// relative pivot: how a run stops when a molecule approaches a singular geometry (a
     /// triatomic bending to linear) before the equations lose accuracy.
     #[inline(always)]
-    pub fn with_tolerance(k: &KineticMatrices<N>, q: &SVector<f64, N>, min_pivot: f64) -> Result<Self, HamiltonianError> {
+    pub fn with_tolerance(
+        k: &KineticMatrices<N>,
+        q: &SVector<f64, N>,
+        min_pivot: f64,
+    ) -> Result<Self, HamiltonianError> {
         let tol = min_pivot.max(PIVOT_TOLERANCE);
         if !(all_finite(k.a.as_slice()) & all_finite(k.coriolis.as_slice()) & all_finite(k.inertia.as_slice())) {
             return Err(HamiltonianError::NonFinite { quantity: "kinetic matrices a, A, I" });
@@ -968,7 +972,11 @@ where
 
     /// The unpacked state and the velocities `(ω, q̇)`.
     #[inline]
-    fn kinematics(&self, y: &[f64], o: &Offsets) -> Result<(Unpacked<N>, Vector3<f64>, SVector<f64, N>), HamiltonianError> {
+    fn kinematics(
+        &self,
+        y: &[f64],
+        o: &Offsets,
+    ) -> Result<(Unpacked<N>, Vector3<f64>, SVector<f64, N>), HamiltonianError> {
         if y.len() != o.dim {
             return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: y.len() });
         }
