@@ -236,3 +236,52 @@ impl MoleculeVisitor for PotentialGradient {
 fn potential_gradient_matches_finite_differences() {
     for_each_molecule(PotentialGradient);
 }
+
+/// The fused `kinetic_and_gradient` gives exactly what `kinetic` and `kinetic_energy_gradient`
+/// give separately (the same expressions, computed once), and hands the kinetic matrices to
+/// the velocity callback before using the velocities.
+#[derive(Copy, Clone)]
+struct Fused;
+impl MoleculeVisitor for Fused {
+    type Output = ();
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
+        let mut rng = Rng::new(7);
+        for _ in 0..POINTS {
+            let q = random_q(&m, &mut rng);
+            let omega = Vector3::from_fn(|_, _| rng.uniform(-1e-3, 1e-3));
+            let qdot = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-1e-3, 1e-3));
+            let mut k = KineticMatrices::<N>::default();
+            let mut grad = SVector::<f64, N>::zeros();
+            let mut seen = None;
+            let (w, qd, t) = m
+                .kinetic_and_gradient(
+                    &q,
+                    &mut k,
+                    |k| {
+                        seen = Some(*k);
+                        Ok::<_, ()>((omega, qdot))
+                    },
+                    &mut grad,
+                )
+                .unwrap();
+            let mut k_ref = KineticMatrices::<N>::default();
+            m.kinetic(&q, &mut k_ref);
+            let mut grad_ref = SVector::<f64, N>::zeros();
+            let t_ref = m.kinetic_energy_gradient(&q, &omega, &qdot, &mut grad_ref);
+            assert_eq!(seen, Some(k_ref), "{}: the callback sees the finished kinetic matrices", m.name());
+            assert_eq!(k, k_ref);
+            assert_eq!((w, qd), (omega, qdot));
+            assert_eq!(grad, grad_ref, "{}", m.name());
+            assert_eq!(t, t_ref);
+            // An error from the callback is returned as is.
+            let err =
+                m.kinetic_and_gradient(&q, &mut k, |_| Err::<(Vector3<f64>, SVector<f64, N>), _>("stop"), &mut grad);
+            assert_eq!(err, Err("stop"));
+        }
+    }
+}
+
+#[test]
+fn fused_kinetic_and_gradient_equals_the_separate_functions() {
+    for_each_molecule(Fused);
+}

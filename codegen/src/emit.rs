@@ -32,6 +32,19 @@ pub struct OutputGroup {
     pub entries: Vec<(TokenStream, ExprId)>,
 }
 
+/// A point inside a function where some inputs become available only after a statement: the
+/// outputs before it are stored, then the statement runs (it may read them), then the
+/// remaining inputs are loaded. Nodes that need none of the late inputs are computed before
+/// the barrier and shared with everything after it.
+pub struct Barrier {
+    /// How many of the function's output groups are stored before the statement.
+    pub groups_before: usize,
+    /// The statement, e.g. `let (omega, qdot) = velocities(k)?;`.
+    pub statement: TokenStream,
+    /// Variables loaded only after the statement.
+    pub late_vars: Vec<u32>,
+}
+
 /// One function to emit.
 pub struct FunctionSpec {
     /// Its name, for statistics.
@@ -46,6 +59,10 @@ pub struct FunctionSpec {
     pub groups: Vec<OutputGroup>,
     /// The returned scalar, if any.
     pub ret: Option<ExprId>,
+    /// How to wrap the returned scalar (`Ok((omega, qdot, #ret))`), if not returned as is.
+    pub ret_wrap: Option<fn(TokenStream) -> TokenStream>,
+    /// A barrier splitting the body in two, if any.
+    pub barrier: Option<Barrier>,
 }
 
 /// Operation counts of one emitted function.
@@ -181,6 +198,135 @@ fn atom(ident: &Ident) -> Printed {
     Printed { tokens: quote!(#ident), prec: 4, weight: 0 }
 }
 
+/// The state of emitting one function: what is printed so far and the statements.
+struct Emitter<'a> {
+    lg: &'a Graph,
+    spec: &'a FunctionSpec,
+    var_idents: &'a [Ident],
+    uses: Vec<u32>,
+    /// `trig[x] = [sin(x), cos(x)]` where the function needs them.
+    trig: HashMap<ExprId, [Option<ExprId>; 2]>,
+    printed: Vec<Option<Printed>>,
+    statements: Vec<TokenStream>,
+    temporaries: usize,
+    ops_emitted: u64,
+    next_temp: usize,
+}
+
+impl Emitter<'_> {
+    fn fresh(&mut self) -> Ident {
+        let t = format_ident!("t{}", self.next_temp);
+        self.next_temp += 1;
+        t
+    }
+
+    fn get(&self, c: ExprId) -> Printed {
+        self.printed[c.index()].clone().expect("children are printed before parents")
+    }
+
+    /// Prints node `i` (inline or as a `let`), in id order.
+    fn node(&mut self, i: usize) {
+        if self.printed[i].is_some() {
+            return;
+        }
+        let node = self.lg.nodes()[i];
+        self.ops_emitted += op_cost(node);
+        let expr = match node {
+            Node::Const(bits) => {
+                self.printed[i] = Some(literal(f64::from_bits(bits), false));
+                return;
+            }
+            Node::Var(k) => {
+                let ident = &self.var_idents[k as usize];
+                let load = self
+                    .spec
+                    .inputs
+                    .iter()
+                    .find(|(v, _)| *v == k)
+                    .map(|(_, t)| t.clone())
+                    .expect("every variable a function reaches is one of its inputs");
+                self.statements.push(quote!(let #ident = #load;));
+                self.printed[i] = Some(atom(ident));
+                return;
+            }
+            Node::Call(Func::Sin | Func::Cos, x) if self.trig[&x].iter().all(Option::is_some) => {
+                // The pair is one call, counted once: the second node is skipped as printed.
+                let [s, c] = self.trig[&x].map(|id| id.expect("both present"));
+                let (ts, tc) = (self.fresh(), self.fresh());
+                let recv = self.get(x).at_least(4);
+                self.statements.push(quote!(let (#ts, #tc) = #recv.sin_cos();));
+                self.temporaries += 2;
+                self.printed[s.index()] = Some(atom(&ts));
+                self.printed[c.index()] = Some(atom(&tc));
+                return;
+            }
+            Node::Neg(a) => {
+                let a = self.get(a);
+                let t = a.at_least(4);
+                Printed { tokens: quote!(-#t), prec: 3, weight: a.weight + 1 }
+            }
+            Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
+                let (a, b) = (self.get(a), self.get(b));
+                let prec = if matches!(node, Node::Add(..) | Node::Sub(..)) { 1 } else { 2 };
+                // Left-associative: the right operand must bind strictly tighter to keep the
+                // graph's evaluation order.
+                let (l, r) = (a.at_least(prec), b.at_least(prec + 1));
+                let tokens = match node {
+                    Node::Add(..) => quote!(#l + #r),
+                    Node::Sub(..) => quote!(#l - #r),
+                    Node::Mul(..) => quote!(#l * #r),
+                    _ => quote!(#l / #r),
+                };
+                Printed { tokens, prec, weight: a.weight + b.weight + 1 }
+            }
+            Node::Powi(..) => unreachable!("integer powers were lowered to multiplications"),
+            Node::Powf(a, b) => {
+                let (a, b) = (receiver(self.lg, a, &self.printed), self.get(b));
+                let (ra, tb) = (a.at_least(4), &b.tokens);
+                Printed { tokens: quote!(#ra.powf(#tb)), prec: 4, weight: a.weight + b.weight + 1 }
+            }
+            Node::Call(f, a) => {
+                let a = receiver(self.lg, a, &self.printed);
+                let ra = a.at_least(4);
+                let method = Ident::new(f.name(), Span::call_site());
+                Printed { tokens: quote!(#ra.#method()), prec: 4, weight: a.weight + 1 }
+            }
+            Node::Atan2(y, x) => {
+                let (y, x) = (receiver(self.lg, y, &self.printed), self.get(x));
+                let (ry, tx) = (y.at_least(4), &x.tokens);
+                Printed { tokens: quote!(#ry.atan2(#tx)), prec: 4, weight: y.weight + x.weight + 1 }
+            }
+        };
+        if self.uses[i] > 1 || expr.weight > MAX_INLINE_WEIGHT {
+            let t = self.fresh();
+            let tokens = &expr.tokens;
+            self.statements.push(quote!(let #t = #tokens;));
+            self.temporaries += 1;
+            self.printed[i] = Some(atom(&t));
+        } else {
+            self.printed[i] = Some(expr);
+        }
+    }
+
+    /// Stores one output group: structural zeros by one `fill(0.0)`, the rest entry by entry.
+    fn store(&mut self, group: &OutputGroup, values: &[ExprId]) {
+        if group.entries.is_empty() {
+            return;
+        }
+        let target = &group.target;
+        if values.iter().any(|&v| self.lg.is_zero(v)) {
+            self.statements.push(quote!(#target.fill(0.0);));
+        }
+        for ((index, _), v) in group.entries.iter().zip(values) {
+            if self.lg.is_zero(*v) {
+                continue;
+            }
+            let value = &self.printed[v.index()].as_ref().expect("outputs are printed").tokens;
+            self.statements.push(quote!(#target #index = #value;));
+        }
+    }
+}
+
 /// Emits one function: its tokens and statistics.
 pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -> (TokenStream, FunctionStats) {
     let mut roots: Vec<ExprId> = spec.groups.iter().flat_map(|g| g.entries.iter().map(|(_, e)| *e)).collect();
@@ -212,140 +358,67 @@ pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -
         }
     }
 
-    let mut printed: Vec<Option<Printed>> = vec![None; lg.len()];
-    let mut statements: Vec<TokenStream> = Vec::new();
-    let mut temporaries = 0usize;
-    let mut ops_emitted = 0u64;
-    let mut next_temp = 0usize;
-    let mut fresh = || {
-        let t = format_ident!("t{}", next_temp);
-        next_temp += 1;
-        t
+    // Nodes that need a late input (directly or through a child) come after the barrier.
+    let mut late = vec![false; lg.len()];
+    if let Some(b) = &spec.barrier {
+        for (i, node) in lg.nodes().iter().enumerate() {
+            late[i] = match *node {
+                Node::Var(k) => b.late_vars.contains(&k),
+                _ => node.children().any(|c| late[c.index()]),
+            };
+        }
+    }
+
+    let mut e = Emitter {
+        lg,
+        spec,
+        var_idents,
+        uses,
+        trig,
+        printed: vec![None; lg.len()],
+        statements: Vec::new(),
+        temporaries: 0,
+        ops_emitted: 0,
+        next_temp: 0,
     };
-
-    for (i, &node) in lg.nodes().iter().enumerate() {
-        if !reachable[i] || printed[i].is_some() {
-            continue;
+    // Each group's values, in the lowered graph.
+    let mut values: Vec<&[ExprId]> = Vec::new();
+    let mut at = 0;
+    for g in &spec.groups {
+        values.push(&lowered_roots[at..at + g.entries.len()]);
+        at += g.entries.len();
+    }
+    let groups_before = spec.barrier.as_ref().map_or(spec.groups.len(), |b| b.groups_before);
+    for i in (0..lg.len()).filter(|&i| reachable[i] && !late[i]) {
+        e.node(i);
+    }
+    for (g, v) in spec.groups.iter().zip(&values).take(groups_before) {
+        e.store(g, v);
+    }
+    if let Some(b) = &spec.barrier {
+        e.statements.push(b.statement.clone());
+        for i in (0..lg.len()).filter(|&i| reachable[i] && late[i]) {
+            e.node(i);
         }
-        let p = |c: ExprId, printed: &Vec<Option<Printed>>| -> Printed {
-            printed[c.index()].clone().expect("children are printed before parents")
-        };
-        ops_emitted += op_cost(node);
-        let expr = match node {
-            Node::Const(bits) => {
-                printed[i] = Some(literal(f64::from_bits(bits), false));
-                continue;
-            }
-            Node::Var(k) => {
-                let ident = &var_idents[k as usize];
-                let load = spec
-                    .inputs
-                    .iter()
-                    .find(|(v, _)| *v == k)
-                    .map(|(_, t)| t.clone())
-                    .expect("every variable a function reaches is one of its inputs");
-                statements.push(quote!(let #ident = #load;));
-                printed[i] = Some(atom(ident));
-                continue;
-            }
-            Node::Call(Func::Sin | Func::Cos, x) if trig[&x].iter().all(Option::is_some) => {
-                let [s, c] = trig[&x].map(|id| id.expect("both present"));
-                let (ts, tc) = (fresh(), fresh());
-                let recv = p(x, &printed).at_least(4);
-                statements.push(quote!(let (#ts, #tc) = #recv.sin_cos();));
-                temporaries += 2;
-                // The pair is one call, counted once: the second node is skipped as printed.
-                printed[s.index()] = Some(atom(&ts));
-                printed[c.index()] = Some(atom(&tc));
-                continue;
-            }
-            Node::Neg(a) => {
-                let a = p(a, &printed);
-                let t = a.at_least(4);
-                Printed { tokens: quote!(-#t), prec: 3, weight: a.weight + 1 }
-            }
-            Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
-                let (a, b) = (p(a, &printed), p(b, &printed));
-                let prec = if matches!(node, Node::Add(..) | Node::Sub(..)) { 1 } else { 2 };
-                // Left-associative: the right operand must bind strictly tighter to keep the
-                // graph's evaluation order.
-                let (l, r) = (a.at_least(prec), b.at_least(prec + 1));
-                let tokens = match node {
-                    Node::Add(..) => quote!(#l + #r),
-                    Node::Sub(..) => quote!(#l - #r),
-                    Node::Mul(..) => quote!(#l * #r),
-                    _ => quote!(#l / #r),
-                };
-                Printed { tokens, prec, weight: a.weight + b.weight + 1 }
-            }
-            Node::Powi(..) => unreachable!("integer powers were lowered to multiplications"),
-            Node::Powf(a, b) => {
-                let (a, b) = (receiver(lg, a, &printed), p(b, &printed));
-                let (ra, tb) = (a.at_least(4), &b.tokens);
-                Printed { tokens: quote!(#ra.powf(#tb)), prec: 4, weight: a.weight + b.weight + 1 }
-            }
-            Node::Call(f, a) => {
-                let a = receiver(lg, a, &printed);
-                let ra = a.at_least(4);
-                let method = Ident::new(f.name(), Span::call_site());
-                Printed { tokens: quote!(#ra.#method()), prec: 4, weight: a.weight + 1 }
-            }
-            Node::Atan2(y, x) => {
-                let (y, x) = (receiver(lg, y, &printed), p(x, &printed));
-                let (ry, tx) = (y.at_least(4), &x.tokens);
-                Printed { tokens: quote!(#ry.atan2(#tx)), prec: 4, weight: y.weight + x.weight + 1 }
-            }
-        };
-        if uses[i] > 1 || expr.weight > MAX_INLINE_WEIGHT {
-            let t = fresh();
-            let tokens = &expr.tokens;
-            statements.push(quote!(let #t = #tokens;));
-            temporaries += 1;
-            printed[i] = Some(atom(&t));
-        } else {
-            printed[i] = Some(expr);
+        for (g, v) in spec.groups.iter().zip(&values).skip(groups_before) {
+            e.store(g, v);
         }
     }
-
-    let mut zero_outputs = 0usize;
-    let mut outputs = 0usize;
-    let mut k = 0usize;
-    for group in &spec.groups {
-        let target = &group.target;
-        let values: Vec<ExprId> = group
-            .entries
-            .iter()
-            .map(|_| {
-                k += 1;
-                lowered_roots[k - 1]
-            })
-            .collect();
-        outputs += values.len();
-        let zeros = values.iter().filter(|&&v| lg.is_zero(v)).count();
-        zero_outputs += zeros;
-        if group.entries.is_empty() {
-            continue;
-        }
-        if zeros > 0 {
-            statements.push(quote!(#target.fill(0.0);));
-        }
-        for ((index, _), v) in group.entries.iter().zip(&values) {
-            if lg.is_zero(*v) {
-                continue;
-            }
-            let value = &printed[v.index()].as_ref().expect("outputs are printed").tokens;
-            statements.push(quote!(#target #index = #value;));
-        }
-    }
+    let zero_outputs = values.iter().flat_map(|v| v.iter()).filter(|&&v| lg.is_zero(v)).count();
+    let mut outputs = values.iter().map(|v| v.len()).sum::<usize>();
     if spec.ret.is_some() {
         outputs += 1;
         let r = lowered_roots[lowered_roots.len() - 1];
-        let value = &printed[r.index()].as_ref().expect("the return value is printed").tokens;
-        statements.push(quote!(#value));
+        let value = e.printed[r.index()].as_ref().expect("the return value is printed").tokens.clone();
+        e.statements.push(match spec.ret_wrap {
+            Some(wrap) => wrap(value),
+            None => value,
+        });
     }
 
     let doc = doc_lines(&spec.doc);
     let signature = &spec.signature;
+    let statements = &e.statements;
     let tokens = quote! {
         #doc
         #signature {
@@ -358,8 +431,8 @@ pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -
         zero_outputs,
         ops_tree: stats_before.0,
         ops_per_output: stats_before.1,
-        ops_emitted,
-        temporaries,
+        ops_emitted: e.ops_emitted,
+        temporaries: e.temporaries,
     };
     (tokens, stats)
 }

@@ -33,7 +33,7 @@ pub mod units;
 pub use definition::{Definition, DefinitionError, parse_definition};
 pub use emit::FunctionStats;
 
-use emit::{FunctionSpec, OutputGroup, doc_lines, index};
+use emit::{Barrier, FunctionSpec, OutputGroup, doc_lines, index};
 use kinetic::{KineticExprs, KineticSet, OMEGA_NAMES};
 use units::{AngleUnit, CoordinateUnit, DALTON_IN_ELECTRON_MASSES, LengthUnit};
 
@@ -235,6 +235,8 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
             inputs: q_inputs.clone(),
             groups: vec![positions_group(quote!(r), &e.positions)],
             ret: None,
+            ret_wrap: None,
+            barrier: None,
         },
         FunctionSpec {
             name: "positions_jacobian",
@@ -243,6 +245,8 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
             inputs: q_inputs.clone(),
             groups: e.jacobian.iter().enumerate().map(|(k, rows)| positions_group(ix(quote!(dr), k), rows)).collect(),
             ret: None,
+            ret_wrap: None,
+            barrier: None,
         },
         FunctionSpec {
             name: "kinetic",
@@ -251,6 +255,8 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
             inputs: q_inputs.clone(),
             groups: kinetic_groups(&quote!(k), &e.kinetic),
             ret: None,
+            ret_wrap: None,
+            barrier: None,
         },
         FunctionSpec {
             name: "kinetic_jacobian",
@@ -264,6 +270,8 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
                 .flat_map(|(l, set)| kinetic_groups(&ix(quote!(dk), l), set))
                 .collect(),
             ret: None,
+            ret_wrap: None,
+            barrier: None,
         },
         FunctionSpec {
             name: "kinetic_energy_gradient",
@@ -277,12 +285,45 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
                     grad: &mut SVector<f64, #n>,
                 ) -> f64
             ),
-            inputs: velocity_inputs,
+            inputs: velocity_inputs.clone(),
             groups: vec![OutputGroup {
                 target: quote!(grad),
                 entries: e.kinetic_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
             }],
             ret: Some(e.kinetic_energy),
+            ret_wrap: None,
+            barrier: None,
+        },
+        FunctionSpec {
+            name: "kinetic_and_gradient",
+            doc: "The kinetic matrices into `k`, then (ω, q̇) from `velocities(k)`, then ∂T/∂q at those\n\
+                  velocities into `grad`; both halves share every position term. Returns (ω, q̇, T)."
+                .into(),
+            signature: quote!(
+                fn kinetic_and_gradient<E>(
+                    &self,
+                    q: #q_ty,
+                    k: &mut KineticMatrices<#n>,
+                    velocities: impl FnOnce(&KineticMatrices<#n>) -> Result<(Vector3<f64>, SVector<f64, #n>), E>,
+                    grad: &mut SVector<f64, #n>,
+                ) -> Result<(Vector3<f64>, SVector<f64, #n>, f64), E>
+            ),
+            inputs: velocity_inputs.clone(),
+            groups: {
+                let mut groups = kinetic_groups(&quote!(k), &e.kinetic);
+                groups.push(OutputGroup {
+                    target: quote!(grad),
+                    entries: e.kinetic_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
+                });
+                groups
+            },
+            ret: Some(e.kinetic_energy),
+            ret_wrap: Some(|t| quote!(Ok((omega, qdot, #t)))),
+            barrier: Some(Barrier {
+                groups_before: 3,
+                statement: quote!(let (omega, qdot) = velocities(k)?;),
+                late_vars: (nc..2 * nc + 3).map(|v| v as u32).collect(),
+            }),
         },
         FunctionSpec {
             name: "potential",
@@ -291,6 +332,8 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
             inputs: q_inputs.clone(),
             groups: vec![],
             ret: Some(e.potential),
+            ret_wrap: None,
+            barrier: None,
         },
         FunctionSpec {
             name: "potential_gradient",
@@ -302,6 +345,8 @@ fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<Funct
                 entries: e.potential_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
             }],
             ret: Some(e.potential),
+            ret_wrap: None,
+            barrier: None,
         },
     ];
     let mut functions = Vec::new();

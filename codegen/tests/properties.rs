@@ -205,6 +205,8 @@ proptest! {
             inputs: vec![(0, quote!(q[0])), (1, quote!(q[1]))],
             groups: vec![OutputGroup { target: quote!(out), entries }],
             ret: None,
+            ret_wrap: None,
+            barrier: None,
         };
         let idents = vec![quote::format_ident!("x"), quote::format_ident!("y")];
         let (tokens, stats) = emit::emit_function(&g, &spec, &idents);

@@ -107,6 +107,27 @@ pub trait Molecule<const N: usize, const NA: usize> {
         grad: &mut SVector<f64, N>,
     ) -> f64;
 
+    /// [`Molecule::kinetic`] and [`Molecule::kinetic_energy_gradient`] in one call, with the
+    /// velocities supplied in between: computes `a`, `A`, `I` into `k`, calls `velocities(k)`
+    /// for `(ω, q̇)` (typically `M⁻¹ (J, p)` from a factorization of `k`), then the gradient of
+    /// `T` at those velocities into `grad`, and returns `(ω, q̇, T)`.
+    ///
+    /// Generated molecules override this with one function in which both halves share every
+    /// position term and every `sin`/`cos`, which the two separate calls compute twice; the
+    /// default just makes the two calls.
+    fn kinetic_and_gradient<E>(
+        &self,
+        q: &SVector<f64, N>,
+        k: &mut KineticMatrices<N>,
+        velocities: impl FnOnce(&KineticMatrices<N>) -> Result<(Vector3<f64>, SVector<f64, N>), E>,
+        grad: &mut SVector<f64, N>,
+    ) -> Result<(Vector3<f64>, SVector<f64, N>, f64), E> {
+        self.kinetic(q, k);
+        let (omega, qdot) = velocities(k)?;
+        let t = self.kinetic_energy_gradient(q, &omega, &qdot, grad);
+        Ok((omega, qdot, t))
+    }
+
     /// The potential energy `U(q)` in hartree.
     fn potential(&self, q: &SVector<f64, N>) -> f64;
 

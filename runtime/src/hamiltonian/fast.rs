@@ -108,15 +108,14 @@
 //!
 //! # Cost
 //!
-//! Water (N = 3), one evaluation through [`OdeSystem::rhs`], on the development machine (a
-//! shared 2-core AMD EPYC VM at 2.6 GHz; `benches/rhs.rs`): seed ≈ 1.37 µs (10 500
-//! instructions), fast ≈ 0.20 µs (2 300 instructions). Of the fast path, the generated
-//! `kinetic` (39 ns), `kinetic_energy_gradient` (48 ns) and `potential_gradient` (12 ns) are
-//! about half, the two Euler-angle `sin_cos` a tenth, the factorization and solve (38 ns) a
-//! fifth. The generated `kinetic` and `kinetic_energy_gradient` recompute the same position
-//! terms, including the same `sin_cos`; a generated pair that shares them (prototyped by hand in
-//! `benches/rhs.rs`, `fused`) measured 10 % fewer instructions and 14 % less time for water,
-//! and would save more for molecules with more angles (each `sin_cos` is paid twice today).
+//! Water (N = 3), one evaluation through [`OdeSystem::rhs`], counted by callgrind
+//! (`ROVIB_RHS_PROFILE=PART` in `benches/rhs.rs`; instructions do not depend on the machine's
+//! load): seed 10 325 instructions, fast path 2 117, production [`ReducedSystem`] 2 046, J = 0
+//! 1 838; in time on the development machine (a shared 2-core AMD EPYC VM at 2.6 GHz) seed
+//! ≈ 1.37 µs against ≈ 0.2 µs. The generated code is about half of the fast path, the
+//! factorization and solve a fifth. The generated [`Molecule::kinetic_and_gradient`] computes
+//! the position terms (and every `sin_cos`) once for `a, A, I` and for `∂T/∂q`: 2 117
+//! instructions against 2 394 with the two separate generated calls (`rhs/NAME/fast_unfused`).
 //!
 //! # Tests
 //!
@@ -454,29 +453,31 @@ impl Euler {
     }
 }
 
-/// `ṗ = ∂T/∂q|_(ω, q̇) − ∂U/∂q` with the seed's finiteness checks. (The `T` that
-/// `kinetic_energy_gradient` returns is not needed: where T is, `½ v · b` is cheaper.)
-#[inline]
-fn internal_force<M, const N: usize, const NA: usize>(
+/// The kinetic matrices, the velocities `(ω, q̇)` from `factor` (the caller's metric solve),
+/// and the internal force `ṗ = ∂T/∂q|_(ω, q̇) − ∂U/∂q`, through the generated
+/// [`Molecule::kinetic_and_gradient`], which computes the position terms once for both halves.
+/// Returns `(ω, q̇, ṗ)`.
+#[inline(always)]
+fn velocities_and_force<M, const N: usize, const NA: usize>(
     molecule: &M,
     q: &SVector<f64, N>,
-    omega: &Vector3<f64>,
-    qdot: &SVector<f64, N>,
-) -> Result<SVector<f64, N>, HamiltonianError>
+    factor: impl FnOnce(&KineticMatrices<N>) -> Result<(Vector3<f64>, SVector<f64, N>), HamiltonianError>,
+) -> Result<(Vector3<f64>, SVector<f64, N>, SVector<f64, N>), HamiltonianError>
 where
     M: Molecule<N, NA> + ?Sized,
 {
+    let mut k = KineticMatrices::default();
+    let mut dt = SVector::zeros();
+    let (omega, qdot, _) = molecule.kinetic_and_gradient(q, &mut k, factor, &mut dt)?;
+    if !all_finite(dt.as_slice()) {
+        return Err(HamiltonianError::NonFinite { quantity: "kinetic energy gradient ∂T/∂q" });
+    }
     let mut du = SVector::zeros();
     molecule.potential_gradient(q, &mut du);
     if !all_finite(du.as_slice()) {
         return Err(HamiltonianError::NonFinite { quantity: "potential gradient ∂U/∂q" });
     }
-    let mut dt = SVector::zeros();
-    molecule.kinetic_energy_gradient(q, omega, qdot, &mut dt);
-    if !all_finite(dt.as_slice()) {
-        return Err(HamiltonianError::NonFinite { quantity: "kinetic energy gradient ∂T/∂q" });
-    }
-    Ok(dt - du)
+    Ok((omega, qdot, dt - du))
 }
 
 fn finite(x: f64, quantity: &'static str) -> Result<f64, HamiltonianError> {
@@ -521,10 +522,8 @@ where
     check_state(state)?;
     let e = Euler::new(&state.euler)?;
     let j = e.j(&state.pe);
-    let mut k = KineticMatrices::default();
-    molecule.kinetic(&state.q, &mut k);
-    let (omega, qdot) = MetricFactor::new(&k, &state.q)?.solve(&j, &state.p);
-    let pdot = internal_force(molecule, &state.q, &omega, &qdot)?;
+    let (omega, qdot, pdot) =
+        velocities_and_force(molecule, &state.q, |k| Ok(MetricFactor::new(k, &state.q)?.solve(&j, &state.p)))?;
     let out =
         PhaseState { q: qdot, p: pdot, euler: e.euler_rates(&omega), pe: e.euler_momenta_rates(&state.pe, &j, &omega) };
     check_rhs(&out)?;
@@ -952,10 +951,8 @@ where
     /// permutation) as `M_red ⊕ 1`, so `M⁻¹ (J, p)` with `p_f = 0` gives `q̇_f = 0` exactly and
     /// the active block `M_red⁻¹ (J, p_a)`.
     #[inline]
-    fn mask(&self, k: &mut KineticMatrices<N>) {
-        if self.all_active {
-            return;
-        }
+    fn masked(&self, k: &KineticMatrices<N>) -> KineticMatrices<N> {
+        let mut k = *k;
         for f in 0..N {
             if !self.reduction.active[f] {
                 for j in 0..N {
@@ -968,6 +965,41 @@ where
                 }
             }
         }
+        k
+    }
+
+    /// The unpacked state, after checking the slice.
+    #[inline]
+    fn checked_unpack(&self, y: &[f64], o: &Offsets) -> Result<Unpacked<N>, HamiltonianError> {
+        if y.len() != o.dim {
+            return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: y.len() });
+        }
+        if !all_finite(y) {
+            return Err(HamiltonianError::NonFinite { quantity: "state (q, p, orientation, J)" });
+        }
+        Ok(self.unpack(y, o))
+    }
+
+    /// `(ω, q̇) = M_red⁻¹ (J, p)` from the kinetic matrices at `u.q`.
+    #[inline(always)]
+    fn solve(
+        &self,
+        k: &KineticMatrices<N>,
+        u: &Unpacked<N>,
+        o: &Offsets,
+    ) -> Result<(Vector3<f64>, SVector<f64, N>), HamiltonianError> {
+        let masked;
+        let k = if self.all_active {
+            k
+        } else {
+            masked = self.masked(k);
+            &masked
+        };
+        let factor = MetricFactor::with_tolerance(k, &u.q, self.min_pivot)?;
+        Ok(match o.j {
+            Some(_) => factor.solve(&u.j, &u.p),
+            None => factor.solve_zero_j(&u.p),
+        })
     }
 
     /// The unpacked state and the velocities `(ω, q̇)`.
@@ -977,21 +1009,10 @@ where
         y: &[f64],
         o: &Offsets,
     ) -> Result<(Unpacked<N>, Vector3<f64>, SVector<f64, N>), HamiltonianError> {
-        if y.len() != o.dim {
-            return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: y.len() });
-        }
-        if !all_finite(y) {
-            return Err(HamiltonianError::NonFinite { quantity: "state (q, p, orientation, J)" });
-        }
-        let u = self.unpack(y, o);
+        let u = self.checked_unpack(y, o)?;
         let mut k = KineticMatrices::default();
         self.molecule.kinetic(&u.q, &mut k);
-        self.mask(&mut k);
-        let factor = MetricFactor::with_tolerance(&k, &u.q, self.min_pivot)?;
-        let (omega, qdot) = match o.j {
-            Some(_) => factor.solve(&u.j, &u.p),
-            None => factor.solve_zero_j(&u.p),
-        };
+        let (omega, qdot) = self.solve(&k, &u, o)?;
         Ok((u, omega, qdot))
     }
 
@@ -1095,8 +1116,8 @@ where
         if dydt.len() != o.dim {
             return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: dydt.len() });
         }
-        let (u, omega, qdot) = self.kinematics(y, &o)?;
-        let pdot = internal_force(self.molecule, &u.q, &omega, &qdot)?;
+        let u = self.checked_unpack(y, &o)?;
+        let (omega, qdot, pdot) = velocities_and_force(self.molecule, &u.q, |k| self.solve(k, &u, &o))?;
         for (slot, &k) in self.index[..self.n_active].iter().enumerate() {
             dydt[slot] = qdot[k];
             dydt[o.p + slot] = pdot[k];
