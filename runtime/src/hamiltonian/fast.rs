@@ -453,6 +453,9 @@ impl Euler {
     }
 }
 
+/// `(ω, q̇, ṗ)`.
+type VelocitiesAndForce<const N: usize> = (Vector3<f64>, SVector<f64, N>, SVector<f64, N>);
+
 /// The kinetic matrices, the velocities `(ω, q̇)` from `factor` (the caller's metric solve),
 /// and the internal force `ṗ = ∂T/∂q|_(ω, q̇) − ∂U/∂q`, through the generated
 /// [`Molecule::kinetic_and_gradient`], which computes the position terms once for both halves.
@@ -462,7 +465,7 @@ fn velocities_and_force<M, const N: usize, const NA: usize>(
     molecule: &M,
     q: &SVector<f64, N>,
     factor: impl FnOnce(&KineticMatrices<N>) -> Result<(Vector3<f64>, SVector<f64, N>), HamiltonianError>,
-) -> Result<(Vector3<f64>, SVector<f64, N>, SVector<f64, N>), HamiltonianError>
+) -> Result<VelocitiesAndForce<N>, HamiltonianError>
 where
     M: Molecule<N, NA> + ?Sized,
 {
