@@ -38,11 +38,11 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use rovib::molecules::H2o;
+use rovib::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use rovib::runtime::hamiltonian::{euler_momenta_from_angular_momentum, rotation_matrix};
 use rovib::runtime::integrate::{Dop853, Dop853Options, Observer};
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rovib::runtime::units::AU_TIME_IN_FS;
-use rovib::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use rovib::runtime::{KineticMatrices, Molecule, PhaseState};
 
 /// Temperature of the initial distribution.
