@@ -12,3 +12,8 @@ pub mod plot;
 pub mod scene;
 
 pub use rovib_runtime as runtime;
+
+/// The README's Rust examples, compiled and run as doctests so that they stay true.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
