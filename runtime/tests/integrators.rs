@@ -337,6 +337,17 @@ fn fixed_steps_are_shrunk_to_fit_the_output_interval() {
 }
 
 #[test]
+fn every_full_output_interval_gets_the_same_number_of_steps() {
+    // A step that is not exact in binary (0.001 fs in atomic units), 100 per output interval,
+    // over 10⁴ intervals: the grid's times carry rounding of order ε·t, which must not add
+    // steps late in the run.
+    let h = 0.001 / 0.024_188_843_265_857;
+    let method = Method::Rk4(Rk4Options { step: h, ..Default::default() });
+    let (_, stats) = final_state(&mut Oscillator, &method, &[1.0, 0.0], 1e6 * h, 100.0 * h);
+    assert_eq!(stats.steps, 1_000_000);
+}
+
+#[test]
 fn observer_can_stop_the_run() {
     for method in [
         Method::Dop853(Dop853Options::default()),

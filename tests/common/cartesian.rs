@@ -139,6 +139,13 @@ impl CrossCheck {
     pub fn production(self) -> Self {
         Self { formulation: Formulation::Production, ..self }
     }
+
+    /// The same with another integrator on the Hamiltonian side only, so that a method (DOP853
+    /// at a looser tolerance, Gauss–Legendre, RK4) is judged against a Cartesian reference that
+    /// keeps the tight settings.
+    pub fn with_hamiltonian_method(self, method: Method) -> Self {
+        Self { hamiltonian: method, ..self }
+    }
 }
 
 /// What a cross-check measured.

@@ -389,11 +389,16 @@ where
     if observer.observe(grid.t0, method.state()).is_break() {
         return Ok(stats);
     }
+    // A full output interval always gets the same number of steps. Computed from the grid's
+    // times instead, its length carries rounding of order ε·t, which late in a long run tips
+    // ceil(L/h) over to one step more (measured: 1 005 419 steps for a nominal 10⁶).
+    let nominal = ceil_snapped(grid.interval / h).max(1);
     let mut t_start = grid.t0;
     for k in 1..=grid.count {
         let t_stop = grid.time(k);
         let length = t_stop - t_start;
-        let n = ceil_snapped(length / h).max(1);
+        let full = (length - grid.interval).abs() <= SNAP * t_stop.abs().max(grid.interval);
+        let n = if full { nominal } else { ceil_snapped(length / h).max(1) };
         let h_k = length / n as f64;
         for j in 0..n {
             let t = t_start + j as f64 * h_k;
