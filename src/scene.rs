@@ -158,6 +158,9 @@ pub struct Scene {
     /// The smallest relative pivot of the kinetic metric a run accepts before it stops as
     /// ill-conditioned (see `ReducedSystem::with_min_pivot`).
     pub min_metric_pivot: f64,
+    /// The largest relative energy error `|H(t) − H(0)| / |H(0)|` a run accepts at an output
+    /// time before it stops as unstable or too loosely integrated.
+    pub max_energy_error: f64,
 }
 
 impl Scene {
@@ -226,6 +229,7 @@ struct RawRun {
     #[serde(default)]
     frozen: Vec<Spanned<String>>,
     min_metric_pivot: Option<Spanned<f64>>,
+    max_energy_error: Option<Spanned<f64>>,
 }
 
 /// The default integrator: DOP853 at rtol = atol = 1e-10.
@@ -233,6 +237,10 @@ pub const DEFAULT_TOLERANCE: f64 = 1e-10;
 
 /// The default smallest relative pivot of the kinetic metric (see `STABILITY.md`).
 pub const DEFAULT_MIN_METRIC_PIVOT: f64 = 1e-12;
+
+/// The default largest relative energy error at an output time: a run whose energy has moved by
+/// 1 % is unstable or far too loosely integrated (the shipped scenes stay below 1e-8).
+pub const DEFAULT_MAX_ENERGY_ERROR: f64 = 1e-2;
 
 /// Parses and validates a scene file. `path` names it in messages.
 pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
@@ -320,6 +328,10 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         min_metric_pivot: match &run.min_metric_pivot {
             Some(x) => positive(&src, x, "run.min_metric_pivot")?,
             None => DEFAULT_MIN_METRIC_PIVOT,
+        },
+        max_energy_error: match &run.max_energy_error {
+            Some(x) => positive(&src, x, "run.max_energy_error")?,
+            None => DEFAULT_MAX_ENERGY_ERROR,
         },
     })
 }

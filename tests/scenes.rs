@@ -178,7 +178,10 @@ fn a_failed_run_keeps_its_output_and_says_where_it_stopped() {
     let err = String::from_utf8(out.stderr).unwrap();
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     assert!(err.starts_with("error: the run stopped: "), "{err}");
-    assert!(err.contains(" fs)") && err.contains("last state"), "{err}");
+    // What, when (in the scene's unit, once) and where.
+    assert!(err.contains("integrator.max_steps = 40 steps were taken by t = "), "{err}");
+    assert_eq!(err.matches("t = ").count(), 1, "{err}");
+    assert!(err.contains(" fs; last accepted state [r1, r2, alpha, p_r1, p_r2, p_alpha"), "{err}");
     let csv = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
     let rows = csv.lines().count() - 1;
     assert!((1..21).contains(&rows), "{rows} rows kept");
@@ -187,6 +190,8 @@ fn a_failed_run_keeps_its_output_and_says_where_it_stopped() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
     assert_eq!(summary["status"], "failed");
     assert!(summary["error"].as_str().unwrap().contains("steps"));
+    // The work done before the stop is still reported.
+    assert!(summary["rhs_evaluations"].as_u64().unwrap() > 40);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -76,9 +76,10 @@ fn summary(dir: &Path) -> serde_json::Value {
 
 /// The scene time (fs) in `(at t = T fs)` of an error line.
 fn time_fs(err: &str) -> f64 {
-    let start = err.find("(at t = ").expect("the time in the scene's unit") + "(at t = ".len();
+    assert_eq!(err.matches("t = ").count(), 1, "the time is given once: {err}");
+    let start = err.find("t = ").expect("the time in the scene's unit") + "t = ".len();
     let rest = &err[start..];
-    rest[..rest.find(" fs)").unwrap()].parse().unwrap()
+    rest[..rest.find(" fs").expect("with its unit")].parse().unwrap()
 }
 
 /// The vector after `marker` in an error line, e.g. `q = [..]`.
@@ -120,7 +121,8 @@ fn co2(j_x: &str, end: &str, extra_integrator: &str, extra_run: &str) -> String 
         .replace("EXTRA_RUN", extra_run)
 }
 
-const CO2_LAYOUT: &str = "last state [r1, r2, alpha, p_r1, p_r2, p_alpha, quaternion w, x, y, z, J_x, J_y, J_z] = [";
+const CO2_LAYOUT: &str =
+    "last accepted state [r1, r2, alpha, p_r1, p_r2, p_alpha, quaternion w, x, y, z, J_x, J_y, J_z] = [";
 
 /// Checks what every failed run must leave behind and returns the rows kept.
 fn failed_run(dir: &Path, err: &str, atoms: usize) -> Vec<Vec<f64>> {
@@ -140,8 +142,10 @@ fn a_bend_closer_to_linear_than_the_threshold_stops_naming_time_q_and_the_inerti
     // J_x = 1e-5 ħ would bring the bend to δ = π − α ≈ 3e-7 rad; the default threshold (relative
     // pivot of I 1e-12) is reached at δ ≈ 5.4e-6 rad.
     let err = error_line(&run_scene(&dir, &co2("1e-5", "60.0", "", "")));
-    assert!(err.starts_with("error: the run stopped: right-hand side failed at t = "), "{err}");
-    assert!(err.contains("the inertia tensor I is singular or not positive definite at q = ["), "{err}");
+    assert!(
+        err.starts_with("error: the run stopped: the inertia tensor I is singular or not positive definite at q = ["),
+        "{err}"
+    );
     let q = vector_after(&err, "at q = [");
     assert!((std::f64::consts::PI - q[2]).abs() < 6e-6, "stopped at the closest approach, q = {q:?}");
     // Measured: t = 12.753 fs (527.24 ħ/E_h), α = π − 5.3e-6.
@@ -215,14 +219,18 @@ fn a_step_beyond_the_stability_limit_overflows_the_morse_potential_and_stops() {
     // RK4 is stable for ω h < 2.8: for the O–H stretch (3830 cm⁻¹) h < 3.9 fs. At 4.2 fs the
     // stretch amplitude grows each step until a stage pushes a bond deep into the repulsive wall
     // and exp(−a (r − re)) overflows.
-    let err = error_line(&run_scene(&dir, &H2O_RK4.replace("STEP", "4.2").replace("OUTPUT", "4.2")));
-    assert!(err.starts_with("error: the run stopped: right-hand side failed at t = "), "{err}");
-    assert!(err.contains("non-finite potential gradient ∂U/∂q"), "{err}");
+    // The energy guard would stop it earlier (see below): raised out of the way here.
+    let scene =
+        H2O_RK4.replace("STEP", "4.2").replace("OUTPUT", "4.2").replace("[run]", "[run]\nmax_energy_error = 1e300");
+    let err = error_line(&run_scene(&dir, &scene));
+    assert!(err.starts_with("error: the run stopped: non-finite potential gradient ∂U/∂q at t = "), "{err}");
     // Measured: t = 79.8 fs; 19 rows kept (t = 0 … 75.6 fs).
     let t = time_fs(&err);
     assert!((70.0..90.0).contains(&t), "t = {t} fs");
-    let state =
-        vector_after(&err, "last state [r1, r2, alpha, p_r1, p_r2, p_alpha, quaternion w, x, y, z, J_x, J_y, J_z] = [");
+    let state = vector_after(
+        &err,
+        "last accepted state [r1, r2, alpha, p_r1, p_r2, p_alpha, quaternion w, x, y, z, J_x, J_y, J_z] = [",
+    );
     assert!(state.len() == 13 && state.iter().all(|x| x.is_finite()), "{state:?}");
     let rows = failed_run(&dir, &err, 3);
     assert!(rows.len() >= 10, "{} rows", rows.len());
@@ -238,8 +246,9 @@ fn a_collapsing_step_size_stops_the_run() {
     // its axis at ω_x ≈ 44 rad per ħ/E_h and DOP853's steps fall to about 3e-3 ħ/E_h; elsewhere
     // they are 0.04 ħ/E_h (the first) to several ħ/E_h. min_step = 0.0005 fs = 0.021 ħ/E_h.
     let err = error_line(&run_scene(&dir, &co2("1e-3", "60.0", "min_step = 0.0005", "")));
-    assert!(err.starts_with("error: the run stopped: step size "), "{err}");
-    assert!(err.contains(" too small at t = "), "{err}");
+    assert!(err.starts_with("error: the run stopped: the step size fell to "), "{err}");
+    // In the scene's unit, like min_step itself.
+    assert!(err.contains(" fs, below integrator.min_step, at t = "), "{err}");
     // Measured: t = 12.751 fs, step 1.7e-2 ħ/E_h.
     let t = time_fs(&err);
     assert!((12.0..13.5).contains(&t), "t = {t} fs");
@@ -254,12 +263,30 @@ fn a_collapsing_step_size_stops_the_run() {
 fn a_non_finite_energy_at_an_output_time_stops_the_run() {
     let dir = temp_dir("output");
     // RK4 at 20 fs: the first step lands where U(q) overflows; the right-hand side was finite at
-    // every stage, so the failure is found when the output time records H. This path reports the
-    // time (in ħ/E_h, without a unit) but not the state.
-    let err = error_line(&run_scene(&dir, &H2O_RK4.replace("STEP", "20.0").replace("OUTPUT", "20.0")));
-    assert!(err.starts_with("error: at t = "), "{err}");
-    assert!(err.contains("non-finite potential U(q)"), "{err}");
+    // every stage, so the failure is found when the output time records H.
+    let scene =
+        H2O_RK4.replace("STEP", "20.0").replace("OUTPUT", "20.0").replace("[run]", "[run]\nmax_energy_error = 1e300");
+    let err = error_line(&run_scene(&dir, &scene));
+    assert!(err.starts_with("error: the run stopped: non-finite potential U(q) at t = 20 fs; state ["), "{err}");
+    assert_eq!(time_fs(&err), 20.0);
     let rows = failed_run(&dir, &err, 3);
     assert_eq!(rows.len(), 1, "only the initial row");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_run_whose_energy_runs_away_stops_instead_of_completing() {
+    let dir = temp_dir("guard");
+    // RK4 at 4.2 fs, just past its stability limit for the O–H stretch: the energy grows each
+    // step. Without the guard the run would overflow only at 79.8 fs, and at 5 fs it would
+    // "complete" with a relative energy error of 4e58; the guard stops it at the first output
+    // time where |ΔH|/|H(0)| exceeds run.max_energy_error (default 1 %).
+    let err = error_line(&run_scene(&dir, &H2O_RK4.replace("STEP", "4.2").replace("OUTPUT", "4.2")));
+    assert!(err.starts_with("error: the run stopped: the energy changed by "), "{err}");
+    assert!(err.contains("more than run.max_energy_error = 1e-2"), "{err}");
+    let t = time_fs(&err);
+    assert!(t < 10.0, "stopped at t = {t} fs");
+    let rows = failed_run(&dir, &err, 3);
+    assert!(rows.iter().all(|r| r.iter().all(|x| x.is_finite())));
     std::fs::remove_dir_all(&dir).unwrap();
 }

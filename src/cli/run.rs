@@ -14,10 +14,8 @@ use crate::output::{Conservation, LabXyz, TrajectoryCsv, write_summary};
 use crate::runtime::diagnostic::FileError;
 use crate::runtime::frames::{FitOptions, LabState, from_lab};
 use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction, ReductionError, Rotation};
-use crate::runtime::hamiltonian::{
-    HamiltonianError, PhaseState, euler_momenta_from_angular_momentum, hamiltonian, w_matrix,
-};
-use crate::runtime::integrate::{Method, Observer, OdeSystem, Stats, solve};
+use crate::runtime::hamiltonian::{PhaseState, euler_momenta_from_angular_momentum, hamiltonian, w_matrix};
+use crate::runtime::integrate::{Method, Observer, OdeSystem, SolveError, Stats, solve};
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use crate::runtime::units::CoordinateUnit;
 use crate::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
@@ -262,7 +260,8 @@ impl MoleculeVisitor for Run<'_> {
         let start = initial_state(&m, scene)?;
         // Fail before writing anything if the initial state is not valid.
         hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
-        let (mut system, y0) = production_system(&m, scene, &start.state)?;
+        let (system, y0) = production_system(&m, scene, &start.state)?;
+        let layout = layout(system.reduction(), &m);
 
         let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
         let mut recorder = Recorder::<M, N, NA> {
@@ -283,13 +282,18 @@ impl MoleculeVisitor for Run<'_> {
             },
             diagnostics: scene.outputs.summary,
             conservation: Conservation::default(),
+            initial_energy: None,
+            max_energy_error: scene.max_energy_error,
+            layout: layout.clone(),
             time_scale: scene.time_unit.in_au(),
+            time_unit: scene.time_unit.name(),
             com: (start.com_position, start.com_velocity),
             progress: self.progress.then(|| progress_bar(scene)),
             error: None,
         };
+        let mut counted = Counted { inner: system, evaluations: 0 };
         let begin = Instant::now();
-        let result = solve(&mut system, &scene.method, 0.0, &y0, scene.t_end, scene.output_interval, &mut recorder);
+        let result = solve(&mut counted, &scene.method, 0.0, &y0, scene.t_end, scene.output_interval, &mut recorder);
         let wall_time = begin.elapsed().as_secs_f64();
         if let Some(bar) = &recorder.progress {
             bar.finish_and_clear();
@@ -298,21 +302,8 @@ impl MoleculeVisitor for Run<'_> {
         let flushed = recorder.flush();
 
         let (stats, failure) = match result {
-            Ok(stats) => (stats, recorder.error.take()),
-            Err(e) => {
-                let t = e.time().map(|t| t / scene.time_unit.in_au());
-                let mut message = format!("the run stopped: {e}");
-                if let Some(source) = std::error::Error::source(&e) {
-                    message.push_str(&format!(": {source}"));
-                }
-                if let Some(t) = t {
-                    message.push_str(&format!(" (at t = {t} {})", scene.time_unit.name()));
-                }
-                if let Some(y) = e.state() {
-                    message.push_str(&format!("; last state {} = {y:?}", layout(system.reduction(), &m)));
-                }
-                (Stats::default(), Some(message))
-            }
+            Ok(stats) => (Some(stats), recorder.error.take().map(|e| format!("the run stopped: {e}"))),
+            Err(e) => (None, Some(format!("the run stopped: {}", describe_failure(&e, scene, &layout)))),
         };
         let mut files: Vec<PathBuf> = Vec::new();
         if scene.outputs.trajectory {
@@ -329,18 +320,20 @@ impl MoleculeVisitor for Run<'_> {
                 "error": failure,
                 "method": method_json(&scene.method),
                 "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
-                "state_layout": layout(system.reduction(), &m),
+                "state_layout": layout,
                 "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
                 "zero_angular_momentum": system.reduction().rotation != Rotation::Free,
                 "min_metric_pivot": scene.min_metric_pivot,
+                "max_energy_error": scene.max_energy_error,
                 "t_end": scene.t_end / scene.time_unit.in_au(),
                 "output_interval": scene.output_interval / scene.time_unit.in_au(),
                 "time_unit": scene.time_unit.name(),
                 "units": "q in bohr or rad, p in hbar/bohr or hbar, angles in rad, p_e and J in hbar, H in hartree; lab.xyz in angstrom",
-                "steps": stats.steps,
-                "accepted_steps": stats.accepted,
-                "rejected_steps": stats.rejected,
-                "rhs_evaluations": stats.rhs_evals,
+                // The solver reports its steps only when it finishes; evaluations are counted here.
+                "steps": stats.map(|s| s.steps),
+                "accepted_steps": stats.map(|s| s.accepted),
+                "rejected_steps": stats.map(|s| s.rejected),
+                "rhs_evaluations": counted.evaluations,
                 "wall_time_s": wall_time,
                 "conservation": recorder.conservation.to_json(),
                 "centre_of_mass": {
@@ -354,6 +347,7 @@ impl MoleculeVisitor for Run<'_> {
         if let Some(message) = failure {
             return Err(CliError::Message(format!("{message}; output so far is in {}", self.out_dir.display())));
         }
+        let stats = stats.unwrap_or_default();
         Ok(RunReport { out_dir: self.out_dir.to_owned(), files, stats, conservation: recorder.conservation, wall_time })
     }
 }
@@ -376,6 +370,57 @@ fn progress_bar(scene: &Scene) -> ProgressBar {
             .expect("a valid template"),
     );
     bar
+}
+
+/// An [`OdeSystem`] that counts its right-hand-side evaluations, so that a run the solver stops
+/// still reports its work.
+struct Counted<S> {
+    inner: S,
+    evaluations: u64,
+}
+
+impl<S: OdeSystem> OdeSystem for Counted<S> {
+    type Error = S::Error;
+
+    fn dim(&self) -> usize {
+        self.inner.dim()
+    }
+
+    fn rhs(&mut self, t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), Self::Error> {
+        self.evaluations += 1;
+        self.inner.rhs(t, y, dydt)
+    }
+}
+
+/// Why a run stopped, in the scene's units: what happened, when, and the last accepted state.
+fn describe_failure<E: std::error::Error>(e: &SolveError<E>, scene: &Scene, layout: &str) -> String {
+    let unit = scene.time_unit.name();
+    let at = |t: f64| format!("t = {} {unit}", t / scene.time_unit.in_au());
+    let what = match e {
+        SolveError::Rhs { t, source, .. } => format!("{} at {}", source, at(*t)),
+        SolveError::NonFinite { t, .. } => {
+            format!(
+                "the right-hand side became infinite or NaN at {} (the step may be too large for this motion)",
+                at(*t)
+            )
+        }
+        SolveError::StepSizeTooSmall { t, h, .. } => format!(
+            "the step size fell to {} {unit}, below integrator.min_step, at {} (the motion has become too fast to resolve)",
+            h / scene.time_unit.in_au(),
+            at(*t)
+        ),
+        SolveError::TooManySteps { t, max_steps, .. } => {
+            format!("integrator.max_steps = {max_steps} steps were taken by {}", at(*t))
+        }
+        SolveError::NotConverged { t, .. } => {
+            format!("the implicit Gauss-Legendre stages did not converge at {} (reduce integrator.step)", at(*t))
+        }
+        SolveError::InvalidInput(reason) => format!("invalid integrator settings: {reason}"),
+    };
+    match e.state() {
+        Some(y) => format!("{what}; last accepted state {layout} = {y:?}"),
+        None => what,
+    }
 }
 
 /// The flat layout of a system's state, for messages: `[q_a, p_a, quaternion, J]`.
@@ -402,7 +447,14 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     lab: Option<LabXyz>,
     diagnostics: bool,
     conservation: Conservation,
+    /// H at the first output time, for the energy guard.
+    initial_energy: Option<f64>,
+    /// The relative energy error at which the run stops.
+    max_energy_error: f64,
+    /// The flat layout, for messages.
+    layout: String,
     time_scale: f64,
+    time_unit: &'static str,
     com: (Vector3<f64>, Vector3<f64>),
     progress: Option<ProgressBar>,
     error: Option<String>,
@@ -410,16 +462,29 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
     fn record(&mut self, t: f64, y: &[f64]) -> Result<(), String> {
-        let at = |e: HamiltonianError| format!("at t = {t}: {e}");
-        let body = self.system.expand_body(y).map_err(at)?;
-        let needs_energy = self.diagnostics || self.trajectory.is_some() || self.lab.is_some();
-        let energy = if needs_energy { self.system.energy(y).map_err(at)? } else { f64::NAN };
+        let t_out = t / self.time_scale;
+        let at = |e: &dyn std::fmt::Display, y: &[f64], layout: &str| {
+            format!("{e} at t = {t_out} {}; state {layout} = {y:?}", self.time_unit)
+        };
+        let body = self.system.expand_body(y).map_err(|e| at(&e, y, &self.layout))?;
+        // H at every output time: for the outputs, and for the guard against a run that has
+        // gone unstable (a too large fixed step) and would otherwise "complete" with garbage.
+        let energy = self.system.energy(y).map_err(|e| at(&e, y, &self.layout))?;
+        let h0 = *self.initial_energy.get_or_insert(energy);
+        let drift = if h0 == 0.0 { (energy - h0).abs() } else { ((energy - h0) / h0).abs() };
+        if !(drift <= self.max_energy_error) {
+            let e = format!(
+                "the energy changed by {drift:.1e} relative to H(0) = {h0} hartree, more than run.max_energy_error = \
+                 {:e} (the step is too large or the tolerances too loose for this motion; reduce them)",
+                self.max_energy_error
+            );
+            return Err(at(&e, y, &self.layout));
+        }
         let rotation = body.rotation();
         let phase = body.to_phase();
         if self.diagnostics {
             self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
         }
-        let t_out = t / self.time_scale;
         if let Some(csv) = &mut self.trajectory {
             let values = phase.q.iter().chain(phase.p.iter()).chain(phase.euler.iter()).chain(phase.pe.iter());
             csv.row(t_out, values.copied().chain([energy]))?;
