@@ -472,7 +472,8 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         let energy = self.system.energy(y).map_err(|e| at(&e, y, &self.layout))?;
         let h0 = *self.initial_energy.get_or_insert(energy);
         let drift = if h0 == 0.0 { (energy - h0).abs() } else { ((energy - h0) / h0).abs() };
-        if !(drift <= self.max_energy_error) {
+        // NaN fails too: a non-finite energy is a runaway as well.
+        if drift.is_nan() || drift > self.max_energy_error {
             let e = format!(
                 "the energy changed by {drift:.1e} relative to H(0) = {h0} hartree, more than run.max_energy_error = \
                  {:e} (the step is too large or the tolerances too loose for this motion; reduce them)",
