@@ -263,3 +263,42 @@ fn lab_frame_errors_name_the_atoms() {
     let e = scene_error(&scene("positions = { O = [0, 0, 0], H1 = [0.9, 0, 0], H2 = [-0.9, 0, 0] }"));
     assert!(e.message.starts_with("the lab-frame positions cannot start a run of h2o: "), "{}", e.message);
 }
+
+fn summary_of(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+/// `[run] frozen` holds a coordinate at its initial value; zero initial angular momentum drops
+/// J from the integrated state; both show in summary.json and in the trajectory.
+#[test]
+fn frozen_coordinates_and_zero_angular_momentum_reduce_what_is_integrated() {
+    let dir = temp_dir("reduced");
+    let path = dir.join("scene.toml");
+    let text = scene("q = { r1 = 1.0, alpha = 100.0 }\nj = [0, 0, 0]")
+        .replace("output_interval = 1.0", "output_interval = 1.0\nfrozen = [\"r2\"]");
+    std::fs::write(&path, text).unwrap();
+    let out = rovib(&["run", path.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap(), "--quiet"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = summary_of(&dir.join("out"));
+    assert_eq!(s["frozen"], serde_json::json!(["r2"]));
+    assert_eq!(s["zero_angular_momentum"], true);
+    assert_eq!(s["state_layout"], "[r1, alpha, p_r1, p_alpha, quaternion w, x, y, z]");
+    assert!(s["conservation"]["max_relative_energy_error"].as_f64().unwrap() < 1e-8);
+    assert_eq!(s["conservation"]["max_abs_j_change_hbar"].as_f64(), Some(0.0));
+    let csv = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect();
+    let r2 = 0.95785 / BOHR_IN_ANGSTROM;
+    assert!(rows.iter().all(|r| (r[2] - r2).abs() < 1e-15), "r2 stays at its value");
+    assert!(rows.iter().any(|r| (r[1] - rows[0][1]).abs() > 1e-3), "r1 moves");
+    assert!(rows.iter().all(|r| r[10] == 0.0 && r[11] == 0.0 && r[12] == 0.0), "p_e stays exactly 0");
+
+    // A frozen name the molecule does not have is an error at its place.
+    let text = scene("q = { r1 = 1.0 }").replace("output_interval = 1.0", "output_interval = 1.0\nfrozen = [\"r3\"]");
+    std::fs::write(&path, text).unwrap();
+    let out = rovib(&["run", path.to_str().unwrap(), "--out", dir.join("out2").to_str().unwrap(), "--quiet"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(err.contains("no internal coordinate is called \"r3\""), "{err}");
+    assert!(err.contains("--> ") && err.contains(":19:11"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
