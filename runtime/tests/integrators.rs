@@ -13,38 +13,11 @@ use rovib_runtime::integrate::{
 };
 
 // ---------------------------------------------------------------------------------------------
-// Test problems
+// Test problems (Kepler is shared with no_alloc.rs, in problems/mod.rs)
 // ---------------------------------------------------------------------------------------------
 
-/// The Kepler problem `q'' = −q/|q|³` as a first-order system `(q1, q2, p1, p2)`; started at
-/// pericentre with eccentricity `e` its period is 2π.
-struct Kepler;
-
-impl Kepler {
-    fn initial(e: f64) -> [f64; 4] {
-        [1.0 - e, 0.0, 0.0, ((1.0 + e) / (1.0 - e)).sqrt()]
-    }
-
-    fn energy(y: &[f64]) -> f64 {
-        0.5 * (y[2] * y[2] + y[3] * y[3]) - 1.0 / y[0].hypot(y[1])
-    }
-}
-
-impl OdeSystem for Kepler {
-    type Error = Infallible;
-    fn dim(&self) -> usize {
-        4
-    }
-    fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), Infallible> {
-        let r = y[0].hypot(y[1]);
-        let r3 = r * r * r;
-        dydt[0] = y[2];
-        dydt[1] = y[3];
-        dydt[2] = -y[0] / r3;
-        dydt[3] = -y[1] / r3;
-        Ok(())
-    }
-}
+mod problems;
+use problems::Kepler;
 
 /// The harmonic oscillator `q' = p, p' = −q`: its energy is a quadratic invariant, which
 /// Gauss methods conserve exactly, so any energy error they show is round-off.

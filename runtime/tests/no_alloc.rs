@@ -14,25 +14,10 @@ use rovib_runtime::integrate::{
     Dop853, Dop853Options, GaussLegendre, GaussLegendreOptions, Observer, OdeSystem, Rk4, Rk4Options,
 };
 
-/// Kepler problem with eccentricity 0.5, period 2π.
-struct Kepler;
+mod problems;
+use problems::Kepler;
 
-impl OdeSystem for Kepler {
-    type Error = Infallible;
-    fn dim(&self) -> usize {
-        4
-    }
-    fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), Infallible> {
-        let r = y[0].hypot(y[1]);
-        let r3 = r * r * r;
-        dydt[0] = y[2];
-        dydt[1] = y[3];
-        dydt[2] = -y[0] / r3;
-        dydt[3] = -y[1] / r3;
-        Ok(())
-    }
-}
-
+/// Kepler with eccentricity 0.5 (period 2π).
 const Y0: [f64; 4] = [0.5, 0.0, 0.0, 1.732_050_807_568_877_2];
 
 /// Sums the first component over all outputs, without allocating.
