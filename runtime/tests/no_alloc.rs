@@ -7,12 +7,9 @@
 //! lifted with `#![allow(unsafe_code)]`.) It counts the current thread only, so tests running
 //! in parallel do not disturb each other.
 
-use core::convert::Infallible;
 use core::ops::ControlFlow;
 
-use rovib_runtime::integrate::{
-    Dop853, Dop853Options, GaussLegendre, GaussLegendreOptions, Observer, OdeSystem, Rk4, Rk4Options,
-};
+use rovib_runtime::integrate::{Dop853, Dop853Options, GaussLegendre, GaussLegendreOptions, Observer, Rk4, Rk4Options};
 
 mod problems;
 use problems::Kepler;
