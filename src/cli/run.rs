@@ -466,10 +466,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         let at = |e: &dyn std::fmt::Display, y: &[f64], layout: &str| {
             format!("{e} at t = {t_out} {}; state {layout} = {y:?}", self.time_unit)
         };
-        let body = self.system.expand_body(y).map_err(|e| at(&e, y, &self.layout))?;
         // H at every output time: for the outputs, and for the guard against a run that has
         // gone unstable (a too large fixed step) and would otherwise "complete" with garbage.
-        let energy = self.system.energy(y).map_err(|e| at(&e, y, &self.layout))?;
+        let (body, energy) = self.system.expand_body_and_energy(y).map_err(|e| at(&e, y, &self.layout))?;
         let h0 = *self.initial_energy.get_or_insert(energy);
         let drift = if h0 == 0.0 { (energy - h0).abs() } else { ((energy - h0) / h0).abs() };
         // NaN fails too: a non-finite energy is a runaway as well.

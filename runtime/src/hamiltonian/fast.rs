@@ -1023,6 +1023,16 @@ where
     pub fn energy(&self, y: &[f64]) -> Result<f64, HamiltonianError> {
         let o = self.offsets();
         let (u, omega, qdot) = self.kinematics(y, &o)?;
+        self.energy_at(&u, &omega, &qdot)
+    }
+
+    /// `½ (ω · J + q̇_a · p_a) + U` at an unpacked state and its velocities.
+    fn energy_at(
+        &self,
+        u: &Unpacked<N>,
+        omega: &Vector3<f64>,
+        qdot: &SVector<f64, N>,
+    ) -> Result<f64, HamiltonianError> {
         let t = 0.5 * (omega.dot(&u.j) + qdot.dot(&u.p));
         let v = finite(self.molecule.potential(&u.q), "potential U(q)")?;
         finite(t + v, "Hamiltonian H")
@@ -1079,12 +1089,22 @@ where
     /// momentum the full system's `p_f = ∂T/∂q̇_f = (Aᵀ ω + a q̇)_f` at the reduced velocities
     /// (so that the full system at the expanded state moves the same way, with `q̇_f = 0`).
     pub fn expand_body(&self, y: &[f64]) -> Result<BodyState<N>, HamiltonianError> {
+        Ok(self.expand_body_and_energy(y)?.0)
+    }
+
+    /// [`ReducedSystem::expand_body`] and [`ReducedSystem::energy`] together, sharing the one
+    /// evaluation of the kinetic matrices and the factorization (what output needs at every
+    /// output time).
+    pub fn expand_body_and_energy(&self, y: &[f64]) -> Result<(BodyState<N>, f64), HamiltonianError> {
         let o = self.offsets();
-        let (u, omega, qdot) = self.kinematics(y, &o)?;
+        let u = self.checked_unpack(y, &o)?;
+        let mut k = KineticMatrices::default();
+        self.molecule.kinetic(&u.q, &mut k);
+        let (omega, qdot) = self.solve(&k, &u, &o)?;
+        let energy = self.energy_at(&u, &omega, &qdot)?;
         let mut p = u.p;
         if !self.all_active {
-            let mut k = KineticMatrices::default();
-            self.molecule.kinetic(&u.q, &mut k);
+            // `k` is unmasked here: the full system's momenta at the reduced velocities.
             let p_full = k.coriolis.transpose() * omega + k.a * qdot;
             for f in 0..N {
                 if !self.reduction.active[f] {
@@ -1094,7 +1114,7 @@ where
         }
         let orientation = UnitQuaternion::try_new(u.quaternion, 0.0)
             .ok_or(HamiltonianError::NonFinite { quantity: "orientation quaternion (zero norm)" })?;
-        Ok(BodyState { q: u.q, p, orientation, j: u.j })
+        Ok((BodyState { q: u.q, p, orientation, j: u.j }, energy))
     }
 
     /// [`ReducedSystem::expand_body`] as a phase-space state ([`BodyState::to_phase`]).
