@@ -81,7 +81,15 @@ fn eval_of_a_rigid_molecule_has_empty_vibrational_blocks() {
 #[test]
 fn eval_errors_are_one_line() {
     let err = stderr_line(&rovib(&["eval", "--molecule", "h2o", "--state", "-"], Some(r#"{"q": [1.8, 1.8]}"#)));
-    assert_eq!(err, "error: `q` has 2 entries, expected 3");
+    assert_eq!(
+        err,
+        "error: state on stdin: `q` has 2 entries, expected 3 (one per coordinate of h2o: r1, r2, alpha, in bohr or rad)"
+    );
+    let err = stderr_line(&rovib(
+        &["eval", "--molecule", "h2o", "--state", "-"],
+        Some(r#"{"q": [1.8, 1.8, 1.8], "pe": [0, 1]}"#),
+    ));
+    assert_eq!(err, "error: state on stdin: `pe` has 2 entries, expected 3 (p_phi, p_theta, p_psi in hbar)");
     let err = stderr_line(&rovib(&["eval", "--molecule", "h2o", "--state", "-"], Some(r#"{"q": [1.8, 1.8, 1e999]}"#)));
     assert!(err.contains("number out of range"), "{err}");
     let err = stderr_line(&rovib(&["eval", "--molecule", "h2O", "--state", "-"], Some("{}")));

@@ -27,23 +27,32 @@ fn rows<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Value {
     Value::Array((0..R).map(|i| Value::from((0..C).map(|j| m[(i, j)]).collect::<Vec<f64>>())).collect())
 }
 
+/// One array of the state file, checked: its length (what each entry is, for the fix) and that
+/// every entry is finite. `file` names the state file in messages.
 fn vector<const K: usize>(
+    file: &str,
     field: &str,
+    meaning: &str,
     values: Option<&Vec<f64>>,
     default: SVector<f64, K>,
 ) -> Result<SVector<f64, K>, CliError> {
     let Some(values) = values else { return Ok(default) };
     if values.len() != K {
-        return Err(CliError::Message(format!("`{field}` has {} entries, expected {K}", values.len())));
+        return Err(CliError::Message(format!(
+            "{file}: `{field}` has {} entries, expected {K} ({meaning})",
+            values.len()
+        )));
     }
     if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-        return Err(CliError::Message(format!("`{field}[{i}]` is not a finite number")));
+        return Err(CliError::Message(format!("{file}: `{field}[{i}]` is not a finite number ({meaning})")));
     }
     Ok(SVector::from_column_slice(values))
 }
 
 struct Eval<'a> {
     state: Option<&'a StateFile>,
+    /// The state file's name, for messages.
+    file: &'a str,
 }
 
 impl MoleculeVisitor for Eval<'_> {
@@ -52,19 +61,29 @@ impl MoleculeVisitor for Eval<'_> {
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         let reference = m.reference_geometry();
         let q_default = reference.unwrap_or_else(SVector::zeros);
+        let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
+        let coordinates = format!("one per coordinate of {}: {}, in bohr or rad", m.name(), names.join(", "));
+        let momenta = format!("one momentum per coordinate of {}: {}", m.name(), names.join(", "));
         let state = match self.state {
             Some(s) => {
                 if s.q.is_none() && reference.is_none() {
                     return Err(CliError::Message(format!(
-                        "`q` is missing and {} has no reference geometry to default to",
+                        "{}: `q` is missing and {} has no reference geometry to default to (give q)",
+                        self.file,
                         m.name()
                     )));
                 }
                 PhaseState {
-                    q: vector("q", s.q.as_ref(), q_default)?,
-                    p: vector("p", s.p.as_ref(), SVector::zeros())?,
-                    euler: vector("euler", s.euler.as_ref(), Vector3::new(0.0, std::f64::consts::FRAC_PI_2, 0.0))?,
-                    pe: vector("pe", s.pe.as_ref(), Vector3::zeros())?,
+                    q: vector(self.file, "q", &coordinates, s.q.as_ref(), q_default)?,
+                    p: vector(self.file, "p", &momenta, s.p.as_ref(), SVector::zeros())?,
+                    euler: vector(
+                        self.file,
+                        "euler",
+                        "phi, theta, psi in rad",
+                        s.euler.as_ref(),
+                        Vector3::new(0.0, std::f64::consts::FRAC_PI_2, 0.0),
+                    )?,
+                    pe: vector(self.file, "pe", "p_phi, p_theta, p_psi in hbar", s.pe.as_ref(), Vector3::zeros())?,
                 }
             }
             None => PhaseState {
@@ -108,6 +127,11 @@ impl MoleculeVisitor for Eval<'_> {
 /// Evaluates `molecule` at the state in `state_path` (or its default state) and returns one
 /// JSON object, a key per line.
 pub fn eval(molecule: &str, state_path: Option<&Path>) -> Result<String, CliError> {
+    let file = match state_path {
+        Some(p) if p.as_os_str() == "-" => "state on stdin".to_owned(),
+        Some(p) => format!("state file {}", p.display()),
+        None => "default state".to_owned(),
+    };
     let state: Option<StateFile> = match state_path {
         None => None,
         Some(path) => {
@@ -121,14 +145,11 @@ pub fn eval(molecule: &str, state_path: Option<&Path>) -> Result<String, CliErro
                 std::fs::read_to_string(path)
                     .map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?
             };
-            Some(
-                serde_json::from_str(&text)
-                    .map_err(|e| CliError::context(format!("invalid state file {}", path.display()), e))?,
-            )
+            Some(serde_json::from_str(&text).map_err(|e| CliError::context(format!("invalid {file}"), e))?)
         }
     };
-    let fields =
-        molecules::visit(molecule, Eval { state: state.as_ref() }).ok_or_else(|| unknown_molecule(molecule))??;
+    let fields = molecules::visit(molecule, Eval { state: state.as_ref(), file: &file })
+        .ok_or_else(|| unknown_molecule(molecule))??;
     // One key per line, each value compact: matrices read as rows.
     let lines: Vec<String> = fields.iter().map(|(k, v)| format!("  {}: {v}", Value::from(*k))).collect();
     Ok(format!("{{\n{}\n}}", lines.join(",\n")))
