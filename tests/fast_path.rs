@@ -5,10 +5,12 @@
 
 mod common;
 
+use common::for_each_molecule;
+
 use std::ops::ControlFlow;
 
 use common::{Rng, random_state, richardson_derivative};
-use rovib::molecules::{self, H2o};
+use rovib::molecules::H2o;
 use rovib::runtime::hamiltonian::fast::{self, FastSystem, ReducedSystem, Reduction, ReductionError, Rotation};
 use rovib::runtime::hamiltonian::{
     self as seed, HamiltonianError, HamiltonianSystem, MetricBlock, PhaseState, WMatrices, Workspace, rotation_matrix,
@@ -18,13 +20,6 @@ use rovib::runtime::nalgebra::{DMatrix, DVector, Quaternion, SVector, UnitQuater
 use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
 
 const STATES: usize = 40;
-
-fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
-    assert!(!molecules::NAMES.is_empty());
-    for name in molecules::NAMES {
-        molecules::visit(name, check).expect("every listed molecule can be visited");
-    }
-}
 
 /// `max |a − b| / max |b|` over one block (0 for an empty block; an all-zero `b` compares
 /// absolutely).

@@ -4,20 +4,16 @@
 
 mod common;
 
+use common::for_each_molecule;
+
 use common::{Rng, random_state};
-use rovib::molecules::{self, H2o, H2oRigid};
+use rovib::molecules::{H2o, H2oRigid};
 use rovib::runtime::frames::{CentreOfMass, FitOptions, FrameError, LabState, from_lab, lab_angular_momentum, to_lab};
 use rovib::runtime::hamiltonian::{PhaseState, body_angular_momentum, hamiltonian, rotation_matrix};
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rovib::runtime::{Molecule, MoleculeVisitor};
 
 const STATES: usize = 12;
-
-fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
-    for name in molecules::NAMES {
-        molecules::visit(name, check).expect("listed");
-    }
-}
 
 fn random_com(rng: &mut Rng) -> CentreOfMass {
     CentreOfMass {

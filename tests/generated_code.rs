@@ -4,20 +4,13 @@
 
 mod common;
 
+use common::for_each_molecule;
+
 use common::{Rng, central_difference, random_q, rel_diff};
-use rovib::molecules;
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
 
 const POINTS: usize = 5;
-
-/// Runs `check` on every shipped molecule.
-fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
-    assert!(!molecules::NAMES.is_empty());
-    for name in molecules::NAMES {
-        molecules::visit(name, check).expect("every listed molecule can be visited");
-    }
-}
 
 #[derive(Copy, Clone)]
 struct CentreOfMass;

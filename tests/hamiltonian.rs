@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::for_each_molecule;
+
 use common::{Rng, random_q, random_state, rel_diff, richardson_derivative};
 use rovib::molecules::{self, H2o};
 use rovib::runtime::hamiltonian::{
@@ -14,12 +16,6 @@ use rovib::runtime::nalgebra::{DMatrix, SVector};
 use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
 
 const STATES: usize = 8;
-
-fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
-    for name in molecules::NAMES {
-        molecules::visit(name, check).expect("listed");
-    }
-}
 
 /// Every component of the right-hand side equals the matching finite difference of H:
 /// q̇ = ∂H/∂p, ṗ = −∂H/∂q, Ω̇ = ∂H/∂p_e, ṗ_e = −∂H/∂Ω.

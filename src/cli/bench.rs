@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::CliError;
-use super::run::{initial_state, production_system};
+use super::run::{initial_state, load_scene, production_system};
 use crate::molecules;
 use crate::output::OutputFile;
 use crate::plot::{Panel, Series, svg};
@@ -29,7 +29,7 @@ use crate::runtime::hamiltonian::hamiltonian;
 use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4Options, Stats, solve};
 use crate::runtime::nalgebra::SMatrix;
 use crate::runtime::{Molecule, MoleculeVisitor};
-use crate::scene::{Scene, parse_scene};
+use crate::scene::Scene;
 
 /// One run of the diagram.
 #[derive(Clone, Debug)]
@@ -63,15 +63,7 @@ pub struct BenchReport {
 /// Runs the work-precision benchmark of the scene at `path` into `out_dir`
 /// (default `out/SCENE_NAME/bench`). `quick` uses fewer tolerances and steps.
 pub fn bench(path: &Path, out_dir: Option<&Path>, quick: bool) -> Result<BenchReport, CliError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
-    let scene = parse_scene(&path.display().to_string(), &text)?;
-    let out_dir = match out_dir {
-        Some(d) => d.to_owned(),
-        None => Path::new("out").join(path.file_stem().unwrap_or_default()).join("bench"),
-    };
-    std::fs::create_dir_all(&out_dir)
-        .map_err(|e| CliError::context(format!("cannot create {}", out_dir.display()), e))?;
+    let (scene, out_dir) = load_scene(path, out_dir, "bench")?;
     let name = scene.molecule.get_ref().clone();
     molecules::visit(&name, Bench { scene: &scene, out_dir: &out_dir, quick })
         .ok_or_else(|| super::unknown_molecule(&name))?

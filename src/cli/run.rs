@@ -35,17 +35,28 @@ pub struct RunReport {
     pub wall_time: f64,
 }
 
-/// Runs the scene at `path`, writing into `out_dir` (default `out/SCENE_NAME`).
-pub fn run(path: &Path, out_dir: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
+/// Reads and parses the scene at `path` and creates its output directory: `out_dir`, or by
+/// default `out/SCENE_NAME` followed by `default_subdir` (for `rovib run` and `rovib bench`).
+pub(crate) fn load_scene(
+    path: &Path,
+    out_dir: Option<&Path>,
+    default_subdir: &str,
+) -> Result<(Scene, PathBuf), CliError> {
     let text =
         std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
     let scene = parse_scene(&path.display().to_string(), &text)?;
     let out_dir = match out_dir {
         Some(d) => d.to_owned(),
-        None => Path::new("out").join(path.file_stem().unwrap_or_default()),
+        None => Path::new("out").join(path.file_stem().unwrap_or_default()).join(default_subdir),
     };
     std::fs::create_dir_all(&out_dir)
         .map_err(|e| CliError::context(format!("cannot create {}", out_dir.display()), e))?;
+    Ok((scene, out_dir))
+}
+
+/// Runs the scene at `path`, writing into `out_dir` (default `out/SCENE_NAME`).
+pub fn run(path: &Path, out_dir: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
+    let (scene, out_dir) = load_scene(path, out_dir, "")?;
     let name = scene.molecule.get_ref().clone();
     let visitor = Run { scene: &scene, out_dir: &out_dir, progress: !quiet && std::io::stderr().is_terminal() };
     molecules::visit(&name, visitor).ok_or_else(|| {

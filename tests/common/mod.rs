@@ -2,9 +2,17 @@
 //! reference geometry, finite differences, and matrix comparisons.
 #![allow(dead_code)]
 
-use rovib::runtime::Molecule;
 use rovib::runtime::nalgebra::{SMatrix, SVector};
 use rovib::runtime::units::CoordinateUnit;
+use rovib::runtime::{Molecule, MoleculeVisitor};
+
+/// Runs `check` on every shipped molecule (there must be at least one).
+pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
+    assert!(!rovib::molecules::NAMES.is_empty());
+    for name in rovib::molecules::NAMES {
+        rovib::molecules::visit(name, check).expect("every listed molecule can be visited");
+    }
+}
 
 /// A small deterministic generator (SplitMix64), so tests need no RNG dependency and every run
 /// sees the same points.
