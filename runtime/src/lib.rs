@@ -14,6 +14,7 @@ pub mod frames;
 pub mod hamiltonian;
 pub mod integrate;
 pub mod molecule;
+pub mod sample;
 pub mod units;
 
 pub use frames::{CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, to_lab, to_lab_body};
