@@ -13,7 +13,7 @@ use crate::molecules;
 use crate::output::{Conservation, LabXyz, TrajectoryCsv, write_summary};
 use crate::runtime::diagnostic::FileError;
 use crate::runtime::frames::{FitOptions, LabState, from_lab};
-use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction, ReductionError, Rotation};
+use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction, ReductionError, RotationPart};
 use crate::runtime::hamiltonian::{PhaseState, euler_momenta_from_angular_momentum, hamiltonian, w_matrix};
 use crate::runtime::integrate::{Method, Observer, OdeSystem, SolveError, Stats, solve};
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
@@ -249,7 +249,7 @@ pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize
     })?;
     if start.pe == Vector3::zeros() {
         reduction.rotation =
-            Rotation::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
+            RotationPart::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
     }
     let system = ReducedSystem::new(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
     let mut y0 = vec![0.0; system.dim()];
@@ -333,7 +333,7 @@ impl MoleculeVisitor for Run<'_> {
                 "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
                 "state_layout": layout,
                 "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
-                "zero_angular_momentum": system.reduction().rotation != Rotation::Free,
+                "zero_angular_momentum": system.reduction().rotation != RotationPart::Free,
                 "min_metric_pivot": scene.min_metric_pivot,
                 "max_energy_error": scene.max_energy_error,
                 "t_end": scene.t_end / scene.time_unit.in_au(),
@@ -443,7 +443,7 @@ fn layout<M: Molecule<N, NA>, const N: usize, const NA: usize>(r: &Reduction<N>,
     if r.orientation() {
         parts.extend(["quaternion w", "x", "y", "z"].map(str::to_owned));
     }
-    if r.rotation == Rotation::Free {
+    if r.rotation == RotationPart::Free {
         parts.extend(["J_x", "J_y", "J_z"].map(str::to_owned));
     }
     format!("[{}]", parts.join(", "))
