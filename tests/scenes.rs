@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use rovib::cli::run::initial_state;
+use rovib::start::initial_state;
 use rovib::molecules::H2o;
 use rovib::runtime::hamiltonian::{velocities, w_matrix};
 use rovib::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM};
