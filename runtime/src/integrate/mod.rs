@@ -97,6 +97,7 @@ pub enum SolveError<E> {
 
 mod dop853;
 mod gauss_legendre;
+pub mod problems;
 mod rk4;
 
 pub use dop853::{Dop853, Dop853Options};
