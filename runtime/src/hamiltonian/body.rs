@@ -64,3 +64,77 @@ pub fn momenta_from_velocities<const N: usize>(
 ) -> (Vector3<f64>, SVector<f64, N>) {
     (k.inertia * omega + k.coriolis * qdot, k.coriolis.transpose() * omega + k.a * qdot)
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Matrix3, SMatrix};
+    use rand::{RngExt as _, SeedableRng as _};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+    use crate::hamiltonian::{euler_momenta_from_angular_momentum, rotation_matrix, w_matrix};
+
+    fn random_euler(rng: &mut ChaCha8Rng) -> Vector3<f64> {
+        use core::f64::consts::PI;
+        Vector3::new(rng.random_range(-PI..PI), rng.random_range(0.1..PI - 0.1), rng.random_range(-PI..PI))
+    }
+
+    /// The quaternion of the Euler angles is the rotation `Rz(φ) Rx(θ) Rz(ψ)` of
+    /// [`rotation_matrix`], written out independently there.
+    #[test]
+    fn quaternion_of_euler_is_the_euler_rotation() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..100 {
+            let euler = random_euler(&mut rng);
+            let from_quaternion = *quaternion_of_euler(&euler).to_rotation_matrix().matrix();
+            assert!((from_quaternion - rotation_matrix(&euler)).amax() < 1e-14, "{euler:?}");
+        }
+    }
+
+    /// `from_phase` gives `J = W p_e` and `to_phase` gives back the same rotation and
+    /// `p_e = Mᵀ J`; at gimbal lock `from_phase` fails.
+    #[test]
+    fn phase_and_body_states_convert_both_ways() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for _ in 0..100 {
+            let euler = random_euler(&mut rng);
+            let pe = Vector3::from_fn(|_, _| rng.random_range(-2.0..2.0));
+            let s = PhaseState::<2> { q: SVector::from([1.0, 2.0]), p: SVector::from([0.5, -0.5]), euler, pe };
+            let body = BodyState::from_phase(&s).unwrap();
+            assert!((body.j - w_matrix(&euler).unwrap() * pe).amax() < 1e-12 * pe.amax() / euler[1].sin());
+            let back = body.to_phase();
+            assert!((rotation_matrix(&back.euler) - rotation_matrix(&euler)).amax() < 1e-13);
+            assert!((back.pe - euler_momenta_from_angular_momentum(&back.euler, &body.j)).amax() < 1e-15);
+            assert_eq!((back.q, back.p), (s.q, s.p));
+        }
+        let locked = PhaseState::<0> {
+            q: SVector::zeros(),
+            p: SVector::zeros(),
+            euler: Vector3::new(0.1, 0.0, 0.2),
+            pe: Vector3::new(1.0, 0.0, 0.0),
+        };
+        assert!(matches!(BodyState::from_phase(&locked), Err(HamiltonianError::EulerSingular { .. })));
+    }
+
+    /// The Legendre map is the metric `M = [[I, A], [Aᵀ, a]]` applied to `(ω, q̇)`, assembled as
+    /// one 5 × 5 matrix here.
+    #[test]
+    fn momenta_from_velocities_is_the_metric_times_the_velocities() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let mut k = KineticMatrices::<2>::default();
+        k.inertia = Matrix3::from_fn(|_, _| rng.random_range(-1.0..1.0));
+        k.coriolis = SMatrix::from_fn(|_, _| rng.random_range(-1.0..1.0));
+        k.a = SMatrix::from_fn(|_, _| rng.random_range(-1.0..1.0));
+        let mut m = SMatrix::<f64, 5, 5>::zeros();
+        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&k.inertia);
+        m.fixed_view_mut::<3, 2>(0, 3).copy_from(&k.coriolis);
+        m.fixed_view_mut::<2, 3>(3, 0).copy_from(&k.coriolis.transpose());
+        m.fixed_view_mut::<2, 2>(3, 3).copy_from(&k.a);
+        let (omega, qdot) = (Vector3::new(0.3, -1.0, 2.0), SVector::<f64, 2>::new(0.7, -0.2));
+        let v = SVector::<f64, 5>::from_iterator(omega.iter().chain(qdot.iter()).copied());
+        let b = m * v;
+        let (j, p) = momenta_from_velocities(&k, &omega, &qdot);
+        assert!((j - b.fixed_rows::<3>(0)).amax() < 1e-15);
+        assert!((p - b.fixed_rows::<2>(3)).amax() < 1e-15);
+    }
+}

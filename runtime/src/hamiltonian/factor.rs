@@ -242,3 +242,105 @@ fn ldl_solve<const D: usize>(
     }
     x
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{SMatrix, SVector};
+    use rand::{RngExt as _, SeedableRng as _};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+
+    /// A random symmetric positive definite `D × D` matrix `B Bᵀ + 0.1·1` with `B` uniform in
+    /// `[-1, 1)`: condition numbers of a few hundred at most.
+    fn random_spd<const D: usize>(rng: &mut ChaCha8Rng) -> SMatrix<f64, D, D> {
+        let b = SMatrix::<f64, D, D>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+        b * b.transpose() + SMatrix::<f64, D, D>::identity() * 0.1
+    }
+
+    fn random_vector<const D: usize>(rng: &mut ChaCha8Rng) -> SVector<f64, D> {
+        SVector::from_fn(|_, _| rng.random_range(-1.0..1.0))
+    }
+
+    /// The kinetic matrices of the full metric `m` = [[I, A], [Aᵀ, a]].
+    fn blocks(m: &SMatrix<f64, 7, 7>) -> KineticMatrices<4> {
+        const N: usize = 4;
+        let mut k = KineticMatrices::<N>::default();
+        k.inertia = m.fixed_view::<3, 3>(0, 0).into_owned();
+        for j in 0..N {
+            for r in 0..3 {
+                k.coriolis[(r, j)] = m[(r, 3 + j)];
+            }
+            for i in 0..N {
+                k.a[(i, j)] = m[(3 + i, 3 + j)];
+            }
+        }
+        k
+    }
+
+    /// `M⁻¹ (J, p)` by the block factorization equals nalgebra's Cholesky solve of the whole
+    /// 7 × 7 metric, for random symmetric positive definite metrics; so does the `J = 0` solve.
+    #[test]
+    fn solve_matches_cholesky_of_the_whole_metric() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        for _ in 0..200 {
+            let m = random_spd::<7>(&mut rng);
+            let k = blocks(&m);
+            let (j, p) = (random_vector::<3>(&mut rng), random_vector::<4>(&mut rng));
+            let factor = MetricFactor::new(&k, &SVector::zeros()).unwrap();
+            let (omega, qdot) = factor.solve(&j, &p);
+            let b = SVector::<f64, 7>::from_iterator(j.iter().chain(p.iter()).copied());
+            let v = m.cholesky().unwrap().solve(&b);
+            let scale = v.amax();
+            assert!((omega - v.fixed_rows::<3>(0)).amax() < 1e-10 * scale, "ω {omega:?} vs {v:?}");
+            assert!((qdot - v.fixed_rows::<4>(3)).amax() < 1e-10 * scale, "q̇ {qdot:?} vs {v:?}");
+
+            let (omega0, qdot0) = factor.solve_zero_j(&p);
+            let b0 = SVector::<f64, 7>::from_iterator([0.0; 3].iter().chain(p.iter()).copied());
+            let v0 = m.cholesky().unwrap().solve(&b0);
+            assert!((omega0 - v0.fixed_rows::<3>(0)).amax() < 1e-10 * v0.amax());
+            assert!((qdot0 - v0.fixed_rows::<4>(3)).amax() < 1e-10 * v0.amax());
+        }
+    }
+
+    /// The closed-form 3 × 3 inverse and the in-place `L D Lᵀ` solve against nalgebra's general
+    /// inverse on random symmetric positive definite matrices.
+    #[test]
+    fn inverse_and_ldl_match_nalgebra() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for _ in 0..200 {
+            let m3 = random_spd::<3>(&mut rng);
+            let inv = inverse_spd3(&m3, PIVOT_TOLERANCE).unwrap();
+            let reference = m3.try_inverse().unwrap();
+            assert!((inv - reference).amax() < 1e-10 * reference.amax(), "{inv} vs {reference}");
+
+            let m5 = random_spd::<5>(&mut rng);
+            let b = random_vector::<5>(&mut rng);
+            let mut l = m5;
+            let d_inv = ldl_in_place(&mut l, |j| m5[(j, j)], PIVOT_TOLERANCE).unwrap();
+            let x = ldl_solve(&l, &d_inv, b);
+            let reference = m5.try_inverse().unwrap() * b;
+            assert!((x - reference).amax() < 1e-10 * reference.amax(), "{x} vs {reference}");
+        }
+    }
+
+    /// Matrices that are not positive definite are refused: a negative eigenvalue in `I` or in
+    /// the Schur complement, and NaN.
+    #[test]
+    fn indefinite_and_nan_matrices_are_refused() {
+        let minus = SMatrix::<f64, 3, 3>::from_diagonal(&SVector::from([1.0, -1.0, 1.0]));
+        assert!(inverse_spd3(&minus, PIVOT_TOLERANCE).is_none());
+        let mut nan = SMatrix::<f64, 3, 3>::identity();
+        nan[(1, 1)] = f64::NAN;
+        assert!(inverse_spd3(&nan, PIVOT_TOLERANCE).is_none());
+        let mut m = minus;
+        assert!(ldl_in_place(&mut m, |_| 1.0, PIVOT_TOLERANCE).is_none());
+
+        let mut k = KineticMatrices::<1>::default();
+        k.inertia = SMatrix::identity();
+        k.coriolis[(0, 0)] = 2.0;
+        k.a[(0, 0)] = 1.0; // S = a − Aᵀ I⁻¹ A = 1 − 4 < 0
+        let q = SVector::<f64, 1>::new(0.5);
+        assert!(matches!(MetricFactor::new(&k, &q), Err(HamiltonianError::SingularMetric { .. })));
+    }
+}

@@ -58,3 +58,48 @@ pub(crate) fn check_rhs<const N: usize>(out: &PhaseState<N>) -> Result<(), Hamil
 fn non_finite_rhs() -> HamiltonianError {
     HamiltonianError::NonFinite { quantity: "right-hand side of Hamilton's equations" }
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{SVector, Vector3};
+
+    use super::*;
+
+    #[test]
+    fn all_finite_rejects_nan_and_both_infinities_anywhere() {
+        assert!(all_finite(&[]));
+        assert!(all_finite(&[0.0, -0.0, 1e308, -1e308, f64::MIN_POSITIVE, 5e-324]));
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            for at in 0..3 {
+                let mut v = [1.0, 2.0, 3.0];
+                v[at] = bad;
+                assert!(!all_finite(&v), "{v:?}");
+            }
+        }
+        assert!(finite(1.5, "x").is_ok());
+        assert_eq!(finite(f64::NAN, "x"), Err(HamiltonianError::NonFinite { quantity: "x" }));
+    }
+
+    /// The fast state check agrees with the state's own, which names the first bad block; a
+    /// non-finite right-hand side is named as such.
+    #[test]
+    fn state_checks_name_the_first_non_finite_block() {
+        let ok = PhaseState::<2> {
+            q: SVector::from([1.0, 2.0]),
+            p: SVector::zeros(),
+            euler: Vector3::new(0.0, 1.0, 0.0),
+            pe: Vector3::zeros(),
+        };
+        assert_eq!(check_state(&ok), Ok(()));
+        assert_eq!(check_rhs(&ok), Ok(()));
+        let mut bad = ok;
+        bad.p[1] = f64::INFINITY;
+        bad.pe[0] = f64::NAN;
+        assert!(!state_is_finite(&bad));
+        assert_eq!(check_state(&bad), Err(HamiltonianError::NonFinite { quantity: "internal momenta p" }));
+        assert_eq!(
+            check_rhs(&bad),
+            Err(HamiltonianError::NonFinite { quantity: "right-hand side of Hamilton's equations" })
+        );
+    }
+}

@@ -515,3 +515,25 @@ where
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The flat dimension counts `2` per active coordinate, `4` for the quaternion when it is
+    /// integrated and `3` for `J` when the rotation is free.
+    #[test]
+    fn reduction_dimensions_count_what_is_integrated() {
+        assert_eq!(Reduction::<3>::none().dim(), 6 + 4 + 3);
+        assert_eq!(Reduction::<3>::zero_angular_momentum(true).dim(), 6 + 4);
+        assert_eq!(Reduction::<3>::zero_angular_momentum(false).dim(), 6);
+        let frozen = Reduction::<3>::frozen([true, false, true]);
+        assert_eq!((frozen.active_count(), frozen.dim()), (2, 4 + 4 + 3));
+        let all_frozen =
+            Reduction { active: [false; 3], rotation: RotationPart::ZeroAngularMomentum { orientation: false } };
+        assert_eq!(all_frozen.dim(), 0);
+        assert_eq!(Reduction::<0>::none().dim(), 7);
+        assert!(Reduction::<2>::zero_angular_momentum(true).orientation());
+        assert!(!Reduction::<2>::zero_angular_momentum(false).orientation());
+    }
+}
