@@ -121,10 +121,11 @@ mod tests {
     #[test]
     fn momenta_from_velocities_is_the_metric_times_the_velocities() {
         let mut rng = ChaCha8Rng::seed_from_u64(9);
-        let mut k = KineticMatrices::<2>::default();
-        k.inertia = Matrix3::from_fn(|_, _| rng.random_range(-1.0..1.0));
-        k.coriolis = SMatrix::from_fn(|_, _| rng.random_range(-1.0..1.0));
-        k.a = SMatrix::from_fn(|_, _| rng.random_range(-1.0..1.0));
+        let k = KineticMatrices::<2> {
+            inertia: Matrix3::from_fn(|_, _| rng.random_range(-1.0..1.0)),
+            coriolis: SMatrix::from_fn(|_, _| rng.random_range(-1.0..1.0)),
+            a: SMatrix::from_fn(|_, _| rng.random_range(-1.0..1.0)),
+        };
         let mut m = SMatrix::<f64, 5, 5>::zeros();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&k.inertia);
         m.fixed_view_mut::<3, 2>(0, 3).copy_from(&k.coriolis);

@@ -265,8 +265,7 @@ mod tests {
     /// The kinetic matrices of the full metric `m` = [[I, A], [Aᵀ, a]].
     fn blocks(m: &SMatrix<f64, 7, 7>) -> KineticMatrices<4> {
         const N: usize = 4;
-        let mut k = KineticMatrices::<N>::default();
-        k.inertia = m.fixed_view::<3, 3>(0, 0).into_owned();
+        let mut k = KineticMatrices::<N> { inertia: m.fixed_view::<3, 3>(0, 0).into_owned(), ..Default::default() };
         for j in 0..N {
             for r in 0..3 {
                 k.coriolis[(r, j)] = m[(r, 3 + j)];
@@ -336,10 +335,12 @@ mod tests {
         let mut m = minus;
         assert!(ldl_in_place(&mut m, |_| 1.0, PIVOT_TOLERANCE).is_none());
 
-        let mut k = KineticMatrices::<1>::default();
-        k.inertia = SMatrix::identity();
-        k.coriolis[(0, 0)] = 2.0;
-        k.a[(0, 0)] = 1.0; // S = a − Aᵀ I⁻¹ A = 1 − 4 < 0
+        // S = a − Aᵀ I⁻¹ A = 1 − 4 < 0.
+        let k = KineticMatrices::<1> {
+            inertia: SMatrix::identity(),
+            coriolis: SMatrix::from([[2.0, 0.0, 0.0]]),
+            a: SMatrix::from([[1.0]]),
+        };
         let q = SVector::<f64, 1>::new(0.5);
         assert!(matches!(MetricFactor::new(&k, &q), Err(HamiltonianError::SingularMetric { .. })));
     }
