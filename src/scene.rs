@@ -91,7 +91,7 @@ pub type Named<T> = (Spanned<String>, T);
 /// `pe`, `j`, and the lab-frame positions and velocities. `q` and `qdot` stay in the scene's
 /// units, because whether a coordinate is a length or an angle is known only with the
 /// molecule; [`CoordinateScale::coordinate_to_au`] and [`CoordinateScale::velocity_to_au`] convert them
-/// (in `crate::start::initial_state`).
+/// (in [`crate::start::initial_state`]).
 #[derive(Clone, Debug)]
 pub enum Initial {
     /// Internal coordinates, their momenta or velocities, the orientation and its momenta.
