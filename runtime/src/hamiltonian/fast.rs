@@ -1,8 +1,10 @@
 //! The fast right-hand side: the same Hamilton's equations as the G-matrix path ([`super::rhs`]),
 //! evaluated from one block factorization of the kinetic metric and one generated
 //! kinetic-energy gradient, with no G matrices, no derivative of any inverse and no
-//! `kinetic_jacobian`; plus reduced systems that skip what a scene does not need (J = 0,
-//! frozen internal coordinates).
+//! `kinetic_jacobian`. The reduced systems that skip what a scene does not need (J = 0, frozen
+//! internal coordinates) build on it in [`super::reduced`]; the factorization is in
+//! [`super::factor`]. This module re-exports both, and the body state, under their old paths
+//! (`hamiltonian::fast::{ReducedSystem, MetricFactor, BodyState, ...}`).
 //!
 //! # What it computes
 //!
