@@ -10,6 +10,7 @@ pub mod molecules;
 pub mod output;
 pub mod plot;
 pub mod scene;
+pub mod start;
 
 pub use rovib_runtime as runtime;
 

@@ -9,7 +9,10 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 
+use crate::runtime::integrate::{Method, Stats};
+use crate::runtime::nalgebra::Vector3;
 use crate::runtime::units::BOHR_IN_ANGSTROM;
+use crate::scene::Scene;
 
 /// A writer that remembers its path for error messages.
 pub struct OutputFile {
@@ -194,4 +197,77 @@ pub fn write_summary(dir: &Path, summary: &Value) -> Result<PathBuf, String> {
     file.line(&serde_json::to_string_pretty(summary).expect("a JSON value serialises"))?;
     file.flush()?;
     Ok(file.path().to_owned())
+}
+
+/// Everything `summary.json` reports about one run; [`RunSummary::to_json`] is the file's schema.
+pub struct RunSummary<'a> {
+    /// The scene that was run (its path, method, end time, units, outputs, limits).
+    pub scene: &'a Scene,
+    /// The molecule's name.
+    pub molecule: &'a str,
+    /// Why the run stopped, if it did.
+    pub failure: Option<&'a str>,
+    /// The flat layout of the integrated state, e.g. `[r1, p_r1, quaternion w, x, y, z, J_x, J_y, J_z]`.
+    pub state_layout: &'a str,
+    /// Whether the run integrated the `J = 0` system.
+    pub zero_angular_momentum: bool,
+    /// The solver's work counters (`None` if it stopped with an error before reporting them).
+    pub stats: Option<Stats>,
+    /// Right-hand-side evaluations, counted as they happen.
+    pub rhs_evaluations: u64,
+    /// Wall time of the integration, s.
+    pub wall_time: f64,
+    /// The conservation diagnostics at output times.
+    pub conservation: &'a Conservation,
+    /// Centre-of-mass position, bohr.
+    pub com_position: Vector3<f64>,
+    /// Centre-of-mass velocity, bohr per ħ/E_h.
+    pub com_velocity: Vector3<f64>,
+}
+
+impl RunSummary<'_> {
+    /// The JSON value written to `summary.json`.
+    pub fn to_json(&self) -> Value {
+        let scene = self.scene;
+        let stats = self.stats;
+        json!({
+            "scene": scene.path,
+            "molecule": self.molecule,
+            "status": if self.failure.is_some() { "failed" } else { "completed" },
+            "error": self.failure,
+            "method": method_json(&scene.method),
+            "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
+            "state_layout": self.state_layout,
+            "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
+            "zero_angular_momentum": self.zero_angular_momentum,
+            "min_metric_pivot": scene.min_metric_pivot,
+            "max_energy_error": scene.max_energy_error,
+            "t_end": scene.t_end / scene.time_unit.in_au(),
+            "output_interval": scene.output_interval / scene.time_unit.in_au(),
+            "time_unit": scene.time_unit.name(),
+            "units": "q in bohr or rad, p in hbar/bohr or hbar, angles in rad, p_e and J in hbar, H in hartree; lab.xyz in angstrom",
+            // The solver reports its steps only when it finishes; evaluations are counted by the caller.
+            "steps": stats.map(|s| s.steps),
+            "accepted_steps": stats.map(|s| s.accepted),
+            "rejected_steps": stats.map(|s| s.rejected),
+            "rhs_evaluations": self.rhs_evaluations,
+            "wall_time_s": self.wall_time,
+            "conservation": self.conservation.to_json(),
+            "centre_of_mass": {
+                "position_bohr": self.com_position.as_slice(),
+                "velocity_bohr_per_au": self.com_velocity.as_slice(),
+            },
+        })
+    }
+}
+
+/// The integrator and its settings, as `summary.json` names them.
+fn method_json(method: &Method) -> Value {
+    match method {
+        Method::Dop853(o) => json!({"name": "dop853", "rtol": o.rtol, "atol": o.atol}),
+        Method::GaussLegendre(o) => {
+            json!({"name": "gauss-legendre", "stages": o.stages, "step_au": o.step, "compensated": o.compensated})
+        }
+        Method::Rk4(o) => json!({"name": "rk4", "step_au": o.step}),
+    }
 }

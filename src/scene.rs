@@ -42,7 +42,7 @@ use toml::Spanned;
 
 use crate::runtime::diagnostic::{FileError, Source};
 use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4Options};
-use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, LengthUnit};
+use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit};
 
 /// A unit of time accepted in scenes.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -85,19 +85,27 @@ pub struct Outputs {
 /// A name in the file with its place.
 pub type Named<T> = (Spanned<String>, T);
 
-/// The initial condition, in atomic units, with names still to be matched to the molecule.
+/// The initial condition, with names still to be matched to the molecule.
+///
+/// Everything whose unit the scene alone determines is in atomic units: the Euler angles, `p`,
+/// `pe`, `j`, and the lab-frame positions and velocities. `q` and `qdot` stay in the scene's
+/// units, because whether a coordinate is a length or an angle is known only with the
+/// molecule; [`CoordinateScale::coordinate_to_au`] and [`CoordinateScale::velocity_to_au`] convert them
+/// (in [`crate::start::initial_state`]).
 #[derive(Clone, Debug)]
 pub enum Initial {
     /// Internal coordinates, their momenta or velocities, the orientation and its momenta.
     Internal {
-        /// q by coordinate name (bohr or rad); missing ones default to the reference geometry.
+        /// q by coordinate name, in the scene's length or angle unit; missing ones default to
+        /// the reference geometry.
         q: Vec<Named<f64>>,
-        /// Conjugate momenta, or velocities q̇ (a.u.), by name; missing ones are 0.
+        /// Conjugate momenta (atomic units) or velocities q̇ (the scene's units), by name;
+        /// missing ones are 0.
         momenta: Momenta,
         /// Euler angles (φ, θ, ψ) in rad.
         euler: [f64; 3],
-        /// The rotational state.
-        rotation: Rotation,
+        /// The initial angular momentum.
+        rotation: InitialAngularMomentum,
     },
     /// Lab-frame Cartesian positions (bohr) and velocities (bohr per a.u. of time) by label.
     Lab {
@@ -115,13 +123,13 @@ pub enum Initial {
 pub enum Momenta {
     /// Conjugate momenta p (ħ/bohr or ħ).
     P(Vec<Named<f64>>),
-    /// Velocities q̇ (bohr or rad per a.u. of time).
+    /// Velocities q̇ (the scene's length or angle unit per its time unit).
     Qdot(Vec<Named<f64>>),
 }
 
-/// How the rotation is given.
+/// How the initial angular momentum is given.
 #[derive(Copy, Clone, Debug, PartialEq)]
-pub enum Rotation {
+pub enum InitialAngularMomentum {
     /// The momenta conjugate to the Euler angles, ħ.
     Pe([f64; 3]),
     /// The body-frame angular momentum J, ħ.
@@ -421,6 +429,27 @@ pub struct CoordinateScale {
     pub time: f64,
 }
 
+impl CoordinateScale {
+    /// A value of a coordinate declared with `unit`, given in the scene's length or angle unit,
+    /// in atomic units (bohr or rad).
+    pub fn coordinate_to_au(&self, unit: CoordinateUnit, value: f64) -> f64 {
+        value * self.factor(unit)
+    }
+
+    /// A velocity of a coordinate declared with `unit`, given in the scene's length or angle
+    /// unit per its time unit, in atomic units (bohr or rad per ħ/E_h).
+    pub fn velocity_to_au(&self, unit: CoordinateUnit, value: f64) -> f64 {
+        value * self.factor(unit) / self.time
+    }
+
+    fn factor(&self, unit: CoordinateUnit) -> f64 {
+        match unit {
+            CoordinateUnit::Length(_) => self.length,
+            CoordinateUnit::Angle(_) => self.angle,
+        }
+    }
+}
+
 fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) -> Result<Initial, FileError> {
     let r = raw.get_ref();
     let internal_keys =
@@ -470,9 +499,9 @@ fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) 
                 "give the Euler momenta pe or the body-frame angular momentum j, not both",
             ));
         }
-        (Some(pe), None) => Rotation::Pe(triple(src, pe, "pe", 1.0)?),
-        (None, Some(j)) => Rotation::J(triple(src, j, "j", 1.0)?),
-        (None, None) => Rotation::J([0.0; 3]),
+        (Some(pe), None) => InitialAngularMomentum::Pe(triple(src, pe, "pe", 1.0)?),
+        (None, Some(j)) => InitialAngularMomentum::J(triple(src, j, "j", 1.0)?),
+        (None, None) => InitialAngularMomentum::J([0.0; 3]),
     };
     let euler = match &r.euler {
         Some(e) => triple(src, e, "euler", a)?,

@@ -1,7 +1,7 @@
 //! The fast right-hand side (`runtime::hamiltonian::fast`) on every shipped molecule, against
-//! independent references: the seed path (the reference implementation), the seed restricted to
+//! independent references: the G-matrix path path (the reference implementation), the G-matrix path restricted to
 //! `p_e = 0` for J = 0, finite differences of an independently built reduced Hamiltonian for
-//! frozen coordinates, a trajectory of the seed system; and no allocation.
+//! frozen coordinates, a trajectory of the G-matrix path system; and no allocation.
 
 mod common;
 
@@ -11,9 +11,10 @@ use std::ops::ControlFlow;
 
 use common::{Rng, random_state, richardson_derivative};
 use rovib::molecules::H2o;
-use rovib::runtime::hamiltonian::fast::{self, FastSystem, ReducedSystem, Reduction, ReductionError, Rotation};
+use rovib::runtime::hamiltonian::fast::{self, FastSystem, ReducedSystem, Reduction, ReductionError, RotationPart};
 use rovib::runtime::hamiltonian::{
-    self as seed, HamiltonianError, HamiltonianSystem, MetricBlock, PhaseState, WMatrices, Workspace, rotation_matrix,
+    self as gmatrix, HamiltonianError, HamiltonianSystem, MetricBlock, PhaseState, WMatrices, Workspace,
+    rotation_matrix,
 };
 use rovib::runtime::integrate::{Dop853, Dop853Options, OdeSystem};
 use rovib::runtime::nalgebra::{DMatrix, DVector, Quaternion, SVector, UnitQuaternion, Vector3};
@@ -46,7 +47,7 @@ fn flat<const N: usize>(s: &PhaseState<N>) -> Vec<f64> {
     y
 }
 
-/// The body-formulation rates `(J̇, ς̇)` implied by a seed right-hand side `ds` at `s`, by the
+/// The body-formulation rates `(J̇, ς̇)` implied by a G-matrix right-hand side `ds` at `s`, by the
 /// chain rule through the Euler angles: `J̇ = (∂W/∂θ θ̇ + ∂W/∂ψ ψ̇) p_e + W ṗ_e` and
 /// `ς̇ = Σ ∂ς/∂Ω_i Ω̇_i` with `ς = exp(φ ẑ/2) exp(θ x̂/2) exp(ψ ẑ/2)`. Independent of the
 /// reduced system's own formulas (`J × ω`, `½ ς ⊗ (0, ω)`).
@@ -67,10 +68,10 @@ fn quaternion_slice(q: &Quaternion<f64>) -> [f64; 4] {
     [q.w, q.i, q.j, q.k]
 }
 
-/// The fast rhs equals the seed rhs block by block to 1e-12 relative; so does H; ṗ_φ is +0.
+/// The fast rhs equals the G-matrix path rhs block by block to 1e-12 relative; so does H; ṗ_φ is +0.
 #[derive(Copy, Clone)]
-struct FastEqualsSeed;
-impl MoleculeVisitor for FastEqualsSeed {
+struct FastEqualsGMatrix;
+impl MoleculeVisitor for FastEqualsGMatrix {
     type Output = ();
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
         let mut rng = Rng::new(101);
@@ -80,7 +81,7 @@ impl MoleculeVisitor for FastEqualsSeed {
         let mut worst_h = 0f64;
         for _ in 0..STATES {
             let s = random_state(&m, &mut rng);
-            let reference = seed::rhs(&m, &s, &mut ws).unwrap();
+            let reference = gmatrix::rhs(&m, &s, &mut ws).unwrap();
             let d = fast::rhs(&m, &s).unwrap();
             assert_eq!(d.pe[0].to_bits(), 0f64.to_bits(), "{}: ṗ_φ must be exactly +0", m.name());
             for (w, e) in worst.iter_mut().zip(state_rel(&d, &reference)) {
@@ -91,11 +92,11 @@ impl MoleculeVisitor for FastEqualsSeed {
             let mut dy = vec![0.0; y.len()];
             system.rhs(0.0, &y, &mut dy).unwrap();
             assert_eq!(dy, flat(&d));
-            let h = seed::hamiltonian(&m, &s).unwrap();
+            let h = gmatrix::hamiltonian(&m, &s).unwrap();
             worst_h = worst_h.max((system.energy(&y).unwrap() - h).abs() / h.abs());
         }
         eprintln!(
-            "{}: fast vs seed rhs, worst block-relative difference q̇ {:.1e}, ṗ {:.1e}, Ω̇ {:.1e}, ṗ_e {:.1e}; H {:.1e}",
+            "{}: fast vs G-matrix path rhs, worst block-relative difference q̇ {:.1e}, ṗ {:.1e}, Ω̇ {:.1e}, ṗ_e {:.1e}; H {:.1e}",
             m.name(),
             worst[0],
             worst[1],
@@ -104,18 +105,18 @@ impl MoleculeVisitor for FastEqualsSeed {
             worst_h
         );
         for (block, w) in ["q̇", "ṗ", "Ω̇", "ṗ_e"].iter().zip(worst) {
-            assert!(w < 1e-12, "{}: fast vs seed {block}: {w:e}", m.name());
+            assert!(w < 1e-12, "{}: fast vs G-matrix path {block}: {w:e}", m.name());
         }
-        assert!(worst_h < 1e-13, "{}: fast vs seed H: {worst_h:e}", m.name());
+        assert!(worst_h < 1e-13, "{}: fast vs G-matrix path H: {worst_h:e}", m.name());
     }
 }
 
 #[test]
-fn fast_rhs_equals_the_seed_rhs() {
-    for_each_molecule(FastEqualsSeed);
+fn fast_rhs_equals_the_gmatrix_rhs() {
+    for_each_molecule(FastEqualsGMatrix);
 }
 
-/// Invalid states give the seed's errors: non-finite components, gimbal lock.
+/// Invalid states give the G-matrix path's errors: non-finite components, gimbal lock.
 #[derive(Copy, Clone)]
 struct SameErrors;
 impl MoleculeVisitor for SameErrors {
@@ -146,20 +147,20 @@ impl MoleculeVisitor for SameErrors {
             bad.push(nan);
         }
         for b in &bad {
-            let expected = seed::rhs(&m, b, &mut ws).unwrap_err();
+            let expected = gmatrix::rhs(&m, b, &mut ws).unwrap_err();
             assert_eq!(fast::rhs(&m, b).unwrap_err(), expected, "{}", m.name());
-            assert_eq!(fast::hamiltonian(&m, b).unwrap_err(), seed::hamiltonian(&m, b).unwrap_err());
+            assert_eq!(fast::hamiltonian(&m, b).unwrap_err(), gmatrix::hamiltonian(&m, b).unwrap_err());
         }
     }
 }
 
 #[test]
-fn invalid_states_give_the_seeds_errors() {
+fn invalid_states_give_the_gmatrix_errors() {
     for_each_molecule(SameErrors);
 }
 
 #[test]
-fn singular_metrics_give_the_seeds_errors() {
+fn singular_metrics_give_the_gmatrix_errors() {
     let m = H2o;
     let mut rng = Rng::new(103);
     let mut ws = Workspace::<3>::default();
@@ -169,7 +170,7 @@ fn singular_metrics_give_the_seeds_errors() {
     for (r1, r2, alpha) in [(1.8, 1.9, core::f64::consts::PI), (1.8, 1.8, 0.0), (0.0, 1.8, 1.8), (0.0, 0.0, 1.8)] {
         let mut b = s;
         b.q = SVector::<f64, 3>::new(r1, r2, alpha);
-        match seed::rhs(&m, &b, &mut ws) {
+        match gmatrix::rhs(&m, &b, &mut ws) {
             Err(expected) => {
                 assert!(matches!(expected, HamiltonianError::SingularMetric { .. }), "{expected}");
                 eprintln!("h2o at (r1, r2, α) = ({r1}, {r2}, {alpha:.4}): {expected}");
@@ -183,7 +184,7 @@ fn singular_metrics_give_the_seeds_errors() {
                 assert_eq!(reduced.rhs(0.0, &y, &mut dy).unwrap_err(), expected);
             }
             Ok(_) => {
-                let (d, reference) = (fast::rhs(&m, &b).unwrap(), seed::rhs(&m, &b, &mut ws).unwrap());
+                let (d, reference) = (fast::rhs(&m, &b).unwrap(), gmatrix::rhs(&m, &b, &mut ws).unwrap());
                 assert!(state_rel(&d, &reference).iter().all(|&e| e < 1e-12));
             }
         }
@@ -197,9 +198,9 @@ fn singular_metrics_give_the_seeds_errors() {
 }
 
 /// Metrics that are singular or indefinite in a block the factorization never forms (`a`,
-/// `G11⁻¹`) are still reported as the seed reports them.
+/// `G11⁻¹`) are still reported as the G-matrix path reports them.
 #[test]
-fn metric_factor_names_the_block_the_seed_names() {
+fn metric_factor_names_the_block_the_gmatrix_path_names() {
     use rovib::runtime::hamiltonian::{InverseMetric, MetricFactor};
     use rovib::runtime::nalgebra::{Matrix2, Matrix3, SMatrix};
     let inertia = Matrix3::from_diagonal(&Vector3::new(3.0, 4.0, 5.0));
@@ -228,10 +229,10 @@ fn metric_factor_names_the_block_the_seed_names() {
     assert_eq!(MetricFactor::new(&nan, &q1).unwrap_err(), InverseMetric::new(&nan, &q1).unwrap_err());
 }
 
-/// The J = 0 systems equal the seed at `p_e = 0`, where the seed's ṗ_e is exactly zero.
+/// The J = 0 systems equal the G-matrix path at `p_e = 0`, where the G-matrix path's ṗ_e is exactly zero.
 #[derive(Copy, Clone)]
-struct ZeroJEqualsSeed;
-impl MoleculeVisitor for ZeroJEqualsSeed {
+struct ZeroJEqualsGMatrix;
+impl MoleculeVisitor for ZeroJEqualsGMatrix {
     type Output = ();
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
         let mut rng = Rng::new(104);
@@ -240,9 +241,14 @@ impl MoleculeVisitor for ZeroJEqualsSeed {
         for _ in 0..STATES {
             let mut s = random_state(&m, &mut rng);
             s.pe = Vector3::zeros();
-            let reference = seed::rhs(&m, &s, &mut ws).unwrap();
+            let reference = gmatrix::rhs(&m, &s, &mut ws).unwrap();
             // ṗ_e is linear in p_e: at p_e = 0 it vanishes identically, so p_e stays 0.
-            assert!(reference.pe.iter().all(|&v| v == 0.0), "{}: seed ṗ_e at p_e = 0: {:?}", m.name(), reference.pe);
+            assert!(
+                reference.pe.iter().all(|&v| v == 0.0),
+                "{}: G-matrix ṗ_e at p_e = 0: {:?}",
+                m.name(),
+                reference.pe
+            );
             for orientation in [true, false] {
                 let mut system = ReducedSystem::new(&m, Reduction::zero_angular_momentum(orientation), &s);
                 let dim = system.dim();
@@ -261,27 +267,27 @@ impl MoleculeVisitor for ZeroJEqualsSeed {
                 assert_eq!(e.pe, Vector3::zeros());
                 assert_eq!((e.q, e.p), (s.q, s.p));
                 assert!((rotation_matrix(&e.euler) - rotation_matrix(&s.euler)).amax() < 1e-14);
-                let h = seed::hamiltonian(&m, &s).unwrap();
+                let h = gmatrix::hamiltonian(&m, &s).unwrap();
                 assert!((system.energy(&y).unwrap() - h).abs() <= 1e-13 * h.abs(), "{}", m.name());
             }
         }
         eprintln!(
-            "{}: J = 0 system vs seed at p_e = 0, worst block-relative difference q̇ {:.1e}, ṗ {:.1e}, ς̇ {:.1e}",
+            "{}: J = 0 system vs G-matrix path at p_e = 0, worst block-relative difference q̇ {:.1e}, ṗ {:.1e}, ς̇ {:.1e}",
             m.name(),
             worst[0],
             worst[1],
             worst[2]
         );
-        assert!(worst.iter().all(|&w| w < 1e-12), "{}: J = 0 vs seed: {worst:?}", m.name());
+        assert!(worst.iter().all(|&w| w < 1e-12), "{}: J = 0 vs G-matrix path: {worst:?}", m.name());
     }
 }
 
 #[test]
-fn zero_angular_momentum_system_equals_the_seed_at_zero_euler_momenta() {
-    for_each_molecule(ZeroJEqualsSeed);
+fn zero_angular_momentum_system_equals_the_gmatrix_path_at_zero_euler_momenta() {
+    for_each_molecule(ZeroJEqualsGMatrix);
 }
 
-/// A J = 0 trajectory keeps p_e = 0 in the seed system to the bit, and the reduced system with
+/// A J = 0 trajectory keeps p_e = 0 in the G-matrix path system to the bit, and the reduced system with
 /// orientation follows it.
 #[derive(Copy, Clone)]
 struct ZeroJTrajectory;
@@ -296,12 +302,12 @@ impl MoleculeVisitor for ZeroJTrajectory {
         s.pe = Vector3::zeros();
         let opts = Dop853Options { rtol: 1e-12, atol: 1e-12, ..Dop853Options::default() };
         let (t_end, dt) = (200.0, 50.0);
-        let mut seed_out = vec![];
-        let mut seed_system = HamiltonianSystem::new(&m);
-        Dop853::new(seed_system.dim(), opts)
+        let mut reference_out = vec![];
+        let mut gmatrix_system = HamiltonianSystem::new(&m);
+        Dop853::new(gmatrix_system.dim(), opts)
             .unwrap()
-            .integrate(&mut seed_system, 0.0, &flat(&s), t_end, dt, &mut |_t: f64, y: &[f64]| {
-                seed_out.push(PhaseState::<N>::read_from(y).unwrap());
+            .integrate(&mut gmatrix_system, 0.0, &flat(&s), t_end, dt, &mut |_t: f64, y: &[f64]| {
+                reference_out.push(PhaseState::<N>::read_from(y).unwrap());
                 ControlFlow::Continue(())
             })
             .unwrap();
@@ -316,9 +322,9 @@ impl MoleculeVisitor for ZeroJTrajectory {
                 ControlFlow::Continue(())
             })
             .unwrap();
-        assert_eq!(out.len(), seed_out.len());
+        assert_eq!(out.len(), reference_out.len());
         let mut worst = 0f64;
-        for (y, reference) in out.iter().zip(&seed_out) {
+        for (y, reference) in out.iter().zip(&reference_out) {
             assert!(reference.pe.iter().all(|&v| v == 0.0), "{}: p_e left 0: {:?}", m.name(), reference.pe);
             let e = system.expand(y).unwrap();
             assert_eq!(e.pe, Vector3::zeros());
@@ -326,13 +332,16 @@ impl MoleculeVisitor for ZeroJTrajectory {
             let rotation = (rotation_matrix(&e.euler) - rotation_matrix(&reference.euler)).amax();
             worst = worst.max(d[0]).max(d[1]).max(rotation);
         }
-        eprintln!("{}: J = 0 trajectory vs seed (p_e = 0): worst block-relative difference {worst:.1e}", m.name());
-        assert!(worst < 1e-9, "{}: J = 0 trajectory vs seed: {worst:e}", m.name());
+        eprintln!(
+            "{}: J = 0 trajectory vs G-matrix path (p_e = 0): worst block-relative difference {worst:.1e}",
+            m.name()
+        );
+        assert!(worst < 1e-9, "{}: J = 0 trajectory vs G-matrix path: {worst:e}", m.name());
     }
 }
 
 #[test]
-fn zero_angular_momentum_trajectory_follows_the_seed() {
+fn zero_angular_momentum_trajectory_follows_the_gmatrix_path() {
     for_each_molecule(ZeroJTrajectory);
 }
 
@@ -379,7 +388,7 @@ fn reduced_hamiltonian<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 }
 
 /// The quaternion of a state's Euler angles.
-fn seed_quaternion<const N: usize>(s: &PhaseState<N>) -> Quaternion<f64> {
+fn reference_quaternion<const N: usize>(s: &PhaseState<N>) -> Quaternion<f64> {
     *fast::quaternion_of_euler(&s.euler).quaternion()
 }
 
@@ -404,7 +413,7 @@ fn masks<const N: usize>(rng: &mut Rng) -> Vec<[bool; N]> {
 
 /// The frozen-coordinate system's rhs is the symplectic gradient of its own Hamiltonian, built
 /// independently and differentiated numerically; its energy is that Hamiltonian; expanding a
-/// state gives a full state where the seed has q̇_frozen = 0 and the same velocities.
+/// state gives a full state where the G-matrix path has q̇_frozen = 0 and the same velocities.
 #[derive(Copy, Clone)]
 struct FrozenIsHamiltonian;
 impl MoleculeVisitor for FrozenIsHamiltonian {
@@ -413,11 +422,11 @@ impl MoleculeVisitor for FrozenIsHamiltonian {
         let mut rng = Rng::new(106);
         let mut ws = Workspace::<N>::default();
         let mut worst_fd = 0f64;
-        let mut worst_seed = 0f64;
+        let mut worst_reference = 0f64;
         let mut cases = 0;
         for active in masks::<N>(&mut rng) {
-            for rotation in [Rotation::Free, Rotation::ZeroAngularMomentum { orientation: true }] {
-                let free = rotation == Rotation::Free;
+            for rotation in [RotationPart::Free, RotationPart::ZeroAngularMomentum { orientation: true }] {
+                let free = rotation == RotationPart::Free;
                 for _ in 0..4 {
                     let mut s = random_state(&m, &mut rng);
                     if !free {
@@ -462,36 +471,41 @@ impl MoleculeVisitor for FrozenIsHamiltonian {
                         worst_fd = worst_fd.max(block_rel(&dy[at + 4..], j.cross(&omega).as_slice()));
                     }
 
-                    // The expanded full state: the seed sees the same motion, with q̇_f = 0.
+                    // The expanded full state: the G-matrix path sees the same motion, with q̇_f = 0.
                     let full = system.expand(&y).unwrap();
-                    let reference = seed::rhs(&m, &full, &mut ws).unwrap();
-                    let hf = seed::hamiltonian(&m, &full).unwrap();
-                    assert!((hf - e).abs() <= 1e-12 * e.abs(), "{}: seed H of the expanded state", m.name());
+                    let reference = gmatrix::rhs(&m, &full, &mut ws).unwrap();
+                    let hf = gmatrix::hamiltonian(&m, &full).unwrap();
+                    assert!((hf - e).abs() <= 1e-12 * e.abs(), "{}: G-matrix H of the expanded state", m.name());
                     // Judged against the velocities the state's momenta give unconstrained (with
-                    // everything frozen, the seed's q̇ is all rounding).
+                    // everything frozen, the G-matrix path's q̇ is all rounding).
                     let qdot_scale = reference.q.amax().max(fast::rhs(&m, &s).unwrap().q.amax());
                     for k in 0..N {
                         let expected = if active[k] { dy[active[..k].iter().filter(|&&a| a).count()] } else { 0.0 };
-                        worst_seed = worst_seed.max((reference.q[k] - expected).abs() / qdot_scale);
+                        worst_reference = worst_reference.max((reference.q[k] - expected).abs() / qdot_scale);
                     }
                     // The seed's rotation rates, carried into the body formulation by the chain
                     // rule (the expanded Euler angles give ±ς: the same rotation).
                     let (jdot, qdot) = body_rates(&full, &reference);
-                    let sign = quaternion.dot(&seed_quaternion(&full)).signum();
-                    worst_seed = worst_seed.max(block_rel(&dy[at..at + 4], &quaternion_slice(&(qdot * sign))));
+                    let sign = quaternion.dot(&reference_quaternion(&full)).signum();
+                    worst_reference =
+                        worst_reference.max(block_rel(&dy[at..at + 4], &quaternion_slice(&(qdot * sign))));
                     if free {
-                        worst_seed = worst_seed.max(block_rel(&dy[at + 4..], jdot.as_slice()));
+                        worst_reference = worst_reference.max(block_rel(&dy[at + 4..], jdot.as_slice()));
                     }
                 }
             }
         }
         eprintln!(
             "{}: frozen systems ({cases} cases): rhs vs finite differences of H_red {worst_fd:.1e}; \
-             expanded state vs seed velocities {worst_seed:.1e}",
+             expanded state vs G-matrix path velocities {worst_reference:.1e}",
             m.name()
         );
         assert!(worst_fd < 1e-7, "{}: frozen rhs vs finite differences: {worst_fd:e}", m.name());
-        assert!(worst_seed < 1e-11, "{}: frozen vs seed at the expanded state: {worst_seed:e}", m.name());
+        assert!(
+            worst_reference < 1e-11,
+            "{}: frozen vs G-matrix path at the expanded state: {worst_reference:e}",
+            m.name()
+        );
     }
 }
 
@@ -597,7 +611,7 @@ impl MoleculeVisitor for NoAllocation {
                 .iter()
                 .map(|s| {
                     let mut s = *s;
-                    if sys.reduction().rotation != Rotation::Free {
+                    if sys.reduction().rotation != RotationPart::Free {
                         s.pe = Vector3::zeros();
                     }
                     for k in 0..N {
@@ -653,7 +667,7 @@ fn no_path_allocates() {
     assert!(info.count_total > 0);
 }
 
-/// A DOP853 trajectory of the fast system follows the seed system's.
+/// A DOP853 trajectory of the fast system follows the G-matrix path system's.
 #[derive(Copy, Clone)]
 struct Trajectory;
 impl MoleculeVisitor for Trajectory {
@@ -669,7 +683,7 @@ impl MoleculeVisitor for Trajectory {
             out
         };
         let y0 = flat(&s);
-        let seed_out = run(&mut |solver, out| {
+        let reference_out = run(&mut |solver, out| {
             let mut sys = HamiltonianSystem::new(&m);
             solver
                 .integrate(&mut sys, 0.0, &y0, t_end, dt, &mut |_t: f64, y: &[f64]| {
@@ -687,9 +701,9 @@ impl MoleculeVisitor for Trajectory {
                 })
                 .unwrap();
         });
-        assert_eq!(seed_out.len(), fast_out.len());
+        assert_eq!(reference_out.len(), fast_out.len());
         let mut worst = [0f64; 4];
-        for (a, b) in fast_out.iter().zip(&seed_out) {
+        for (a, b) in fast_out.iter().zip(&reference_out) {
             let (a, b) = (PhaseState::<N>::read_from(a).unwrap(), PhaseState::<N>::read_from(b).unwrap());
             assert_eq!(a.pe[0], b.pe[0], "p_φ is conserved exactly in both");
             for (w, e) in worst.iter_mut().zip(state_rel(&a, &b)) {
@@ -697,7 +711,7 @@ impl MoleculeVisitor for Trajectory {
             }
         }
         eprintln!(
-            "{}: fast vs seed DOP853 trajectory (t = {t_end}), worst block-relative difference q {:.1e}, p {:.1e}, Ω {:.1e}, p_e {:.1e}",
+            "{}: fast vs G-matrix path DOP853 trajectory (t = {t_end}), worst block-relative difference q {:.1e}, p {:.1e}, Ω {:.1e}, p_e {:.1e}",
             m.name(),
             worst[0],
             worst[1],
@@ -709,6 +723,6 @@ impl MoleculeVisitor for Trajectory {
 }
 
 #[test]
-fn fast_trajectory_follows_the_seed_trajectory() {
+fn fast_trajectory_follows_the_gmatrix_trajectory() {
     for_each_molecule(Trajectory);
 }

@@ -5,11 +5,11 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use rovib::cli::run::initial_state;
 use rovib::molecules::H2o;
 use rovib::runtime::hamiltonian::{velocities, w_matrix};
 use rovib::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM};
 use rovib::scene::parse_scene;
+use rovib::start::initial_state;
 
 const BASE: &str = r#"molecule = "h2o"
 

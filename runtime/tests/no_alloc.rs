@@ -11,8 +11,7 @@ use core::ops::ControlFlow;
 
 use rovib_runtime::integrate::{Dop853, Dop853Options, GaussLegendre, GaussLegendreOptions, Observer, Rk4, Rk4Options};
 
-mod problems;
-use problems::Kepler;
+use rovib_runtime::integrate::problems::Kepler;
 
 /// Kepler with eccentricity 0.5 (period 2π).
 const Y0: [f64; 4] = [0.5, 0.0, 0.0, 1.732_050_807_568_877_2];

@@ -20,7 +20,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::CliError;
-use super::run::{initial_state, load_scene, production_system};
 use crate::molecules;
 use crate::output::OutputFile;
 use crate::plot::{Panel, Series, svg};
@@ -30,6 +29,7 @@ use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4
 use crate::runtime::nalgebra::SMatrix;
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::Scene;
+use crate::start::{initial_state, load_scene, production_system};
 
 /// One run of the diagram.
 #[derive(Clone, Debug)]

@@ -166,3 +166,12 @@ pub(crate) fn unknown_molecule(name: &str) -> CliError {
         crate::molecules::NAMES.join(", ")
     ))
 }
+
+impl From<crate::start::StartError> for CliError {
+    fn from(e: crate::start::StartError) -> Self {
+        match e {
+            crate::start::StartError::File(e) => CliError::File(e),
+            crate::start::StartError::Message(m) => CliError::Message(m),
+        }
+    }
+}

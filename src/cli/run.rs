@@ -6,20 +6,19 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use serde_json::json;
 
 use super::{CliError, unknown_molecule};
 use crate::molecules;
-use crate::output::{Conservation, LabXyz, TrajectoryCsv, write_summary};
-use crate::runtime::diagnostic::FileError;
-use crate::runtime::frames::{FitOptions, LabState, from_lab};
-use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction, ReductionError, Rotation};
-use crate::runtime::hamiltonian::{PhaseState, euler_momenta_from_angular_momentum, hamiltonian, w_matrix};
-use crate::runtime::integrate::{Method, Observer, OdeSystem, SolveError, Stats, solve};
-use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
-use crate::runtime::units::CoordinateUnit;
-use crate::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
-use crate::scene::{Initial, Momenta, Rotation as InitialRotation, Scene, parse_scene};
+use crate::output::{Conservation, LabXyz, RunSummary, TrajectoryCsv, write_summary};
+use crate::runtime::hamiltonian::hamiltonian;
+use crate::runtime::hamiltonian::{ReducedSystem, Reduction, RotationPart};
+use crate::runtime::integrate::{Observer, OdeSystem, SolveError, Stats, solve};
+use crate::runtime::nalgebra::{SMatrix, Vector3};
+use crate::runtime::{Molecule, MoleculeVisitor};
+use crate::scene::Scene;
+// The initial state and the production system live in `crate::start`; re-exported here for
+// callers that used these paths.
+pub use crate::start::{Start, initial_state, load_scene, production_system};
 
 /// What a finished run reports on the terminal.
 pub struct RunReport {
@@ -35,25 +34,6 @@ pub struct RunReport {
     pub wall_time: f64,
 }
 
-/// Reads and parses the scene at `path` and creates its output directory: `out_dir`, or by
-/// default `out/SCENE_NAME` followed by `default_subdir` (for `rovib run` and `rovib bench`).
-pub(crate) fn load_scene(
-    path: &Path,
-    out_dir: Option<&Path>,
-    default_subdir: &str,
-) -> Result<(Scene, PathBuf), CliError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
-    let scene = parse_scene(&path.display().to_string(), &text)?;
-    let out_dir = match out_dir {
-        Some(d) => d.to_owned(),
-        None => Path::new("out").join(path.file_stem().unwrap_or_default()).join(default_subdir),
-    };
-    std::fs::create_dir_all(&out_dir)
-        .map_err(|e| CliError::context(format!("cannot create {}", out_dir.display()), e))?;
-    Ok((scene, out_dir))
-}
-
 /// Runs the scene at `path`, writing into `out_dir` (default `out/SCENE_NAME`).
 pub fn run(path: &Path, out_dir: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
     let (scene, out_dir) = load_scene(path, out_dir, "")?;
@@ -63,198 +43,6 @@ pub fn run(path: &Path, out_dir: Option<&Path>, quiet: bool) -> Result<RunReport
         let e = unknown_molecule(&name);
         CliError::File(scene.source().error(scene.molecule.span(), e.to_string(), "use a name from `rovib list`"))
     })?
-}
-
-/// Where a run starts: the phase-space state and the centre-of-mass motion (bohr, bohr/a.u.).
-pub struct Start<const N: usize> {
-    /// The internal state.
-    pub state: PhaseState<N>,
-    /// Centre-of-mass position.
-    pub com_position: Vector3<f64>,
-    /// Centre-of-mass velocity.
-    pub com_velocity: Vector3<f64>,
-}
-
-/// Binds the scene's initial condition to molecule `m`: names to indices, units to atomic units.
-pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
-    m: &M,
-    scene: &Scene,
-) -> Result<Start<N>, FileError> {
-    let src = scene.source();
-    let coords = m.coordinates();
-    let index = |name: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
-        coords.iter().position(|c| c.name == name.get_ref()).ok_or_else(|| {
-            let known: Vec<&str> = coords.iter().map(|c| c.name).collect();
-            src.error(
-                name.span(),
-                format!("{} has no coordinate `{}` (in {what})", m.name(), name.get_ref()),
-                if known.is_empty() {
-                    format!("{} is rigid: remove {what}", m.name())
-                } else {
-                    format!("the coordinates of {} are {}", m.name(), known.join(", "))
-                },
-            )
-        })
-    };
-    // Per-coordinate factor from the scene's units to atomic units.
-    let scale = |k: usize| match coords[k].unit {
-        CoordinateUnit::Length(_) => scene.units.length,
-        CoordinateUnit::Angle(_) => scene.units.angle,
-    };
-    match &scene.initial {
-        Initial::Internal { q, momenta, euler, rotation } => {
-            let mut qv = SVector::<f64, N>::zeros();
-            let mut given = [false; N];
-            for (name, value) in q {
-                let k = index(name, "q")?;
-                qv[k] = value * scale(k);
-                given[k] = true;
-            }
-            if let Some(k) = (0..N).find(|&k| !given[k]) {
-                let reference = m.reference_geometry().ok_or_else(|| {
-                    src.error(
-                        scene.molecule.span(),
-                        format!(
-                            "the initial q does not give `{}` and {} has no reference geometry",
-                            coords[k].name,
-                            m.name()
-                        ),
-                        format!("give every coordinate in q = {{ ... }}, or add `reference` values to {}", m.source()),
-                    )
-                })?;
-                for k in (0..N).filter(|&k| !given[k]) {
-                    qv[k] = reference[k];
-                }
-            }
-            let euler = Vector3::from(*euler);
-            let (pv, pe) = match (momenta, rotation) {
-                (Momenta::P(p), rot) => {
-                    let mut pv = SVector::<f64, N>::zeros();
-                    for (name, value) in p {
-                        pv[index(name, "p")?] = *value;
-                    }
-                    let pe = match rot {
-                        InitialRotation::Pe(pe) => Vector3::from(*pe),
-                        InitialRotation::J(j) => euler_momenta_from_angular_momentum(&euler, &Vector3::from(*j)),
-                    };
-                    (pv, pe)
-                }
-                (Momenta::Qdot(qd), rot) => {
-                    let mut qdot = SVector::<f64, N>::zeros();
-                    for (name, value) in qd {
-                        let k = index(name, "qdot")?;
-                        qdot[k] = value * scale(k) / scene.units.time;
-                    }
-                    // J is given (or follows from p_e); then ω = I⁻¹(J − A q̇) and p = Aᵀω + a q̇.
-                    let j = match rot {
-                        InitialRotation::J(j) => Vector3::from(*j),
-                        InitialRotation::Pe(pe) => {
-                            w_matrix(&euler).map_err(|e| {
-                                src.whole_file(format!("the initial orientation: {e}"), "choose θ away from 0 and π")
-                            })? * Vector3::from(*pe)
-                        }
-                    };
-                    let mut k = KineticMatrices::<N>::default();
-                    m.kinetic(&qv, &mut k);
-                    let inertia = k.inertia.cholesky().ok_or_else(|| {
-                        src.whole_file(
-                            format!(
-                                "the inertia tensor of {} is singular at the initial geometry q = {:?}",
-                                m.name(),
-                                qv.as_slice()
-                            ),
-                            "start from a geometry where the molecule is not linear",
-                        )
-                    })?;
-                    let omega = inertia.solve(&(j - k.coriolis * qdot));
-                    let pv = k.coriolis.transpose() * omega + k.a * qdot;
-                    let pe = match rot {
-                        InitialRotation::Pe(pe) => Vector3::from(*pe),
-                        InitialRotation::J(_) => euler_momenta_from_angular_momentum(&euler, &j),
-                    };
-                    (pv, pe)
-                }
-            };
-            Ok(Start {
-                state: PhaseState { q: qv, p: pv, euler, pe },
-                com_position: Vector3::zeros(),
-                com_velocity: Vector3::zeros(),
-            })
-        }
-        Initial::Lab { positions, velocities, span } => {
-            let atoms = m.atoms();
-            let atom_index = |label: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
-                atoms.iter().position(|a| a.label == label.get_ref()).ok_or_else(|| {
-                    let known: Vec<&str> = atoms.iter().map(|a| a.label).collect();
-                    src.error(
-                        label.span(),
-                        format!("{} has no atom `{}` (in {what})", m.name(), label.get_ref()),
-                        format!("the atoms of {} are {}", m.name(), known.join(", ")),
-                    )
-                })
-            };
-            let mut lab = LabState::<NA> { positions: SMatrix::zeros(), velocities: SMatrix::zeros() };
-            let mut given = [false; NA];
-            for (label, x) in positions {
-                let i = atom_index(label, "positions")?;
-                lab.positions.set_column(i, &Vector3::from(*x));
-                given[i] = true;
-            }
-            let missing: Vec<&str> = (0..NA).filter(|&i| !given[i]).map(|i| atoms[i].label).collect();
-            if !missing.is_empty() {
-                return Err(src.error(
-                    span.clone(),
-                    format!(
-                        "the lab-frame positions do not give atom{} {}",
-                        if missing.len() == 1 { "" } else { "s" },
-                        missing.join(", ")
-                    ),
-                    "give the position of every atom, keyed by its label",
-                ));
-            }
-            for (label, v) in velocities {
-                lab.velocities.set_column(atom_index(label, "velocities")?, &Vector3::from(*v));
-            }
-            let (state, com, _) = from_lab(m, &lab, &FitOptions::default()).map_err(|e| {
-                src.error(
-                    span.clone(),
-                    format!("the lab-frame positions cannot start a run of {}: {e}", m.name()),
-                    "check the atom positions and their units; rotate the input if θ is at 0 or π",
-                )
-            })?;
-            Ok(Start { state, com_position: com.position, com_velocity: com.velocity })
-        }
-    }
-}
-
-/// The system every command integrates, chosen from the scene: the body formulation (no
-/// gimbal lock) on the fast path, reduced to what the scene needs: frozen coordinates as it
-/// names them, `J = 0` when the initial angular momentum is exactly zero (then `J` stays
-/// zero), and the orientation only when an output needs it. Returns the system and the
-/// initial flat state.
-pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
-    m: &'m M,
-    scene: &Scene,
-    start: &PhaseState<N>,
-) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), CliError> {
-    let names: Vec<&str> = scene.frozen.iter().map(|s| s.get_ref().as_str()).collect();
-    let mut reduction = Reduction::freezing(m, &names).map_err(|e| {
-        let at = match &e {
-            ReductionError::UnknownCoordinate { name, .. } => {
-                scene.frozen.iter().find(|s| s.get_ref() == name).map_or(0..0, |s| s.span())
-            }
-            _ => 0..0,
-        };
-        scene.source().error(at, e.to_string(), "name coordinates from `rovib list` in run.frozen")
-    })?;
-    if start.pe == Vector3::zeros() {
-        reduction.rotation =
-            Rotation::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
-    }
-    let system = ReducedSystem::new(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
-    let mut y0 = vec![0.0; system.dim()];
-    system.reduce(start, &mut y0).map_err(|e| CliError::context("the initial state", e))?;
-    Ok((system, y0))
 }
 
 struct Run<'a> {
@@ -324,35 +112,20 @@ impl MoleculeVisitor for Run<'_> {
             files.push(self.out_dir.join("lab.xyz"));
         }
         if scene.outputs.summary {
-            let summary = json!({
-                "scene": scene.path,
-                "molecule": m.name(),
-                "status": if failure.is_some() { "failed" } else { "completed" },
-                "error": failure,
-                "method": method_json(&scene.method),
-                "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
-                "state_layout": layout,
-                "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
-                "zero_angular_momentum": system.reduction().rotation != Rotation::Free,
-                "min_metric_pivot": scene.min_metric_pivot,
-                "max_energy_error": scene.max_energy_error,
-                "t_end": scene.t_end / scene.time_unit.in_au(),
-                "output_interval": scene.output_interval / scene.time_unit.in_au(),
-                "time_unit": scene.time_unit.name(),
-                "units": "q in bohr or rad, p in hbar/bohr or hbar, angles in rad, p_e and J in hbar, H in hartree; lab.xyz in angstrom",
-                // The solver reports its steps only when it finishes; evaluations are counted here.
-                "steps": stats.map(|s| s.steps),
-                "accepted_steps": stats.map(|s| s.accepted),
-                "rejected_steps": stats.map(|s| s.rejected),
-                "rhs_evaluations": counted.evaluations,
-                "wall_time_s": wall_time,
-                "conservation": recorder.conservation.to_json(),
-                "centre_of_mass": {
-                    "position_bohr": start.com_position.as_slice(),
-                    "velocity_bohr_per_au": start.com_velocity.as_slice(),
-                },
-            });
-            files.push(write_summary(self.out_dir, &summary)?);
+            let summary = RunSummary {
+                scene,
+                molecule: m.name(),
+                failure: failure.as_deref(),
+                state_layout: &layout,
+                zero_angular_momentum: system.reduction().rotation != RotationPart::Free,
+                stats,
+                rhs_evaluations: counted.evaluations,
+                wall_time,
+                conservation: &recorder.conservation,
+                com_position: start.com_position,
+                com_velocity: start.com_velocity,
+            };
+            files.push(write_summary(self.out_dir, &summary.to_json())?);
         }
         flushed?;
         if let Some(message) = failure {
@@ -360,16 +133,6 @@ impl MoleculeVisitor for Run<'_> {
         }
         let stats = stats.unwrap_or_default();
         Ok(RunReport { out_dir: self.out_dir.to_owned(), files, stats, conservation: recorder.conservation, wall_time })
-    }
-}
-
-fn method_json(method: &Method) -> serde_json::Value {
-    match method {
-        Method::Dop853(o) => json!({"name": "dop853", "rtol": o.rtol, "atol": o.atol}),
-        Method::GaussLegendre(o) => {
-            json!({"name": "gauss-legendre", "stages": o.stages, "step_au": o.step, "compensated": o.compensated})
-        }
-        Method::Rk4(o) => json!({"name": "rk4", "step_au": o.step}),
     }
 }
 
@@ -443,7 +206,7 @@ fn layout<M: Molecule<N, NA>, const N: usize, const NA: usize>(r: &Reduction<N>,
     if r.orientation() {
         parts.extend(["quaternion w", "x", "y", "z"].map(str::to_owned));
     }
-    if r.rotation == Rotation::Free {
+    if r.rotation == RotationPart::Free {
         parts.extend(["J_x", "J_y", "J_z"].map(str::to_owned));
     }
     format!("[{}]", parts.join(", "))

@@ -14,28 +14,8 @@ pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
     }
 }
 
-/// A small deterministic generator (SplitMix64), so tests need no RNG dependency and every run
-/// sees the same points.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [lo, hi).
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
+#[allow(unused_imports)]
+pub use rovib_testkit::Rng;
 
 /// A random geometry near the reference: lengths within ±8 %, angles within ±0.15 rad.
 pub fn random_q<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, rng: &mut Rng) -> SVector<f64, N> {

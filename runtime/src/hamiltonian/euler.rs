@@ -26,6 +26,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::HamiltonianError;
+use super::finite::all_finite;
 
 /// Below this `|sin θ|` the functions that need W fail with
 /// [`HamiltonianError::EulerSingular`].
@@ -68,15 +69,7 @@ impl WMatrices {
     /// Evaluates W, ∂W/∂θ and ∂W/∂ψ; fails if `|sin θ| <` [`MIN_SIN_THETA`] or an angle is not
     /// finite.
     pub fn new(euler: &Vector3<f64>) -> Result<Self, HamiltonianError> {
-        if !euler.iter().all(|a| a.is_finite()) {
-            return Err(HamiltonianError::NonFinite { quantity: "Euler angles (φ, θ, ψ)" });
-        }
-        let theta = euler[1];
-        let (st, ct) = theta.sin_cos();
-        if st.abs() < MIN_SIN_THETA {
-            return Err(HamiltonianError::EulerSingular { theta });
-        }
-        let (sp, cp) = euler[2].sin_cos();
+        let EulerTrig { st, ct, sp, cp, .. } = EulerTrig::new(euler)?;
         let cot = ct / st;
         let s2 = st * st;
         #[rustfmt::skip]
@@ -99,6 +92,66 @@ impl WMatrices {
              0.0,      0.0, 0.0,
         );
         Ok(Self { w, dw_dtheta, dw_dpsi })
+    }
+}
+
+/// `sin`/`cos` of θ and ψ: everything W, Wᵀ and ∂W need (W does not depend on φ), with
+/// `1 / sin θ` computed once (one division instead of three). [`WMatrices::new`] builds the
+/// matrices from it; the fast paths apply W, Wᵀ and ∂W to vectors without forming them.
+#[derive(Copy, Clone, Debug)]
+pub(crate) struct EulerTrig {
+    st: f64,
+    inv_st: f64,
+    ct: f64,
+    sp: f64,
+    cp: f64,
+}
+
+impl EulerTrig {
+    /// The one validation of an orientation for W: fails with [`HamiltonianError::NonFinite`]
+    /// for non-finite angles, then with [`HamiltonianError::EulerSingular`] if
+    /// `|sin θ| <` [`MIN_SIN_THETA`].
+    #[inline]
+    pub(crate) fn new(euler: &Vector3<f64>) -> Result<Self, HamiltonianError> {
+        if !all_finite(euler.as_slice()) {
+            return Err(HamiltonianError::NonFinite { quantity: "Euler angles (φ, θ, ψ)" });
+        }
+        let theta = euler[1];
+        let (st, ct) = theta.sin_cos();
+        if st.abs() < MIN_SIN_THETA {
+            return Err(HamiltonianError::EulerSingular { theta });
+        }
+        let (sp, cp) = euler[2].sin_cos();
+        Ok(Self { st, inv_st: 1.0 / st, ct, sp, cp })
+    }
+
+    /// `J = W p_e` (eq. 2).
+    #[inline]
+    pub(crate) fn j(&self, pe: &Vector3<f64>) -> Vector3<f64> {
+        let g = (pe[0] - self.ct * pe[2]) * self.inv_st;
+        Vector3::new(self.sp * g + self.cp * pe[1], self.cp * g - self.sp * pe[1], pe[2])
+    }
+
+    /// `Ω̇_e = Wᵀ ω` (eq. 6).
+    #[inline]
+    pub(crate) fn euler_rates(&self, omega: &Vector3<f64>) -> Vector3<f64> {
+        let phi_dot = (self.sp * omega[0] + self.cp * omega[1]) * self.inv_st;
+        Vector3::new(phi_dot, self.cp * omega[0] - self.sp * omega[1], omega[2] - self.ct * phi_dot)
+    }
+
+    /// `ṗ_e = −((∂W/∂Ω_e) p_e) · ω` (eqs. 5, 7) with `ṗ_φ` a literal `+0.0` (H does not depend
+    /// on φ; negating a computed zero could give −0.0), given `J = W p_e`.
+    #[inline]
+    pub(crate) fn euler_momenta_rates(
+        &self,
+        pe: &Vector3<f64>,
+        j: &Vector3<f64>,
+        omega: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        let dh_dtheta =
+            (pe[2] - self.ct * pe[0]) * (self.inv_st * self.inv_st) * (self.sp * omega[0] + self.cp * omega[1]);
+        let dh_dpsi = j[1] * omega[0] - j[0] * omega[1];
+        Vector3::new(0.0, -dh_dtheta, -dh_dpsi)
     }
 }
 

@@ -714,7 +714,7 @@ fn combine(out: &mut [f64], y: &[f64], k: &[f64], n: usize, h: f64, row: &[(usiz
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::convert::Infallible;
+    use crate::integrate::problems::ExpSin;
 
     fn row_weight_sum(row: &[(usize, f64)], power: i32) -> f64 {
         row.iter().map(|&(j, a)| a * C[j].powi(power)).sum()
@@ -746,20 +746,6 @@ mod tests {
         }
     }
 
-    /// y' = y·cos t with the exact solution exp(sin t).
-    struct ExpSin;
-
-    impl OdeSystem for ExpSin {
-        type Error = Infallible;
-        fn dim(&self) -> usize {
-            1
-        }
-        fn rhs(&mut self, t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), Infallible> {
-            dydt[0] = y[0] * t.cos();
-            Ok(())
-        }
-    }
-
     /// Error at t = 2 after `steps` fixed steps of the 8th-order solution.
     fn fixed_step_error(steps: u32) -> f64 {
         let mut solver = Dop853::new(1, Dop853Options::default()).unwrap();
@@ -772,7 +758,7 @@ mod tests {
             solver.trial_step(&mut ExpSin, t, h, &mut stats).unwrap();
             solver.y[0] = solver.y_new[0];
         }
-        (solver.y[0] - 2.0_f64.sin().exp()).abs()
+        (solver.y[0] - ExpSin::exact(2.0)).abs()
     }
 
     #[test]
@@ -827,7 +813,7 @@ mod tests {
             for s in [0.0, 0.125, 0.25, 0.5, 0.75, 0.9, 1.0] {
                 let t = s * h;
                 solver.interpolate(0.0, h, t);
-                worst = worst.max((solver.y_out[0] - t.sin().exp()).abs());
+                worst = worst.max((solver.y_out[0] - ExpSin::exact(t)).abs());
             }
             errors.push(worst);
         }

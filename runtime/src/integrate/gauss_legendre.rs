@@ -11,10 +11,7 @@
 //!   increment with compensated summation: E. Hairer, R. I. McLachlan & A. Razakarivony,
 //!   "Achieving Brouwer's law with implicit Runge–Kutta methods", BIT 48 (2008) 231–243.
 
-use super::{
-    FixedStep, InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_positive, check_run,
-    eval_checked, run_fixed,
-};
+use super::{FixedStep, InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_positive, eval_checked};
 
 /// Largest number of stages supported (the 3-stage method).
 const MAX_STAGES: usize = 3;
@@ -224,10 +221,7 @@ impl GaussLegendre {
         S: OdeSystem + ?Sized,
         O: Observer + ?Sized,
     {
-        let grid = check_run(self.dim(), system.dim(), t0, y0, t_end, output_interval)?;
-        self.restart(y0);
-        let (step, max_steps) = (self.options.step, self.options.max_steps);
-        run_fixed(self, system, grid, step, max_steps, observer)
+        self.integrate_fixed(system, t0, y0, t_end, output_interval, observer)
     }
 
     /// Writes the starting guess for the stage increments of a step of length `h` into `z`.
@@ -274,6 +268,10 @@ impl GaussLegendre {
 impl FixedStep for GaussLegendre {
     fn state(&self) -> &[f64] {
         &self.y
+    }
+
+    fn step_and_limit(&self) -> (f64, u64) {
+        (self.options.step, self.options.max_steps)
     }
 
     fn restart(&mut self, y0: &[f64]) {

@@ -97,6 +97,7 @@ pub enum SolveError<E> {
 
 mod dop853;
 mod gauss_legendre;
+pub mod problems;
 mod rk4;
 
 pub use dop853::{Dop853, Dop853Options};
@@ -364,6 +365,31 @@ trait FixedStep {
         h: f64,
         stats: &mut Stats,
     ) -> Result<(), SolveError<S::Error>>;
+
+    /// The nominal step and the step limit, from the method's options.
+    fn step_and_limit(&self) -> (f64, u64);
+
+    /// The body of every fixed-step method's `integrate`: checks the input, restarts from `y0`
+    /// and runs over the output grid ([`run_fixed`]).
+    fn integrate_fixed<S, O>(
+        &mut self,
+        system: &mut S,
+        t0: f64,
+        y0: &[f64],
+        t_end: f64,
+        output_interval: f64,
+        observer: &mut O,
+    ) -> Result<Stats, SolveError<S::Error>>
+    where
+        Self: Sized,
+        S: OdeSystem + ?Sized,
+        O: Observer + ?Sized,
+    {
+        let grid = check_run(self.state().len(), system.dim(), t0, y0, t_end, output_interval)?;
+        self.restart(y0);
+        let (step, max_steps) = self.step_and_limit();
+        run_fixed(self, system, grid, step, max_steps, observer)
+    }
 }
 
 /// Runs a fixed-step method over the output grid.

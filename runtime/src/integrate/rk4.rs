@@ -4,10 +4,7 @@
 //! Source: the "classical" method of Kutta (1901), Table 1.2 (right) in Hairer, Nørsett &
 //! Wanner, *Solving Ordinary Differential Equations I*, 2nd ed., Springer 1993, section II.1.
 
-use super::{
-    FixedStep, InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_positive, check_run,
-    eval_checked, run_fixed,
-};
+use super::{FixedStep, InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_positive, eval_checked};
 
 /// Options of [`Rk4`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -100,16 +97,17 @@ impl Rk4 {
         S: OdeSystem + ?Sized,
         O: Observer + ?Sized,
     {
-        let grid = check_run(self.dim(), system.dim(), t0, y0, t_end, output_interval)?;
-        self.restart(y0);
-        let (step, max_steps) = (self.options.step, self.options.max_steps);
-        run_fixed(self, system, grid, step, max_steps, observer)
+        self.integrate_fixed(system, t0, y0, t_end, output_interval, observer)
     }
 }
 
 impl FixedStep for Rk4 {
     fn state(&self) -> &[f64] {
         &self.y
+    }
+
+    fn step_and_limit(&self) -> (f64, u64) {
+        (self.options.step, self.options.max_steps)
     }
 
     fn restart(&mut self, y0: &[f64]) {

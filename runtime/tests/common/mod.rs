@@ -339,31 +339,9 @@ impl Molecule<0, 3> for RigidTop {
     }
 }
 
-/// A small deterministic generator (SplitMix64), so that the tests need no extra crate and
-/// every run sees the same "random" states.
-pub struct Rng(u64);
-
-impl Rng {
-    /// A generator with the given seed.
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn next_f64(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next_f64()
-    }
-}
+// Each test binary uses a different subset of these.
+#[allow(unused_imports)]
+pub use rovib_testkit::{Rng, derivative};
 
 /// A random water geometry around equilibrium: `r ∈ [1.5, 2.3]` bohr, `α ∈ [1.4, 2.5]` rad.
 pub fn random_water_q(rng: &mut Rng) -> SVector<f64, 3> {
@@ -379,11 +357,4 @@ pub fn random_euler(rng: &mut Rng) -> Vector3<f64> {
 /// A random vector with components in `[-s, s)`.
 pub fn random_vector<const D: usize>(rng: &mut Rng, s: f64) -> SVector<f64, D> {
     SVector::from_fn(|_, _| rng.uniform(-s, s))
-}
-
-/// `f'(x)` by the 5-point central difference with step `h`, improved by one Richardson
-/// extrapolation (error O(h⁶)).
-pub fn derivative(f: impl Fn(f64) -> f64, x: f64, h: f64) -> f64 {
-    let d4 = |h: f64| (8.0 * (f(x + h) - f(x - h)) - (f(x + 2.0 * h) - f(x - 2.0 * h))) / (12.0 * h);
-    (16.0 * d4(0.5 * h) - d4(h)) / 15.0
 }

@@ -1,0 +1,264 @@
+//! Where a run starts: a scene's initial condition bound to a molecule (names to indices, the
+//! scene's units to atomic units, velocities to momenta, lab-frame positions fitted to q and an
+//! orientation) and the system a run integrates. `rovib run`, `rovib bench` and any other
+//! runner start here.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use crate::runtime::diagnostic::{FileError, Source};
+use crate::runtime::frames::{FitOptions, LabState, from_lab};
+use crate::runtime::hamiltonian::{
+    PhaseState, ReducedSystem, Reduction, ReductionError, RotationPart, euler_momenta_from_angular_momentum,
+    momenta_from_velocities, w_matrix,
+};
+use crate::runtime::integrate::OdeSystem;
+use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
+use crate::runtime::{KineticMatrices, Molecule};
+use crate::scene::{Initial, InitialAngularMomentum, Momenta, Scene, parse_scene};
+
+/// Why a scene cannot start a run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum StartError {
+    /// A problem located in the scene file, shown with its place and a fix.
+    File(FileError),
+    /// Anything else, one line with its context.
+    Message(String),
+}
+
+impl fmt::Display for StartError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StartError::File(e) => write!(f, "{e}"),
+            StartError::Message(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for StartError {}
+
+impl From<FileError> for StartError {
+    fn from(e: FileError) -> Self {
+        StartError::File(e)
+    }
+}
+
+/// Reads and parses the scene at `path` and creates its output directory: `out_dir`, or by
+/// default `out/SCENE_NAME` followed by `default_subdir` (`rovib run` uses none, `rovib bench`
+/// `bench`).
+pub fn load_scene(path: &Path, out_dir: Option<&Path>, default_subdir: &str) -> Result<(Scene, PathBuf), StartError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| StartError::Message(format!("cannot read {}: {e}", path.display())))?;
+    let scene = parse_scene(&path.display().to_string(), &text)?;
+    let out_dir = match out_dir {
+        Some(d) => d.to_owned(),
+        None => Path::new("out").join(path.file_stem().unwrap_or_default()).join(default_subdir),
+    };
+    std::fs::create_dir_all(&out_dir)
+        .map_err(|e| StartError::Message(format!("cannot create {}: {e}", out_dir.display())))?;
+    Ok((scene, out_dir))
+}
+
+/// Where a run starts: the phase-space state and the centre-of-mass motion (bohr, bohr/a.u.).
+pub struct Start<const N: usize> {
+    /// The internal state, in atomic units.
+    pub state: PhaseState<N>,
+    /// Centre-of-mass position.
+    pub com_position: Vector3<f64>,
+    /// Centre-of-mass velocity.
+    pub com_velocity: Vector3<f64>,
+}
+
+/// The index of `name` among `known`, or an error at the name's place in the file: `message`
+/// says what is unknown, `help` is given the known names (the one "unknown name, these are the
+/// known ones" answer of scene binding).
+pub fn find_name(
+    src: &Source<'_>,
+    known: &[&str],
+    name: &toml::Spanned<String>,
+    message: impl FnOnce() -> String,
+    help: impl FnOnce(&[&str]) -> String,
+) -> Result<usize, FileError> {
+    known.iter().position(|k| *k == name.get_ref()).ok_or_else(|| src.error(name.span(), message(), help(known)))
+}
+
+/// Binds the scene's initial condition to molecule `m`: names to indices, the scene's units to
+/// atomic units, velocities to momenta (the Legendre map), lab-frame positions and velocities to
+/// q, p, the orientation and J (a mass-weighted fit, [`from_lab`]).
+pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+) -> Result<Start<N>, FileError> {
+    let src = scene.source();
+    let coords = m.coordinates();
+    let coord_names: Vec<&str> = coords.iter().map(|c| c.name).collect();
+    let index = |name: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
+        find_name(
+            &src,
+            &coord_names,
+            name,
+            || format!("{} has no coordinate `{}` (in {what})", m.name(), name.get_ref()),
+            |known| {
+                if known.is_empty() {
+                    format!("{} is rigid: remove {what}", m.name())
+                } else {
+                    format!("the coordinates of {} are {}", m.name(), known.join(", "))
+                }
+            },
+        )
+    };
+    match &scene.initial {
+        Initial::Internal { q, momenta, euler, rotation } => {
+            let mut qv = SVector::<f64, N>::zeros();
+            let mut given = [false; N];
+            for (name, value) in q {
+                let k = index(name, "q")?;
+                qv[k] = scene.units.coordinate_to_au(coords[k].unit, *value);
+                given[k] = true;
+            }
+            if let Some(k) = (0..N).find(|&k| !given[k]) {
+                let reference = m.reference_geometry().ok_or_else(|| {
+                    src.error(
+                        scene.molecule.span(),
+                        format!(
+                            "the initial q does not give `{}` and {} has no reference geometry",
+                            coords[k].name,
+                            m.name()
+                        ),
+                        format!("give every coordinate in q = {{ ... }}, or add `reference` values to {}", m.source()),
+                    )
+                })?;
+                for k in (0..N).filter(|&k| !given[k]) {
+                    qv[k] = reference[k];
+                }
+            }
+            let euler = Vector3::from(*euler);
+            let (pv, pe) = match (momenta, rotation) {
+                (Momenta::P(p), rot) => {
+                    let mut pv = SVector::<f64, N>::zeros();
+                    for (name, value) in p {
+                        pv[index(name, "p")?] = *value;
+                    }
+                    let pe = match rot {
+                        InitialAngularMomentum::Pe(pe) => Vector3::from(*pe),
+                        InitialAngularMomentum::J(j) => euler_momenta_from_angular_momentum(&euler, &Vector3::from(*j)),
+                    };
+                    (pv, pe)
+                }
+                (Momenta::Qdot(qd), rot) => {
+                    let mut qdot = SVector::<f64, N>::zeros();
+                    for (name, value) in qd {
+                        let k = index(name, "qdot")?;
+                        qdot[k] = scene.units.velocity_to_au(coords[k].unit, *value);
+                    }
+                    // J is given (or follows from p_e); then ω = I⁻¹(J − A q̇) and p = Aᵀω + a q̇.
+                    let j = match rot {
+                        InitialAngularMomentum::J(j) => Vector3::from(*j),
+                        InitialAngularMomentum::Pe(pe) => {
+                            w_matrix(&euler).map_err(|e| {
+                                src.whole_file(format!("the initial orientation: {e}"), "choose θ away from 0 and π")
+                            })? * Vector3::from(*pe)
+                        }
+                    };
+                    let mut k = KineticMatrices::<N>::default();
+                    m.kinetic(&qv, &mut k);
+                    let inertia = k.inertia.cholesky().ok_or_else(|| {
+                        src.whole_file(
+                            format!(
+                                "the inertia tensor of {} is singular at the initial geometry q = {:?}",
+                                m.name(),
+                                qv.as_slice()
+                            ),
+                            "start from a geometry where the molecule is not linear",
+                        )
+                    })?;
+                    let omega = inertia.solve(&(j - k.coriolis * qdot));
+                    let (_, pv) = momenta_from_velocities(&k, &omega, &qdot);
+                    let pe = match rot {
+                        InitialAngularMomentum::Pe(pe) => Vector3::from(*pe),
+                        InitialAngularMomentum::J(_) => euler_momenta_from_angular_momentum(&euler, &j),
+                    };
+                    (pv, pe)
+                }
+            };
+            Ok(Start {
+                state: PhaseState { q: qv, p: pv, euler, pe },
+                com_position: Vector3::zeros(),
+                com_velocity: Vector3::zeros(),
+            })
+        }
+        Initial::Lab { positions, velocities, span } => {
+            let atoms = m.atoms();
+            let labels: Vec<&str> = atoms.iter().map(|a| a.label).collect();
+            let atom_index = |label: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
+                find_name(
+                    &src,
+                    &labels,
+                    label,
+                    || format!("{} has no atom `{}` (in {what})", m.name(), label.get_ref()),
+                    |known| format!("the atoms of {} are {}", m.name(), known.join(", ")),
+                )
+            };
+            let mut lab = LabState::<NA> { positions: SMatrix::zeros(), velocities: SMatrix::zeros() };
+            let mut given = [false; NA];
+            for (label, x) in positions {
+                let i = atom_index(label, "positions")?;
+                lab.positions.set_column(i, &Vector3::from(*x));
+                given[i] = true;
+            }
+            let missing: Vec<&str> = (0..NA).filter(|&i| !given[i]).map(|i| atoms[i].label).collect();
+            if !missing.is_empty() {
+                return Err(src.error(
+                    span.clone(),
+                    format!(
+                        "the lab-frame positions do not give atom{} {}",
+                        if missing.len() == 1 { "" } else { "s" },
+                        missing.join(", ")
+                    ),
+                    "give the position of every atom, keyed by its label",
+                ));
+            }
+            for (label, v) in velocities {
+                lab.velocities.set_column(atom_index(label, "velocities")?, &Vector3::from(*v));
+            }
+            let (state, com, _) = from_lab(m, &lab, &FitOptions::default()).map_err(|e| {
+                src.error(
+                    span.clone(),
+                    format!("the lab-frame positions cannot start a run of {}: {e}", m.name()),
+                    "check the atom positions and their units; rotate the input if θ is at 0 or π",
+                )
+            })?;
+            Ok(Start { state, com_position: com.position, com_velocity: com.velocity })
+        }
+    }
+}
+
+/// The system every command integrates, chosen from the scene: the body formulation (no
+/// gimbal lock) on the fast path, reduced to what the scene needs: frozen coordinates as it
+/// names them, `J = 0` when the initial angular momentum is exactly zero (then `J` stays
+/// zero), and the orientation only when an output needs it. Returns the system and the
+/// initial flat state.
+pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &'m M,
+    scene: &Scene,
+    start: &PhaseState<N>,
+) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
+    let names: Vec<&str> = scene.frozen.iter().map(|s| s.get_ref().as_str()).collect();
+    let mut reduction = Reduction::freezing(m, &names).map_err(|e| {
+        let at = match &e {
+            ReductionError::UnknownCoordinate { name, .. } => {
+                scene.frozen.iter().find(|s| s.get_ref() == name).map_or(0..0, |s| s.span())
+            }
+            _ => 0..0,
+        };
+        scene.source().error(at, e.to_string(), "name coordinates from `rovib list` in run.frozen")
+    })?;
+    if start.pe == Vector3::zeros() {
+        reduction.rotation =
+            RotationPart::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
+    }
+    let system = ReducedSystem::new(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
+    let mut y0 = vec![0.0; system.dim()];
+    system.reduce(start, &mut y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
+    Ok((system, y0))
+}
