@@ -1,0 +1,1 @@
+//! Initial states read from files: extended XYZ and rovib's internal CSV.
