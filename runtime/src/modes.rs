@@ -106,13 +106,20 @@ impl<const N: usize> NormalModes<N> {
         let mut grad = SVector::zeros();
         let u0 = molecule.potential_gradient(q0, &mut grad);
         if !u0.is_finite() || grad.iter().any(|g| !g.is_finite()) {
-            return Err(ModesError::Failed(format!("the potential or its gradient is not finite at q = {:?}", q0.as_slice())));
+            return Err(ModesError::Failed(format!(
+                "the potential or its gradient is not finite at q = {:?}",
+                q0.as_slice()
+            )));
         }
         let step = newton_step(&hessian, &grad)?;
         if let Some(k) = (0..N).max_by(|&a, &b| step[a].abs().total_cmp(&step[b].abs()))
             && step[k].abs() > STATIONARY_TOLERANCE
         {
-            return Err(ModesError::NotStationary { coordinate: coords[k].name, gradient: grad[k], distance: step[k].abs() });
+            return Err(ModesError::NotStationary {
+                coordinate: coords[k].name,
+                gradient: grad[k],
+                distance: step[k].abs(),
+            });
         }
         let mut k = KineticMatrices::default();
         molecule.kinetic(q0, &mut k);
@@ -120,7 +127,8 @@ impl<const N: usize> NormalModes<N> {
             .map_err(|e| ModesError::Failed(format!("no G matrix at the stationary point: {e}")))?
             .g
             .g22;
-        let c = g.cholesky().ok_or_else(|| ModesError::Failed("Wilson's G matrix is not positive definite".into()))?.l();
+        let c =
+            g.cholesky().ok_or_else(|| ModesError::Failed("Wilson's G matrix is not positive definite".into()))?.l();
         let s = c.transpose() * hessian * c;
         let s = DMatrix::from_fn(N, N, |i, j| 0.5 * (s[(i, j)] + s[(j, i)]));
         let eig = s.symmetric_eigen();
@@ -192,11 +200,9 @@ where
 fn newton_step<const N: usize>(f: &SMatrix<f64, N, N>, grad: &SVector<f64, N>) -> Result<SVector<f64, N>, ModesError> {
     let fd = DMatrix::from_fn(N, N, |i, j| f[(i, j)]);
     let gd = DVector::from_fn(N, |i, _| grad[i]);
-    fd.lu()
-        .solve(&gd)
-        .filter(|s| s.iter().all(|x| x.is_finite()))
-        .map(|s| SVector::from_fn(|i, _| s[i]))
-        .ok_or_else(|| ModesError::Failed("the Hessian of the potential is singular: no isolated stationary point".into()))
+    fd.lu().solve(&gd).filter(|s| s.iter().all(|x| x.is_finite())).map(|s| SVector::from_fn(|i, _| s[i])).ok_or_else(
+        || ModesError::Failed("the Hessian of the potential is singular: no isolated stationary point".into()),
+    )
 }
 
 /// A stationary point of U found by Newton's method from `start` (at most 50 steps; a step is

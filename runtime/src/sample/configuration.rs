@@ -4,14 +4,16 @@
 //! # Method
 //!
 //! A proposal φ (a Gaussian about the minimum of U with covariance `s·kT_eff·F⁻¹`, F the
-//! Hessian there, for several widths s; or uniform in the region's box when the box is finite)
+//! Hessian there, for several widths s, with angles that turn through a whole period, such as
+//! torsions, uniform instead; or uniform in the region's box when the box is finite)
 //! is drawn from; a candidate q is accepted with probability `r(q) / r_max`, where
 //! `r = target / φ` and `r_max` bounds r over the region. Accepted points are then distributed
 //! exactly as the target, and each draw uses only its own trajectory's stream, so trajectory i
 //! depends on `(seed, i)` alone.
 //!
-//! `r_max` is found at build time: 2000 points from each candidate proposal (and, where the box
-//! is finite, 2000 uniform in the box), a pattern search from the best three, and a safety
+//! `r_max` is found at build time: 2000 points from each candidate proposal, 2000 from it at
+//! three times its width and, where the box is finite, 2000 uniform in the box; a pattern
+//! search from the best eight of them; and a safety
 //! factor [`SAFETY`]. The candidate with the largest estimated acceptance rate
 //! `E_φ[r] / r_max` is used. Every draw checks `r(q) ≤ r_max`: a point above it (the density
 //! somewhere larger than the search found) is an error naming q, never a silently wrong
@@ -25,7 +27,7 @@
 //! inverse of the acceptance rate, `r_max / E_φ[r]`, about 2–4 for water and 5–15 for methane
 //! at 300 K (`Configuration::acceptance`).
 
-use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, Vector3};
 use rand::RngExt as _;
 use rand_distr::StandardNormal;
 
@@ -39,8 +41,20 @@ use crate::units::CoordinateUnit;
 /// used for rejection.
 pub const SAFETY: f64 = 2.0;
 
+/// `ln(det M / det M(centre))` below which a local minimum of det M along an angle is taken
+/// for a singular geometry that ends the angle's default range.
+const SINGULAR_LOG_DET: f64 = -4.605_170_185_988_091; // ln 0.01
+
 /// Points drawn per candidate proposal when the envelope is searched.
 const SEARCH_POINTS: usize = 2000;
+
+/// The smallest estimated acceptance rate accepted when building: below it the region is so
+/// large (or the density so far from the proposals) that a draw would take thousands of
+/// evaluations, which usually means the region does not bound the density.
+const MIN_ACCEPTANCE: f64 = 1e-3;
+
+/// Starting points (the best of the random points) of the pattern search for the envelope.
+const SEARCH_STARTS: usize = 8;
 
 /// Proposals tried per draw before a draw fails.
 const MAX_TRIES: usize = 1_000_000;
@@ -120,8 +134,10 @@ pub(crate) struct Point<const N: usize> {
 
 #[derive(Clone, Debug)]
 enum Proposal<const N: usize> {
-    /// `q = centre + l z`, z standard normal; `ln φ = −½|z|²`.
-    Gaussian { centre: SVector<f64, N>, l: SMatrix<f64, N, N> },
+    /// `q = centre + l z`, z standard normal, except that the coordinates marked `uniform`
+    /// (angles free to turn through a whole period, such as a torsion, whose Boltzmann factor
+    /// may have several wells) are uniform in their box; `ln φ = −½ Σ z_k²` over the others.
+    Gaussian { centre: SVector<f64, N>, l: SMatrix<f64, N, N>, uniform: [bool; N] },
     /// Uniform in the (finite) box; `ln φ = 0`.
     Uniform,
 }
@@ -151,8 +167,8 @@ pub(crate) struct Bounds<const N: usize> {
     pub u_cap: Option<f64>,
 }
 
-/// The minimum of U near the reference geometry and the Hessian there (None if not positive
-/// definite), or the reference itself when Newton fails.
+/// The stationary point of U found from the reference geometry (the reference itself when
+/// Newton fails) and the Hessian there (None if not finite).
 pub(crate) fn centre<M, const N: usize, const NA: usize>(
     molecule: &M,
 ) -> Result<(SVector<f64, N>, Option<SMatrix<f64, N, N>>), SampleError>
@@ -168,13 +184,17 @@ where
     })?;
     let q = modes::stationary_point(molecule, &reference).unwrap_or(reference);
     let f = modes::hessian(molecule, &q);
-    let pd = f.cholesky().is_some();
-    Ok((q, pd.then_some(f)))
+    Ok((q, f.iter().all(|x| x.is_finite()).then_some(f)))
 }
 
 /// The box of the region: given limits, else lengths in (0, ∞) and angles within the interval
 /// about `centre` where the metric stays regular, at most ±π (one period), found by a scan in
-/// steps of 0.01 rad along each angle with the others at `centre`.
+/// steps of 0.01 rad along each angle with the others at `centre`. The scan stops where the
+/// metric is singular or the positions undefined, and at a local minimum of det M below 1 % of
+/// its value at the centre (a bond angle reaching π: stepping over it would count mirror
+/// images twice). The part of the range lost this way is at most one step, where √det M is
+/// small. An angle that keeps a regular metric through a whole period (a torsion) gets one
+/// full period and is then proposed uniformly.
 pub(crate) fn bounds<M, const N: usize, const NA: usize>(
     molecule: &M,
     region: &super::Region<N>,
@@ -200,21 +220,30 @@ where
             None => match coords[k].unit {
                 CoordinateUnit::Length(_) => (0.0, f64::INFINITY),
                 CoordinateUnit::Angle(_) => {
-                    let regular = |t: f64| {
+                    // ln det M along the coordinate, None where the metric is singular or the
+                    // positions are not defined.
+                    let log_det = |t: f64| {
                         let mut q = *centre;
                         q[k] += t;
                         let mut kin = KineticMatrices::default();
                         molecule.kinetic(&q, &mut kin);
-                        MetricFactor::new(&kin, &q).is_ok()
+                        MetricFactor::new(&kin, &q).ok()?;
+                        MetricCholesky::new(&kin).map(|c| 2.0 * (c.half_log_det_i + c.half_log_det_s))
                     };
+                    let at_centre = log_det(0.0).unwrap_or(f64::NAN);
                     let scan = |dir: f64| {
-                        let mut t = 0.0;
+                        let (mut t, mut previous) = (0.0, at_centre);
+                        let mut falling = false;
                         while t < std::f64::consts::PI {
                             let next = (t + 0.01).min(std::f64::consts::PI);
-                            if !regular(dir * next) {
+                            let Some(ld) = log_det(dir * next) else { break };
+                            // A minimum of det M far below its value at the centre is a
+                            // singular geometry stepped over (a bond angle through π).
+                            if falling && ld > previous && previous < at_centre + SINGULAR_LOG_DET {
                                 break;
                             }
-                            t = next;
+                            falling = ld < previous;
+                            (t, previous) = (next, ld);
                         }
                         t
                     };
@@ -268,10 +297,25 @@ where
         };
         let finite_box = (0..N).all(|k| this.low[k].is_finite() && this.high[k].is_finite());
         let mut candidates = Vec::new();
-        if let Some(f_inv) = hessian.and_then(|f| f.try_inverse()) {
-            for s in [0.5, 0.75, 1.0, 1.5, 2.25, 3.4, 5.0] {
-                if let Some(c) = (f_inv * (s * kt_eff)).cholesky() {
-                    candidates.push(Proposal::Gaussian { centre, l: c.l() });
+        // Angles whose box spans a whole period are drawn uniformly.
+        let uniform: [bool; N] = std::array::from_fn(|k| {
+            matches!(molecule.coordinates()[k].unit, CoordinateUnit::Angle(_))
+                && this.high[k] - this.low[k] >= std::f64::consts::TAU - 1e-9
+        });
+        if let Some(f) = hessian {
+            let gaussian: Vec<usize> = (0..N).filter(|&k| !uniform[k]).collect();
+            let sub = DMatrix::from_fn(gaussian.len(), gaussian.len(), |i, j| f[(gaussian[i], gaussian[j])]);
+            if let Some(sub_inv) = sub.cholesky().map(|c| c.inverse()) {
+                for s in [0.5, 0.75, 1.0, 1.5, 2.25, 3.4, 5.0] {
+                    let mut cov = SMatrix::<f64, N, N>::identity();
+                    for (i, &a) in gaussian.iter().enumerate() {
+                        for (j, &b) in gaussian.iter().enumerate() {
+                            cov[(a, b)] = s * kt_eff * sub_inv[(i, j)];
+                        }
+                    }
+                    if let Some(c) = cov.cholesky() {
+                        candidates.push(Proposal::Gaussian { centre, l: c.l(), uniform });
+                    }
                 }
             }
         }
@@ -306,10 +350,31 @@ where
             if !max.is_finite() {
                 continue;
             }
+            // Exploration beyond the proposal's bulk, where the ratio can rise again (a Morse
+            // bond softer than its harmonic proposal): points from the proposal at three times
+            // its width and, in a finite box, uniform in the box.
+            for _ in 0..SEARCH_POINTS {
+                let (mut x, _) = this.propose(&mut rng);
+                if let Proposal::Gaussian { uniform, .. } = &this.proposal {
+                    for k in 0..N {
+                        if !uniform[k] {
+                            x[k] *= 3.0;
+                        }
+                    }
+                }
+                points.push((this.search_objective(&x), x));
+                if finite_box
+                    && let Some(x) = this.x_of(&SVector::from_fn(|k, _| {
+                        this.low[k] + (this.high[k] - this.low[k]) * rng.random::<f64>()
+                    }))
+                {
+                    points.push((this.search_objective(&x), x));
+                }
+            }
             // The envelope: the largest worst-case ratio found, improved by a pattern search.
             points.sort_by(|a, b| b.0.total_cmp(&a.0));
             let mut top = points[0].0.max(max);
-            for (v, x) in points.iter().take(3) {
+            for (v, x) in points.iter().take(SEARCH_STARTS) {
                 if v.is_finite() {
                     top = top.max(this.pattern_search(*x, *v));
                 }
@@ -331,10 +396,11 @@ where
                     .into(),
             ));
         };
-        if acceptance < 1e-5 {
+        if acceptance < MIN_ACCEPTANCE {
             return Err(SampleError::Invalid(format!(
-                "the region is too large for rejection sampling (estimated acceptance {acceptance:.1e}): give tighter \
-                 coordinate limits or a lower energy cap"
+                "the density is far from bounded in the region (estimated acceptance of rejection sampling \
+                 {acceptance:.1e}): the potential may fall without bound along some direction or the region is too large; \
+                 give every length coordinate limits (or a lower energy cap)"
             )));
         }
         this.proposal = proposal;
@@ -347,29 +413,72 @@ where
     /// A proposal: the proposal coordinates x (z for a Gaussian, q for uniform) and q.
     fn propose(&self, rng: &mut TrajectoryRng) -> (SVector<f64, N>, SVector<f64, N>) {
         match &self.proposal {
-            Proposal::Gaussian { centre, l } => {
-                let z = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
-                (z, centre + l * z)
+            Proposal::Gaussian { centre, l, uniform } => {
+                let mut z = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
+                for k in 0..N {
+                    if uniform[k] {
+                        z[k] = self.low[k] + (self.high[k] - self.low[k]) * rng.random::<f64>();
+                    }
+                }
+                (z, self.gaussian_q(centre, l, uniform, &z))
             }
             Proposal::Uniform => {
-                let q = SVector::<f64, N>::from_fn(|k, _| {
-                    self.low[k] + (self.high[k] - self.low[k]) * rng.random::<f64>()
-                });
+                let q =
+                    SVector::<f64, N>::from_fn(|k, _| self.low[k] + (self.high[k] - self.low[k]) * rng.random::<f64>());
                 (q, q)
             }
         }
     }
 
+    /// q of the proposal coordinates x: `centre + l z` with z = x on the Gaussian coordinates
+    /// (the Cholesky factor of the block-diagonal covariance does not mix the two kinds), x
+    /// itself on the uniform ones.
+    fn gaussian_q(
+        &self,
+        centre: &SVector<f64, N>,
+        l: &SMatrix<f64, N, N>,
+        uniform: &[bool; N],
+        x: &SVector<f64, N>,
+    ) -> SVector<f64, N> {
+        let z = SVector::<f64, N>::from_fn(|k, _| if uniform[k] { 0.0 } else { x[k] });
+        let mut q = centre + l * z;
+        for k in 0..N {
+            if uniform[k] {
+                q[k] = x[k];
+            }
+        }
+        q
+    }
+
+    /// The proposal coordinates of q (the inverse of [`Self::q_of`]).
+    fn x_of(&self, q: &SVector<f64, N>) -> Option<SVector<f64, N>> {
+        match &self.proposal {
+            Proposal::Gaussian { centre, l, uniform } => {
+                let d = SVector::<f64, N>::from_fn(|k, _| if uniform[k] { 0.0 } else { q[k] - centre[k] });
+                let mut z = l.solve_lower_triangular(&d)?;
+                for k in 0..N {
+                    if uniform[k] {
+                        z[k] = q[k];
+                    }
+                }
+                Some(z)
+            }
+            Proposal::Uniform => Some(*q),
+        }
+    }
+
     fn q_of(&self, x: &SVector<f64, N>) -> SVector<f64, N> {
         match &self.proposal {
-            Proposal::Gaussian { centre, l } => centre + l * x,
+            Proposal::Gaussian { centre, l, uniform } => self.gaussian_q(centre, l, uniform, x),
             Proposal::Uniform => *x,
         }
     }
 
     fn log_proposal(&self, x: &SVector<f64, N>) -> f64 {
         match &self.proposal {
-            Proposal::Gaussian { .. } => -0.5 * x.norm_squared(),
+            Proposal::Gaussian { uniform, .. } => {
+                -0.5 * (0..N).filter(|&k| !uniform[k]).map(|k| x[k] * x[k]).sum::<f64>()
+            }
             Proposal::Uniform => 0.0,
         }
     }
@@ -394,14 +503,16 @@ where
         }
     }
 
-    /// Maximises [`Self::search_objective`] from x by a compass search (steps ±h along each
-    /// proposal coordinate, h halved when no step improves, 60 rounds).
+    /// Maximises [`Self::search_objective`] from x by a compass search: steps ±h_k along each
+    /// proposal coordinate, a step that improves grows by 1.5 (so that a ratio rising towards
+    /// the edge of the region, or without bound, is followed there quickly), all steps halve
+    /// when none improves; 80 rounds.
     fn pattern_search(&self, mut x: SVector<f64, N>, mut value: f64) -> f64 {
         let mut h = SVector::<f64, N>::from_fn(|k, _| match self.proposal {
-            Proposal::Gaussian { .. } => 0.5,
-            Proposal::Uniform => 0.05 * (self.high[k] - self.low[k]),
+            Proposal::Gaussian { uniform, .. } if !uniform[k] => 0.5,
+            _ => 0.05 * (self.high[k] - self.low[k]),
         });
-        for _ in 0..60 {
+        for _ in 0..80 {
             let mut improved = false;
             for k in 0..N {
                 for sign in [1.0, -1.0] {
@@ -410,6 +521,8 @@ where
                     let v = self.search_objective(&y);
                     if v > value {
                         (x, value, improved) = (y, v, true);
+                        h[k] *= 1.5;
+                        break;
                     }
                 }
             }

@@ -97,7 +97,7 @@ where
             )));
         }
         let u_centre = molecule.potential(&centre);
-        if !(energy > u_centre) && hessian.is_some() {
+        if !(energy > u_centre) && hessian.is_some_and(|f| f.cholesky().is_some()) {
             return Err(SampleError::Invalid(format!(
                 "the energy E = {energy} hartree is not above the minimum of the potential, U = {u_centre} hartree: \
                  raise E"

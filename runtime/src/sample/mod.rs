@@ -226,7 +226,8 @@ pub fn kinetic_energy<const N: usize>(
     j: &Vector3<f64>,
     p: &SVector<f64, N>,
 ) -> Result<f64, SampleError> {
-    let (omega, qdot) = MetricFactor::new(k, q).map_err(|e: HamiltonianError| SampleError::Invalid(e.to_string()))?.solve(j, p);
+    let (omega, qdot) =
+        MetricFactor::new(k, q).map_err(|e: HamiltonianError| SampleError::Invalid(e.to_string()))?.solve(j, p);
     Ok(0.5 * (omega.dot(j) + qdot.dot(p)))
 }
 

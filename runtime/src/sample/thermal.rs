@@ -62,7 +62,13 @@ where
         Self::build(molecule, temperature, region, seed, false)
     }
 
-    fn build(molecule: &'m M, temperature: f64, region: &Region<N>, seed: u64, metric: bool) -> Result<Self, SampleError> {
+    fn build(
+        molecule: &'m M,
+        temperature: f64,
+        region: &Region<N>,
+        seed: u64,
+        metric: bool,
+    ) -> Result<Self, SampleError> {
         if !(temperature > 0.0 && temperature.is_finite()) {
             return Err(SampleError::Invalid(format!(
                 "the temperature must be positive and finite (got {temperature} K): give it in kelvin"
@@ -81,7 +87,8 @@ where
                 )));
             }
         }
-        let configuration = Configuration::new(molecule, Target::Boltzmann { kt, metric }, bounds, centre, hessian, kt)?;
+        let configuration =
+            Configuration::new(molecule, Target::Boltzmann { kt, metric }, bounds, centre, hessian, kt)?;
         Ok(Self { configuration, kt, seed })
     }
 
