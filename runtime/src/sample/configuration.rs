@@ -209,7 +209,7 @@ where
     for k in 0..N {
         let (lo, hi) = match region.limits[k] {
             Some((lo, hi)) => {
-                if !(lo < hi) {
+                if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
                     return Err(SampleError::Invalid(format!(
                         "the limits of {} are empty ([{lo}, {hi}]): give a lower limit below the upper one",
                         coords[k].name
@@ -329,7 +329,7 @@ where
         }
         for (i, proposal) in candidates.into_iter().enumerate() {
             this.proposal = proposal.clone();
-            let mut rng = stream(0x5eed_0f_e4e1_09e5, i as u64);
+            let mut rng = stream(0x005e_ed0f_e4e1_09e5, i as u64);
             let mut points: Vec<(f64, SVector<f64, N>)> = Vec::with_capacity(SEARCH_POINTS);
             let mut sum = 0.0;
             let mut max = f64::NEG_INFINITY;

@@ -97,7 +97,7 @@ where
             )));
         }
         let u_centre = molecule.potential(&centre);
-        if !(energy > u_centre) && hessian.is_some_and(|f| f.cholesky().is_some()) {
+        if energy.partial_cmp(&u_centre) != Some(std::cmp::Ordering::Greater) && hessian.is_some_and(|f| f.cholesky().is_some()) {
             return Err(SampleError::Invalid(format!(
                 "the energy E = {energy} hartree is not above the minimum of the potential, U = {u_centre} hartree: \
                  raise E"
@@ -115,7 +115,7 @@ where
         let configuration = Configuration::new(molecule, target, bounds, centre, hessian, kt_eff).map_err(|e| {
             SampleError::Invalid(format!("{e} (is E = {energy} hartree above the minimum of U in the region?)"))
         })?;
-        if !(energy > configuration.u_min) {
+        if energy.partial_cmp(&configuration.u_min) != Some(std::cmp::Ordering::Greater) {
             return Err(SampleError::Invalid(format!(
                 "the energy E = {energy} hartree is below the lowest potential found in the region ({} hartree): raise E",
                 configuration.u_min
