@@ -97,7 +97,9 @@ where
             )));
         }
         let u_centre = molecule.potential(&centre);
-        if energy.partial_cmp(&u_centre) != Some(std::cmp::Ordering::Greater) && hessian.is_some_and(|f| f.cholesky().is_some()) {
+        if energy.partial_cmp(&u_centre) != Some(std::cmp::Ordering::Greater)
+            && hessian.is_some_and(|f| f.cholesky().is_some())
+        {
             return Err(SampleError::Invalid(format!(
                 "the energy E = {energy} hartree is not above the minimum of the potential, U = {u_centre} hartree: \
                  raise E"

@@ -18,7 +18,8 @@
 //! * [`microcanonical`]: uniform on `H = E`, optionally at fixed |J|.
 //! * [`normal_modes`]: harmonic normal modes about the minimum ([`crate::modes`]), random
 //!   phases, energies per mode random, fixed or `(v + ½)ħω`, rotation thermal or fixed.
-//! * [`file`]: states read from extended XYZ or from rovib's internal CSV ([`Spec::States`]).
+//! * [`Spec::States`]: states given explicitly (readers for extended XYZ and internal CSV files
+//!   are not written yet).
 //!
 //! The configuration of the first two is drawn by exact rejection sampling
 //! ([`configuration`]), so every state is an independent draw from its trajectory's own stream.
@@ -39,7 +40,6 @@ use crate::hamiltonian::fast::{BodyState, MetricFactor};
 use crate::molecule::{KineticMatrices, Molecule};
 
 pub mod configuration;
-pub mod file;
 pub mod microcanonical;
 pub mod normal_modes;
 pub mod thermal;

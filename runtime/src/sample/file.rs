@@ -1,1 +1,0 @@
-//! Initial states read from files: extended XYZ and rovib's internal CSV.
