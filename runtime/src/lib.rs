@@ -13,6 +13,7 @@ pub mod diagnostic;
 pub mod frames;
 pub mod hamiltonian;
 pub mod integrate;
+pub mod modes;
 pub mod molecule;
 pub mod sample;
 pub mod units;

@@ -10,11 +10,47 @@
 //! Trajectory `index` draws from its own random stream, derived from `(seed, index)` only
 //! ([`stream`]), so an ensemble is the same whatever the number of threads, ranks or the order in
 //! which trajectories finish.
+//!
+//! # Samplers (one file each)
+//!
+//! * [`thermal`]: canonical at T; configuration `exp(−U/kT)·√det M(q)`, `(J, p)` Gaussian with
+//!   covariance `kT·M(q)`, orientation uniform.
+//! * [`microcanonical`]: uniform on `H = E`, optionally at fixed |J|.
+//! * [`normal_modes`]: harmonic normal modes about the minimum ([`crate::modes`]), random
+//!   phases, energies per mode random, fixed or `(v + ½)ħω`, rotation thermal or fixed.
+//! * [`Spec::States`]: states given explicitly (readers for extended XYZ and internal CSV files
+//!   are not written yet).
+//!
+//! The configuration of the first two is drawn by exact rejection sampling
+//! ([`configuration`]), so every state is an independent draw from its trajectory's own stream.
+//!
+//! # Units
+//!
+//! Atomic units: q in bohr and rad, p in ħ/bohr or ħ, J in ħ, energies in hartree; temperatures
+//! in kelvin, converted with [`BOLTZMANN`]. The orientation is the body → lab rotation as a
+//! unit quaternion; the centre of mass is at rest at the origin.
 
+use nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
+use rand::RngExt as _;
 use rand::SeedableRng as _;
+use rand_distr::StandardNormal;
 
-use crate::hamiltonian::fast::BodyState;
-use crate::molecule::Molecule;
+use crate::hamiltonian::HamiltonianError;
+use crate::hamiltonian::fast::{BodyState, MetricFactor};
+use crate::molecule::{KineticMatrices, Molecule};
+
+pub mod configuration;
+pub mod microcanonical;
+pub mod normal_modes;
+pub mod thermal;
+
+pub use microcanonical::Microcanonical;
+pub use normal_modes::NormalModeSampler;
+pub use thermal::Thermal;
+
+/// The Boltzmann constant in hartree per kelvin (CODATA 2018: k_B = 1.380 649 × 10⁻²³ J/K exact,
+/// E_h = 4.359 744 722 2071 × 10⁻¹⁸ J).
+pub const BOLTZMANN: f64 = 3.166_811_563_455_6e-6;
 
 /// The random generator of one trajectory: ChaCha8, a counter-based generator whose 2⁶⁴
 /// independent streams are selected by the trajectory index.
@@ -72,7 +108,7 @@ pub enum RotationSampling {
         temperature: f64,
     },
     /// This body-frame J (ħ), orientation uniform (Haar).
-    Fixed(nalgebra::Vector3<f64>),
+    Fixed(Vector3<f64>),
 }
 
 /// What to sample, all in atomic units except temperatures (kelvin).
@@ -130,11 +166,79 @@ pub fn sampler<'m, M, const N: usize, const NA: usize>(
 where
     M: Molecule<N, NA> + Sync,
 {
-    let _ = (molecule, seed);
     match spec {
-        Spec::States(states) => Ok(Box::new(Given(states.clone()))),
-        _ => Err(SampleError::Invalid("this sampling method is not implemented yet".into())),
+        Spec::Thermal { temperature, region } => Ok(Box::new(Thermal::new(molecule, *temperature, region, seed)?)),
+        Spec::Microcanonical { energy, angular_momentum, region } => {
+            Ok(Box::new(Microcanonical::new(molecule, *energy, *angular_momentum, region, seed)?))
+        }
+        Spec::NormalModes { energies, rotation } => {
+            Ok(Box::new(NormalModeSampler::new(molecule, energies, rotation, seed)?))
+        }
+        Spec::States(states) => {
+            if states.is_empty() {
+                return Err(SampleError::Invalid("no states given: the file holds no state".into()));
+            }
+            Ok(Box::new(Given(states.clone())))
+        }
     }
+}
+
+impl<const N: usize> Region<N> {
+    /// No cap, every coordinate over its valid range.
+    pub fn unbounded() -> Self {
+        Self { energy_cap: None, limits: [None; N] }
+    }
+
+    /// Only an energy cap (hartree above U at the reference geometry).
+    pub fn capped(energy_cap: f64) -> Self {
+        Self { energy_cap: Some(energy_cap), limits: [None; N] }
+    }
+}
+
+/// A uniformly distributed rotation (Haar measure): four standard normals, normalised, as a unit
+/// quaternion.
+pub fn haar(rng: &mut TrajectoryRng) -> UnitQuaternion<f64> {
+    loop {
+        let v: [f64; 4] = std::array::from_fn(|_| rng.sample(StandardNormal));
+        let q = Quaternion::new(v[0], v[1], v[2], v[3]);
+        if q.norm() > 1e-150 {
+            return UnitQuaternion::from_quaternion(q);
+        }
+    }
+}
+
+/// A direction uniform on the unit sphere.
+pub fn uniform_direction(rng: &mut TrajectoryRng) -> Vector3<f64> {
+    loop {
+        let v = Vector3::from_fn(|_, _| rng.sample::<f64, _>(StandardNormal));
+        let n = v.norm();
+        if n > 1e-150 {
+            return v / n;
+        }
+    }
+}
+
+/// The kinetic energy `½ (ω·J + q̇·p)`, `(ω, q̇) = M⁻¹ (J, p)`, as the runtime's fast path
+/// computes it, in hartree.
+pub fn kinetic_energy<const N: usize>(
+    k: &KineticMatrices<N>,
+    q: &SVector<f64, N>,
+    j: &Vector3<f64>,
+    p: &SVector<f64, N>,
+) -> Result<f64, SampleError> {
+    let (omega, qdot) =
+        MetricFactor::new(k, q).map_err(|e: HamiltonianError| SampleError::Invalid(e.to_string()))?.solve(j, p);
+    Ok(0.5 * (omega.dot(j) + qdot.dot(p)))
+}
+
+/// The total energy `H = T + U` of a body state, in hartree, by the fast path's formula.
+pub fn energy<M, const N: usize, const NA: usize>(molecule: &M, state: &BodyState<N>) -> Result<f64, SampleError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    let mut k = KineticMatrices::default();
+    molecule.kinetic(&state.q, &mut k);
+    Ok(kinetic_energy(&k, &state.q, &state.j, &state.p)? + molecule.potential(&state.q))
 }
 
 /// Trajectory `i` starts from the `i`-th given state.
