@@ -46,7 +46,7 @@ use crate::diagnostic::{FileError, Source};
 use crate::elements;
 use crate::expr::{ExprId, Func, Graph};
 use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
-use crate::units::{CoordinateUnit, EnergyUnit, LengthUnit};
+use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, EnergyUnit, LengthUnit};
 
 /// A problem in a definition file, with its place and a suggested fix (file, line, column,
 /// message, help), displayed like a rustc error.
@@ -280,6 +280,21 @@ impl Validator<'_> {
                 "use lowercase letters, digits and `_`, starting with a letter, e.g. \"h2o\"",
             ));
         }
+        if crate::names::is_keyword(&name) {
+            return Err(src.error(
+                raw.name.span(),
+                format!("molecule name `{name}` is a Rust keyword"),
+                "the name becomes a Rust module; choose another, e.g. \"h2o\" or \"water\"",
+            ));
+        }
+        let ty = crate::names::type_name(&name);
+        if crate::names::RESERVED_TYPE_NAMES.contains(&ty.as_str()) {
+            return Err(src.error(
+                raw.name.span(),
+                format!("molecule name `{name}` gives the type name `{ty}`, which generated code already uses"),
+                "choose another name (the type name is the name in CamelCase)",
+            ));
+        }
         if name != stem {
             return Err(src.error(
                 raw.name.span(),
@@ -312,6 +327,13 @@ impl Validator<'_> {
             let reference = match &c.reference {
                 Some(r) if !r.get_ref().is_finite() => {
                     return Err(src.error(r.span(), "non-finite reference value", "write a finite number"));
+                }
+                Some(r) if !(r.get_ref() * unit.in_atomic_units()).is_finite() => {
+                    return Err(src.error(
+                        r.span(),
+                        format!("reference value {:?} {} overflows in atomic units", r.get_ref(), c.unit.get_ref()),
+                        "write the reference geometry's value of this coordinate, a number of ordinary size",
+                    ));
                 }
                 r => r.as_ref().map(|r| *r.get_ref()),
             };
@@ -386,6 +408,15 @@ impl Validator<'_> {
             }
             atoms.push(AtomDef { label: label.clone(), element, mass_da });
             positions.push(xyz);
+        }
+
+        // The total mass divides every position (the centre-of-mass shift): it must be finite.
+        let total: f64 = atoms.iter().map(|a| a.mass_da * DALTON_IN_ELECTRON_MASSES).sum();
+        if !total.is_finite() {
+            return Err(src.whole_file(
+                format!("the total mass overflows in electron masses ({} atoms)", atoms.len()),
+                "give every mass in daltons, e.g. mass = 1.00782503223",
+            ));
         }
 
         // Every coordinate must move some atom, or the kinetic metric is singular.
@@ -518,6 +549,13 @@ impl Validator<'_> {
                 return Err(src.error(
                     m.span(),
                     format!("the mass of atom `{label}` must be positive and finite, got {mass}"),
+                    "give the mass in daltons, e.g. mass = 1.00782503223",
+                ));
+            }
+            if !(mass * DALTON_IN_ELECTRON_MASSES).is_finite() {
+                return Err(src.error(
+                    m.span(),
+                    format!("the mass of atom `{label}` ({mass:?} Da) overflows in electron masses"),
                     "give the mass in daltons, e.g. mass = 1.00782503223",
                 ));
             }

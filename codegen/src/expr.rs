@@ -347,7 +347,8 @@ impl Graph {
         }
         let (ca, xa) = self.split_coefficient(a);
         let (cb, xb) = self.split_coefficient(b);
-        if xa == xb && self.as_const(xa).is_none() {
+        // Like terms are collected only where the summed coefficient is finite.
+        if xa == xb && self.as_const(xa).is_none() && (ca + cb).is_finite() {
             return self.scaled(ca + cb, xa);
         }
         // A negative term is subtracted: `a + (−c)·y = a − c·y`, exactly, since negation is.
@@ -384,7 +385,7 @@ impl Graph {
         }
         let (ca, xa) = self.split_coefficient(a);
         let (cb, xb) = self.split_coefficient(b);
-        if xa == xb && self.as_const(xa).is_none() {
+        if xa == xb && self.as_const(xa).is_none() && (ca - cb).is_finite() {
             return self.scaled(ca - cb, xa);
         }
         if cb < 0.0 && xb != b {

@@ -24,11 +24,13 @@ pub mod elements;
 pub mod emit;
 pub mod expr;
 pub mod kinetic;
+pub mod names;
 pub mod parse;
 pub mod template;
 
 pub use definition::{Definition, DefinitionError, parse_definition};
 pub use emit::FunctionStats;
+pub use names::type_name;
 pub use rovib_base::{diagnostic, units};
 
 /// The generated source of one molecule and what it cost.
@@ -75,17 +77,6 @@ impl GeneratedMolecule {
         }
         s
     }
-}
-
-/// The type name for a molecule name: `h2o` → `H2o`, `co2_model` → `Co2Model`.
-pub fn type_name(name: &str) -> String {
-    name.split('_')
-        .filter(|p| !p.is_empty())
-        .map(|p| {
-            let mut c = p.chars();
-            c.next().map(|f| f.to_ascii_uppercase().to_string() + c.as_str()).unwrap_or_default()
-        })
-        .collect()
 }
 
 /// Parses, validates and generates one molecule. `path` names the file in messages and in the
@@ -178,6 +169,24 @@ pub fn generate(molecules_dir: &Path, display_dir: &str, out_dir: &Path) -> Resu
             source_line: None,
         });
     }
+    // Type names come from molecule names with `_` dropped, so `h2o` and `h_2o` would both be
+    // `H2o`: report every such pair, naming both files.
+    for (i, m) in molecules.iter().enumerate() {
+        if let Some(first) = molecules[..i].iter().find(|f| f.type_name == m.type_name) {
+            errors.push(DefinitionError {
+                path: format!("{display_dir}/{}.toml", m.name),
+                line: 0,
+                column: 0,
+                message: format!(
+                    "molecules `{}` ({display_dir}/{}.toml) and `{}` both give the type name `{}`",
+                    first.name, first.name, m.name, m.type_name
+                ),
+                help: "rename one of the two files and its `name`; type names are the names in CamelCase without `_`"
+                    .into(),
+                source_line: None,
+            });
+        }
+    }
     if !errors.is_empty() {
         return Err(errors);
     }
@@ -190,7 +199,7 @@ pub fn generate(molecules_dir: &Path, display_dir: &str, out_dir: &Path) -> Resu
         Ok(())
     };
     for m in &molecules {
-        write(&format!("{}.rs", m.name), &m.source).map_err(|e| vec![e])?;
+        write(&template::file_name(&m.name), &m.source).map_err(|e| vec![e])?;
     }
     write("molecules.rs", &template::registry(&molecules, display_dir)).map_err(|e| vec![e])?;
     Ok(Report { molecules, inputs })

@@ -6,40 +6,32 @@
 //! exist, with which signatures, and what surrounds them.
 
 use proc_macro2::{Ident, Span, TokenStream};
-use quote::{format_ident, quote};
+use quote::quote;
 
+use crate::GeneratedMolecule;
 use crate::definition::Definition;
 use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_lines, index};
 use crate::expr;
 use crate::kinetic::{KineticExprs, KineticSet, OMEGA_NAMES};
+use crate::names::{self, type_name};
 use crate::units::{AngleUnit, CoordinateUnit, DALTON_IN_ELECTRON_MASSES, LengthUnit};
-use crate::{GeneratedMolecule, type_name};
 
-/// Local variable names for the graph's variables, safe from clashes with parameters and
-/// temporaries.
+/// Local variable names for the graph's variables, in variable order: the coordinates, ω, then
+/// the velocities, mangled so that no user name can clash with anything (see [`crate::names`]).
 fn var_idents(def: &Definition) -> Vec<Ident> {
-    let reserved = ["q", "r", "dr", "k", "dk", "grad", "omega", "qdot", "self", "Self"];
-    let clashes = |name: &str| {
-        reserved.contains(&name)
-            || name.starts_with("omega_")
-            || name.starts_with("qdot_")
-            || (name.starts_with('t') && name.len() > 1 && name[1..].chars().all(|c| c.is_ascii_digit()))
-    };
-    let mut names: Vec<String> = def
-        .coordinates
-        .iter()
-        .map(|c| if clashes(&c.name) { format!("q_{}", c.name) } else { c.name.clone() })
-        .collect();
-    let mut sorted = names.clone();
-    sorted.sort();
-    sorted.dedup();
-    if sorted.len() != names.len() {
-        names = (0..names.len()).map(|k| format!("q{k}")).collect();
-    }
-    let mut idents: Vec<Ident> = names.iter().map(|n| Ident::new(n, Span::call_site())).collect();
+    let coordinate = |(k, c): (usize, &crate::definition::CoordinateDef)| names::coordinate_ident(k, &c.name);
+    let velocity = |(k, c): (usize, &crate::definition::CoordinateDef)| names::velocity_ident(k, &c.name);
+    let mut idents: Vec<Ident> =
+        def.coordinates.iter().enumerate().map(coordinate).map(|n| Ident::new(&n, Span::call_site())).collect();
     idents.extend(OMEGA_NAMES.iter().map(|n| Ident::new(n, Span::call_site())));
-    idents.extend(names.iter().map(|n| format_ident!("qdot_{}", n)));
+    idents.extend(def.coordinates.iter().enumerate().map(velocity).map(|n| Ident::new(&n, Span::call_site())));
     idents
+}
+
+/// The generated file of molecule `name` in `OUT_DIR`; the prefix keeps it apart from the
+/// registry `molecules.rs` whatever the molecule is called.
+pub fn file_name(name: &str) -> String {
+    format!("molecule_{name}.rs")
 }
 
 fn float(x: f64) -> TokenStream {
@@ -335,7 +327,7 @@ pub(crate) fn registry(molecules: &[GeneratedMolecule], display_dir: &str) -> St
     let modules = molecules.iter().map(|m| {
         let module = Ident::new(&m.name, Span::call_site());
         let ty = Ident::new(&m.type_name, Span::call_site());
-        let file = format!("/{}.rs", m.name);
+        let file = format!("/{}", file_name(&m.name));
         let doc = format!(" Generated from `{display_dir}/{}.toml`.", m.name);
         quote! {
             #[doc = #doc]

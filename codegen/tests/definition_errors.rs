@@ -241,3 +241,62 @@ fn every_error_of_a_directory_is_reported() {
     assert!(std::fs::read_dir(&out).unwrap().next().is_none(), "nothing is written when a definition is bad");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Values that are finite as written but overflow in atomic units: located errors, not a
+/// panic while printing an infinite literal.
+#[test]
+fn values_that_overflow_in_atomic_units() {
+    let e = error(&with("label = \"O\"", "label = \"O\"\nmass = 1e306"));
+    assert_error(&e, 18, 8, "the mass of atom `O` (1e306 Da) overflows in electron masses", "daltons");
+    let e = error(&with(
+        "unit = \"bohr\"\n\n[[coordinates]]\nname = \"r2\"",
+        "unit = \"angstrom\"\nreference = 1e308\n\n[[coordinates]]\nname = \"r2\"",
+    ));
+    assert_error(&e, 7, 13, "reference value 1e308 angstrom overflows in atomic units", "reference geometry");
+    // Each mass fits, their sum does not.
+    let huge = "mass = 9e304";
+    let text = with("label = \"O\"", &format!("label = \"O\"\n{huge}"))
+        .replace("label = \"H1\"", &format!("label = \"H1\"\n{huge}"))
+        .replace("label = \"H2\"", &format!("label = \"H2\"\n{huge}"));
+    let e = error(&text);
+    assert_eq!(e.message, "the total mass overflows in electron masses (3 atoms)");
+}
+
+/// A molecule name becomes a module and a type: keywords and names the generated code uses are
+/// refused where the name is written.
+#[test]
+fn molecule_names_that_cannot_be_rust() {
+    for name in ["fn", "type", "self", "gen", "async"] {
+        let text = with("name = \"xy2\"", &format!("name = \"{name}\""));
+        let e = generate_molecule(&format!("molecules/{name}.toml"), &text).unwrap_err();
+        assert_eq!(e.message, format!("molecule name `{name}` is a Rust keyword"), "{e}");
+        assert_eq!((e.line, e.column), (1, 8));
+    }
+    for (name, ty) in [("result", "Result"), ("atom", "Atom"), ("kinetic_matrices", "KineticMatrices"), ("e", "E")] {
+        let text = with("name = \"xy2\"", &format!("name = \"{name}\""));
+        let e = generate_molecule(&format!("molecules/{name}.toml"), &text).unwrap_err();
+        assert_eq!(
+            e.message,
+            format!("molecule name `{name}` gives the type name `{ty}`, which generated code already uses")
+        );
+    }
+}
+
+/// A coordinate named like a velocity variable (`omega_x`, `qdot_r1`) is a coordinate of its
+/// own: the kinetic energy has one term per coordinate and ω component.
+#[test]
+fn coordinates_named_like_velocities_stay_coordinates() {
+    let text = GOOD
+        .replace("\"r1", "\"omega_x")
+        .replace("r1 ", "omega_x ")
+        .replace("(r1", "(omega_x")
+        .replace("\"alpha\"", "\"qdot_r2\"")
+        .replace("alpha /", "qdot_r2 /");
+    let m = generate_molecule("molecules/xy2.toml", &text).expect("valid");
+    let lets: Vec<&str> = m.source.lines().filter(|l| l.trim_start().starts_with("let q")).collect();
+    // Coordinates and velocities load from different inputs.
+    assert!(lets.iter().any(|l| l.contains("let q0_omega_x = q[0];")), "{lets:#?}");
+    assert!(m.source.contains("let omega_x = omega[0];"), "{}", m.source);
+    assert!(lets.iter().any(|l| l.contains("let qdot1_r2 = qdot[1];")), "{lets:#?}");
+    assert!(lets.iter().any(|l| l.contains("let q2_qdot_r2 = q[2];")), "{lets:#?}");
+}
