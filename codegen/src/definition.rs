@@ -44,7 +44,7 @@ use toml::Spanned;
 
 use crate::diagnostic::{FileError, Source};
 use crate::elements;
-use crate::expr::{ExprId, Func, Graph};
+use crate::expr::{ExprId, Func, Graph, Node};
 use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
 use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, EnergyUnit, LengthUnit};
 
@@ -370,6 +370,7 @@ impl Validator<'_> {
         let mut atoms = Vec::new();
         let mut positions = Vec::new();
         let mut labels: HashMap<String, Range<usize>> = HashMap::new();
+        let mut position_spans: Vec<Vec<Range<usize>>> = Vec::new();
         for a in &raw.atoms {
             let label = a.label.get_ref();
             if label.trim().is_empty() {
@@ -408,6 +409,7 @@ impl Validator<'_> {
             }
             atoms.push(AtomDef { label: label.clone(), element, mass_da });
             positions.push(xyz);
+            position_spans.push(position.get_ref().iter().map(|c| c.span()).collect::<Vec<_>>());
         }
 
         // The total mass divides every position (the centre-of-mass shift): it must be finite.
@@ -423,12 +425,7 @@ impl Validator<'_> {
         let roots: Vec<ExprId> = positions.iter().flatten().copied().collect();
         let reachable = self.graph.reachable(&roots);
         for (k, c) in coordinates.iter().enumerate() {
-            let used = self
-                .graph
-                .nodes()
-                .iter()
-                .enumerate()
-                .any(|(i, n)| reachable[i] && *n == crate::expr::Node::Var(k as u32));
+            let used = self.graph.nodes().iter().enumerate().any(|(i, n)| reachable[i] && *n == Node::Var(k as u32));
             if !used {
                 return Err(src.error(
                     coordinate_spans[k].clone(),
@@ -462,6 +459,38 @@ impl Validator<'_> {
         let u = self.expression(&pot.expression, "the potential")?;
         let scale = self.graph.constant(energy_unit.in_hartree());
         let potential = self.graph.mul(scale, u);
+
+        // Nothing non-finite where it can be known now: constant positions and a constant
+        // potential everywhere, and everything at the reference geometry if the file gives one.
+        let reference: Option<Vec<f64>> =
+            coordinates.iter().map(|c| c.reference.map(|r| r * c.unit.in_atomic_units())).collect();
+        // The value of `e` where it is known now, and where that is (for the message).
+        let known = |graph: &Graph, e: ExprId| -> Option<(f64, &'static str)> {
+            let varying = graph.reachable(&[e]).iter().zip(graph.nodes()).any(|(r, n)| *r && matches!(n, Node::Var(_)));
+            match (&reference, varying) {
+                (_, false) => Some((graph.eval(&[e], &[])[0], "(a constant)")),
+                (Some(q), true) => Some((graph.eval(&[e], q)[0], "at the reference geometry")),
+                (None, true) => None,
+            }
+        };
+        for (i, xyz) in positions.iter().enumerate() {
+            for (axis, &e) in xyz.iter().enumerate() {
+                if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
+                    return Err(src.error(
+                        position_spans[i][axis].clone(),
+                        format!("the {} coordinate of atom `{}` is {v} {place}", ["x", "y", "z"][axis], atoms[i].label),
+                        "check for a division by zero, the square root or logarithm of a negative number, or a number too large in bohr",
+                    ));
+                }
+            }
+        }
+        if let Some((v, place)) = known(&self.graph, potential).filter(|(v, _)| !v.is_finite()) {
+            return Err(src.error(
+                pot.expression.span(),
+                format!("the potential is {v} hartree {place}"),
+                "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
+            ));
+        }
 
         Ok(Definition {
             path: src.path.to_owned(),

@@ -791,6 +791,21 @@ mod tests {
     }
 
     #[test]
+    fn like_terms_are_not_collected_into_an_infinite_coefficient() {
+        let mut g = Graph::new();
+        let x = g.var("x");
+        let big = g.constant(1e308);
+        let t = g.mul(big, x);
+        let sum = g.add(t, t);
+        let minus_t = g.neg(t);
+        let diff = g.sub(t, minus_t);
+        for e in [sum, diff] {
+            assert!(g.nodes().iter().all(|n| !matches!(n, Node::Const(b) if !f64::from_bits(*b).is_finite())));
+            assert_eq!(g.eval(&[e], &[0.5]), vec![1e308]);
+        }
+    }
+
+    #[test]
     fn division_by_a_power_of_two_becomes_an_exact_multiplication() {
         let mut g = Graph::new();
         let x = g.var("x");

@@ -33,6 +33,12 @@ pub use emit::FunctionStats;
 pub use names::type_name;
 pub use rovib_base::{diagnostic, units};
 
+/// Generated files longer than this get a build warning ([`GeneratedMolecule::size_warning`]).
+pub const WARN_LINES: usize = 100_000;
+
+/// Generated code with more operations than this (after CSE) gets a build warning.
+pub const WARN_OPERATIONS: u64 = 200_000;
+
 /// The generated source of one molecule and what it cost.
 #[derive(Clone, Debug)]
 pub struct GeneratedMolecule {
@@ -58,6 +64,33 @@ impl GeneratedMolecule {
     /// Lines of generated source.
     pub fn lines(&self) -> usize {
         self.source.lines().count()
+    }
+
+    /// Operations in the generated code, after common-subexpression elimination, over all
+    /// functions.
+    pub fn operations(&self) -> u64 {
+        self.stats.iter().map(|f| f.ops_emitted).sum()
+    }
+
+    /// A warning with the figures if the generated code is large enough that compiling it
+    /// takes rustc noticeable time and memory (more than [`WARN_LINES`] lines or
+    /// [`WARN_OPERATIONS`] operations), else `None`.
+    pub fn size_warning(&self) -> Option<String> {
+        let (lines, ops) = (self.lines(), self.operations());
+        (lines > WARN_LINES || ops > WARN_OPERATIONS).then(|| {
+            format!(
+                "molecule `{}` generates {lines} lines and {ops} operations ({} coordinates, {} atoms; \
+                 generation took {:.1} s): expect rustc to need roughly {:.0} s and {:.1} GB to compile it \
+                 (about 1.2 s and 35 MB per 10,000 lines); fewer coordinates (freeze some) or a simpler \
+                 potential make it smaller",
+                self.name,
+                self.coordinates,
+                self.atoms,
+                self.codegen_time.as_secs_f64(),
+                lines as f64 * 1.2e-4,
+                lines as f64 * 3.5e-6,
+            )
+        })
     }
 
     /// A short table of the operation counts, one row per function.
@@ -203,4 +236,42 @@ pub fn generate(molecules_dir: &Path, display_dir: &str, out_dir: &Path) -> Resu
     }
     write("molecules.rs", &template::registry(&molecules, display_dir)).map_err(|e| vec![e])?;
     Ok(Report { molecules, inputs })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn molecule(lines: usize, ops: u64) -> GeneratedMolecule {
+        GeneratedMolecule {
+            name: "big".into(),
+            type_name: "Big".into(),
+            coordinates: 84,
+            atoms: 30,
+            source: "x\n".repeat(lines),
+            stats: vec![FunctionStats {
+                name: "kinetic",
+                outputs: 1,
+                zero_outputs: 0,
+                ops_tree: ops as f64,
+                ops_per_output: ops,
+                ops_emitted: ops,
+                temporaries: 0,
+            }],
+            graph_nodes: 0,
+            codegen_time: Duration::from_millis(1500),
+        }
+    }
+
+    #[test]
+    fn large_generated_code_gets_a_warning_with_the_figures() {
+        assert_eq!(molecule(WARN_LINES, WARN_OPERATIONS).size_warning(), None);
+        let w = molecule(680_000, 1000).size_warning().expect("too many lines");
+        assert!(
+            w.starts_with("molecule `big` generates 680000 lines and 1000 operations (84 coordinates, 30 atoms"),
+            "{w}"
+        );
+        assert!(w.contains("roughly 82 s and 2.4 GB"), "{w}");
+        assert!(molecule(10, WARN_OPERATIONS + 1).size_warning().is_some());
+    }
 }

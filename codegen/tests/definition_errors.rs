@@ -300,3 +300,38 @@ fn coordinates_named_like_velocities_stay_coordinates() {
     assert!(lets.iter().any(|l| l.contains("let qdot1_r2 = qdot[1];")), "{lets:#?}");
     assert!(lets.iter().any(|l| l.contains("let q2_qdot_r2 = q[2];")), "{lets:#?}");
 }
+
+/// Non-finite positions and potentials are build errors where they can be known: constants
+/// always, everything else at the reference geometry when the file gives one.
+#[test]
+fn non_finite_positions_and_potentials() {
+    let e = error(&with("position = [0, 0, 0]", "position = [\"1 / 0\", 0, 0]"));
+    assert_error(&e, 18, 13, "the x coordinate of atom `O` is inf (a constant)", "division by zero");
+    let e = error(&with("position = [0, 0, 0]", "position = [0, \"sqrt(-1)\", 0]"));
+    assert_error(&e, 18, 16, "the y coordinate of atom `O` is NaN (a constant)", "square root");
+    // Finite in ångström, infinite in bohr.
+    let e = error(
+        &with("position = [0, 0, 0]", "position = [0, 0, 1e308]")
+            .replace("length_unit = \"bohr\"", "length_unit = \"angstrom\""),
+    );
+    assert_eq!(e.message, "the z coordinate of atom `O` is inf (a constant)");
+    let e = error(&with("position = [0, 0, 0]", "position = [0, 0, \"1e300 * 1e300\"]"));
+    assert_eq!(e.message, "the z coordinate of atom `O` is inf (a constant)");
+    let with_references = GOOD
+        .replace("\nunit = \"bohr\"", "\nunit = \"bohr\"\nreference = 1.8")
+        .replace("\nunit = \"rad\"", "\nunit = \"rad\"\nreference = 1.8");
+    let e = error(&with_references.replace("k * (pow(r1 - 1.8, 2) + pow(r2 - 1.8, 2))", "k * ln(r1 - 1.8)"));
+    assert_eq!(e.message, "the potential is -inf hartree at the reference geometry");
+    assert_eq!(e.line, 33);
+    let e = error(&with_references.replace("\"r1 * sin(alpha / 2)\"", "\"sqrt(1.7 - r1)\""));
+    assert_eq!(e.message, "the x coordinate of atom `H1` is NaN at the reference geometry");
+    let e = error(&with("k * (pow(r1 - 1.8, 2) + pow(r2 - 1.8, 2))", "1e200 * 1e200 + 0 * r1"));
+    assert_eq!(e.message, "the potential is inf hartree (a constant)");
+    // Like terms whose summed coefficient overflows are left uncollected: no reference, so no
+    // check, and generation must not fail on an infinite constant.
+    generate_molecule(
+        "molecules/xy2.toml",
+        &with("k * (pow(r1 - 1.8, 2) + pow(r2 - 1.8, 2))", "1e308 * r1 + 1e308 * r1"),
+    )
+    .expect("generates; the value overflows only at run time");
+}
