@@ -16,6 +16,8 @@
 //! name = "r1"
 //! unit = "angstrom"                # bohr | angstrom | rad | deg
 //! reference = 0.9578               # optional, in `unit`
+//! range = [0, "inf"]               # optional valid values in `unit` (default: lengths [0, inf],
+//!                                  # angles [-inf, inf]; bond angles declare [0, 180] deg)
 //!
 //! [[atoms]]
 //! label = "H1"                     # unique; the element is read from its leading letters
@@ -72,6 +74,9 @@ pub struct CoordinateDef {
     pub unit: CoordinateUnit,
     /// Reference value in the declared unit.
     pub reference: Option<f64>,
+    /// The valid values, a closed interval in the declared unit: as declared, else
+    /// [`default_range`].
+    pub range: (f64, f64),
 }
 
 /// A validated molecule: metadata plus its positions and potential as expressions in one graph.
@@ -124,6 +129,8 @@ struct RawCoordinate {
     #[serde(default)]
     reference: Option<Spanned<f64>>,
     #[serde(default)]
+    range: Option<Spanned<Vec<Spanned<RawValue>>>>,
+    #[serde(default)]
     #[allow(dead_code)]
     description: Option<String>,
 }
@@ -158,6 +165,15 @@ enum RawValue {
     Int(i64),
     Float(f64),
     Expr(String),
+}
+
+/// The valid values of a coordinate that declares no range: lengths are positive,
+/// angles unbounded (dihedrals and torsions wrap; bond angles declare [0, 180] deg).
+pub fn default_range(unit: CoordinateUnit) -> (f64, f64) {
+    match unit {
+        CoordinateUnit::Length(_) => (0.0, f64::INFINITY),
+        CoordinateUnit::Angle(_) => (f64::NEG_INFINITY, f64::INFINITY),
+    }
 }
 
 /// Places inside expression strings.
@@ -346,7 +362,23 @@ impl Validator<'_> {
                 self.graph.mul(factor, var)
             };
             self.names.insert(c.name.get_ref().clone(), symbol);
-            coordinates.push(CoordinateDef { name: c.name.get_ref().clone(), unit, reference });
+            let range = self.range(c, unit)?;
+            if let (Some(r), Some(value)) = (&c.reference, reference)
+                && !(range.0 <= value && value <= range.1)
+            {
+                return Err(src.error(
+                    r.span(),
+                    format!(
+                        "reference value {value:?} of `{}` is outside its range [{:?}, {:?}] {}",
+                        c.name.get_ref(),
+                        range.0,
+                        range.1,
+                        c.unit.get_ref()
+                    ),
+                    "correct the reference, or declare the range of valid values with range = [low, high]",
+                ));
+            }
+            coordinates.push(CoordinateDef { name: c.name.get_ref().clone(), unit, reference, range });
             coordinate_spans.push(c.name.span());
         }
 
@@ -503,6 +535,55 @@ impl Validator<'_> {
             potential,
             energy_unit,
         })
+    }
+
+    /// The declared range of a coordinate in its unit, or the default; checked to be an interval
+    /// that is also one in atomic units.
+    fn range(&self, c: &RawCoordinate, unit: CoordinateUnit) -> Result<(f64, f64), DefinitionError> {
+        let src = self.src;
+        let Some(range) = &c.range else { return Ok(default_range(unit)) };
+        let help = "write range = [low, high] in the coordinate's unit, low < high; numbers, `pi` and \
+                    `inf` (e.g. [0, \"pi\"], [0, 180], [-inf, inf])";
+        let [low, high] = range.get_ref().as_slice() else {
+            return Err(src.error(
+                range.span(),
+                format!("the range of `{}` has {} values instead of 2", c.name.get_ref(), range.get_ref().len()),
+                help,
+            ));
+        };
+        let bound = |v: &Spanned<RawValue>| -> Result<f64, DefinitionError> {
+            let x = match v.get_ref() {
+                RawValue::Int(i) => *i as f64,
+                RawValue::Float(x) => *x,
+                RawValue::Expr(text) if text.trim() == "inf" => f64::INFINITY,
+                RawValue::Expr(text) if text.trim() == "-inf" => f64::NEG_INFINITY,
+                RawValue::Expr(text) => {
+                    let mut g = Graph::new();
+                    let names = HashMap::new();
+                    let scope = Scope { names: &names, context: "a range" };
+                    let e = parse::parse_expression(&mut g, text, &scope)
+                        .map_err(|e| src.expression_error(v.span(), text, e))?;
+                    g.as_const(e).unwrap_or(f64::NAN)
+                }
+            };
+            if x.is_nan() || (x.is_finite() && !(x * unit.in_atomic_units()).is_finite()) {
+                return Err(src.error(
+                    v.span(),
+                    format!("invalid bound {x:?} in the range of `{}`", c.name.get_ref()),
+                    help,
+                ));
+            }
+            Ok(x)
+        };
+        let (low, high) = (bound(low)?, bound(high)?);
+        if low >= high {
+            return Err(src.error(
+                range.span(),
+                format!("the range of `{}` is empty: {low:?} is not below {high:?}", c.name.get_ref()),
+                help,
+            ));
+        }
+        Ok((low, high))
     }
 
     /// Evaluates the constants, each of which may use `pi` and other constants.

@@ -39,6 +39,15 @@ fn float(x: f64) -> TokenStream {
     if x.is_sign_negative() { quote!(-#lit) } else { quote!(#lit) }
 }
 
+/// A range bound: a finite number, or ±infinity by name.
+fn bound(x: f64) -> TokenStream {
+    match x {
+        f64::INFINITY => quote!(f64::INFINITY),
+        f64::NEG_INFINITY => quote!(f64::NEG_INFINITY),
+        x => float(x),
+    }
+}
+
 fn unit_tokens(u: CoordinateUnit) -> TokenStream {
     match u {
         CoordinateUnit::Length(LengthUnit::Bohr) => quote!(CoordinateUnit::Length(LengthUnit::Bohr)),
@@ -254,7 +263,8 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             }
             None => quote!(None),
         };
-        quote!(Coordinate { name: #name, unit: #unit, reference: #reference })
+        let (low, high) = (bound(c.range.0 * c.unit.in_atomic_units()), bound(c.range.1 * c.unit.in_atomic_units()));
+        quote!(Coordinate { name: #name, unit: #unit, reference: #reference, range: (#low, #high) })
     });
     let name = &def.name;
     let path = &def.path;

@@ -335,3 +335,31 @@ fn non_finite_positions_and_potentials() {
     )
     .expect("generates; the value overflows only at run time");
 }
+
+/// Coordinates carry valid ranges: declared ones are checked and emitted in atomic units, the
+/// defaults keep lengths positive, and a reference outside the range is an error.
+#[test]
+fn coordinate_ranges() {
+    let angle = |range: &str| with("unit = \"rad\"", &format!("unit = \"deg\"\nreference = 100\nrange = {range}"));
+    let m = generate_molecule("molecules/xy2.toml", &angle("[0, 180]")).expect("valid");
+    assert!(m.source.contains("range: (0.0, 3.141592653589793)"), "{}", m.source);
+    assert!(m.source.contains("range: (0.0, f64::INFINITY)"), "lengths default to positive");
+    let m = generate_molecule("molecules/xy2.toml", &angle("[-inf, \"inf\"]")).expect("valid");
+    assert!(m.source.contains("range: (f64::NEG_INFINITY, f64::INFINITY)"));
+    let m = generate_molecule("molecules/xy2.toml", &angle("[\"-pi\", \"180 * 2\"]")).expect("valid");
+    assert!(m.source.contains("range: (-0.05483113556160755, 6.283185307179586)"), "{}", m.source);
+
+    let e = error(&angle("[0, 90]"));
+    assert_error(&e, 15, 13, "reference value 100.0 of `alpha` is outside its range [0.0, 90.0] deg", "range = [low, high]");
+    let e = error(&angle("[90, 0]"));
+    assert_eq!(e.message, "the range of `alpha` is empty: 90.0 is not below 0.0");
+    let e = error(&angle("[0, 90, 180]"));
+    assert_eq!(e.message, "the range of `alpha` has 3 values instead of 2");
+    let e = error(&angle("[0, nan]"));
+    assert_eq!(e.message, "invalid bound NaN in the range of `alpha`");
+    let e = error(&angle("[0, \"pi(\"]"));
+    assert!(e.message.starts_with("syntax error in a range"), "{e}");
+    // The default range of a length: positive.
+    let e = error(&with("name = \"r2\"\nunit = \"bohr\"", "name = \"r2\"\nunit = \"bohr\"\nreference = -2.05"));
+    assert_eq!(e.message, "reference value -2.05 of `r2` is outside its range [0.0, inf] bohr");
+}
