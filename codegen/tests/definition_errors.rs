@@ -350,7 +350,13 @@ fn coordinate_ranges() {
     assert!(m.source.contains("range: (-0.05483113556160755, 6.283185307179586)"), "{}", m.source);
 
     let e = error(&angle("[0, 90]"));
-    assert_error(&e, 15, 13, "reference value 100.0 of `alpha` is outside its range [0.0, 90.0] deg", "range = [low, high]");
+    assert_error(
+        &e,
+        15,
+        13,
+        "reference value 100.0 of `alpha` is outside its range [0.0, 90.0] deg",
+        "range = [low, high]",
+    );
     let e = error(&angle("[90, 0]"));
     assert_eq!(e.message, "the range of `alpha` is empty: 90.0 is not below 0.0");
     let e = error(&angle("[0, 90, 180]"));
