@@ -1,7 +1,8 @@
 //! Generates Rust for every molecule definition in `molecules/` (see `rovib-codegen`).
 //!
 //! Thin on purpose: it calls `rovib_codegen::generate`, prints one `rerun-if-changed` per
-//! definition, and on a bad definition prints readable errors and exits 1 (never a panic).
+//! definition, warns (`cargo::warning`) about molecules whose generated code is large enough to
+//! make rustc slow, and on a bad definition prints readable errors and exits 1 (never a panic).
 //!
 //! `ROVIB_MOLECULES_DIR`, if set, replaces `molecules/` (for building a private set of
 //! molecules without editing the checkout).
@@ -23,6 +24,9 @@ fn main() {
         Ok(report) => {
             for input in &report.inputs {
                 println!("cargo::rerun-if-changed={}", input.display());
+            }
+            for warning in report.molecules.iter().filter_map(|m| m.size_warning()) {
+                println!("cargo::warning={warning}");
             }
         }
         Err(errors) => {

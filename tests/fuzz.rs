@@ -10,8 +10,10 @@ use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
 use rovib::cli::run::initial_state;
 use rovib::molecules::H2o;
+use rovib::runtime::diagnostic::FileError;
 use rovib::runtime::hamiltonian::hamiltonian;
 use rovib::scene::parse_scene;
+use rovib_codegen::definition::parse_definition;
 use rovib_codegen::expr::Graph;
 use rovib_codegen::generate_molecule;
 use rovib_codegen::parse::{Scope, parse_expression};
@@ -89,6 +91,25 @@ const PIECES: &[&str] = &[
     "sqrt(-1)",
     "/ 0",
     "pow(0, -1)",
+    // Hostile names and edge numbers.
+    "None",
+    "Some",
+    "Ok",
+    "fn",
+    "self",
+    "gen",
+    "R1",
+    "omega_x",
+    "1e308",
+    "5e-324",
+    "name = \"fn\"",
+    "name = \"None\"",
+    "reference = 1e308",
+    "mass = 1e306",
+    "range = [0, 1]",
+    "range = [1, 0]",
+    "range = [0, \"pi\"]",
+    "((((((((((",
 ];
 
 #[derive(Clone, Debug)]
@@ -144,14 +165,11 @@ fn apply(text: &str, m: &Mutation) -> String {
 }
 
 /// A usable error: a message, a fix and a line inside the file, and a display that works.
-/// (Definition and scene errors are the same struct compiled into two crates, hence a macro.)
-macro_rules! well_formed {
-    ($e:expr, $text:expr) => {{
-        let (e, text) = (&$e, &$text);
-        assert!(!e.message.is_empty() && !e.help.is_empty(), "{e:?}");
-        assert!(e.line <= text.lines().count() + 1, "line {} beyond the file: {e:?}", e.line);
-        let _ = e.to_string();
-    }};
+/// (Definition and scene errors are one type, `rovib_base::diagnostic::FileError`.)
+fn well_formed(e: &FileError, text: &str) {
+    assert!(!e.message.is_empty() && !e.help.is_empty(), "{e:?}");
+    assert!(e.line <= text.lines().count() + 1, "line {} beyond the file: {e:?}", e.line);
+    let _ = e.to_string();
 }
 
 proptest! {
@@ -168,7 +186,7 @@ proptest! {
         }
         match generate_molecule(path, &text) {
             Ok(m) => prop_assert!(m.source.starts_with("// @generated")),
-            Err(e) => well_formed!(e, text),
+            Err(e) => well_formed(&e, &text),
         }
     }
 }
@@ -224,11 +242,163 @@ proptest! {
                         Ok(start) => {
                             let _ = hamiltonian(&H2o, &start.state);
                         }
-                        Err(e) => well_formed!(e, text),
+                        Err(e) => well_formed(&e, &text),
                     }
                 }
             }
-            Err(e) => well_formed!(e, text),
+            Err(e) => well_formed(&e, &text),
+        }
+    }
+}
+
+/// A small deterministic generator (SplitMix64) for [`hostile_definition`].
+struct Pick(u64);
+impl Pick {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+    fn of<'a>(&mut self, items: &[&'a str]) -> &'a str {
+        items[self.below(items.len())]
+    }
+}
+
+/// Names that Rust, the prelude, the template or the output columns use, uppercase names and
+/// names that mangle alike.
+const HOSTILE_NAMES: &[&str] = &[
+    "None",
+    "Some",
+    "Ok",
+    "Err",
+    "velocities",
+    "gen",
+    "self",
+    "Self",
+    "fn",
+    "q",
+    "k",
+    "t0",
+    "omega_x",
+    "qdot_r1",
+    "r1",
+    "R1",
+    "a_b",
+    "A_B",
+    "a__b",
+    "H",
+    "theta",
+    "pi",
+    "sin",
+    "x",
+    "E",
+    "Result",
+    "grad",
+];
+
+/// Numbers at the edges of f64: huge, tiny, signed zero, non-finite.
+const EDGE_NUMBERS: &[&str] =
+    &["1.0", "1e308", "5e-324", "-0.0", "0", "1e-300", "2.5", "-1.0", "1e20", "nan", "inf", "1.8", "0.5", "180"];
+
+/// A random definition built from hostile names, edge numbers and a potential of up to 1,000
+/// terms; the name of its file.
+fn hostile_definition(seed: u64) -> (String, String) {
+    let mut p = Pick(seed);
+    // Mostly an ordinary molecule name, so that most definitions get as far as generation.
+    let name = if p.below(4) == 0 {
+        p.of(&["fn", "self", "gen", "result", "atom", "x_y", "a__b", "molecules", "e", "none"])
+    } else {
+        "h"
+    };
+    let mut text = format!("name = \"{name}\"\nlength_unit = \"{}\"\n", p.of(&["bohr", "angstrom"]));
+    let n = 1 + p.below(3);
+    let mut coords: Vec<&str> = (0..n).map(|_| p.of(HOSTILE_NAMES)).collect();
+    if p.below(4) > 0 {
+        coords.dedup();
+    }
+    for c in &coords {
+        text +=
+            &format!("\n[[coordinates]]\nname = \"{c}\"\nunit = \"{}\"\n", p.of(&["bohr", "angstrom", "rad", "deg"]));
+        match p.below(4) {
+            0 => {}
+            1 => text += &format!("reference = {}\n", p.of(EDGE_NUMBERS)),
+            _ => text += &format!("reference = {}\n", p.of(&["0.5", "1.0", "1.8", "2.5"])),
+        }
+        if p.below(3) == 0 {
+            text += &format!(
+                "range = {}\n",
+                p.of(&[
+                    "[0, 1]",
+                    "[1, 0]",
+                    "[-inf, inf]",
+                    "[0, \"pi\"]",
+                    "[0, 1e308]",
+                    "[5e-324, 1]",
+                    "[-1e308, 1e308]"
+                ])
+            );
+        }
+    }
+    // Numbers inside expressions: finite, but at the edges of f64 as often as not.
+    const IN_EXPRESSIONS: &[&str] = &["1e308", "5e-324", "-0.0", "0", "1e-300", "2.5", "1e20", "0.5", "1.0", "3.0"];
+    let term = |p: &mut Pick| -> String {
+        let c = coords[p.below(coords.len())];
+        match p.below(5) {
+            0 => format!("{} * {c}", p.of(IN_EXPRESSIONS)),
+            1 => format!("sin({c} * {})", p.of(IN_EXPRESSIONS)),
+            2 => format!("pow({c} - {}, {})", p.of(IN_EXPRESSIONS), 1 + p.below(6)),
+            3 => format!("exp(-{} * {c})", p.of(IN_EXPRESSIONS)),
+            _ => p.of(IN_EXPRESSIONS).to_owned(),
+        }
+    };
+    for (i, label) in ["O", "H1", "H2", "C"].iter().take(2 + p.below(3)).enumerate() {
+        let xyz: Vec<String> = (0..3)
+            .map(|axis| if axis == i % 3 || p.below(3) == 0 { format!("\"{}\"", term(&mut p)) } else { "0".into() })
+            .collect();
+        text += &format!("\n[[atoms]]\nlabel = \"{label}\"\nposition = [{}]\n", xyz.join(", "));
+        if p.below(8) == 0 {
+            text += &format!("mass = {}\n", p.of(EDGE_NUMBERS));
+        }
+    }
+    let terms = if p.below(10) == 0 { 1000 } else { 1 + p.below(40) };
+    let potential: Vec<String> = (0..terms).map(|_| term(&mut p)).collect();
+    text += &format!(
+        "\n[potential]\nenergy_unit = \"{}\"\nexpression = \"{}\"\n",
+        p.of(&["hartree", "cm-1", "eV", "kcal/mol"]),
+        potential.join(" + ")
+    );
+    (format!("molecules/{name}.toml"), text)
+}
+
+proptest! {
+    #![proptest_config(config(cases(300), 17))]
+
+    /// Definitions built from hostile names, edge numbers and large potentials: no panic; every
+    /// accepted one prints source that parses, and its positions and potential are finite at
+    /// the reference geometry when it has one.
+    #[test]
+    fn hostile_definitions_never_panic_and_accepted_ones_parse(seed in any::<u64>()) {
+        let (path, text) = hostile_definition(seed);
+        match generate_molecule(&path, &text) {
+            Ok(m) => {
+                prop_assert!(syn::parse_file(&m.source).is_ok(), "generated source does not parse:\n{}", m.source);
+                let def = parse_definition(&path, &text).expect("generated above");
+                let reference: Option<Vec<f64>> =
+                    def.coordinates.iter().map(|c| c.reference.map(|r| r * c.unit.in_atomic_units())).collect();
+                if let Some(q) = reference {
+                    let mut roots: Vec<_> = def.positions.iter().flatten().copied().collect();
+                    roots.push(def.potential);
+                    for v in def.graph.eval(&roots, &q) {
+                        prop_assert!(v.is_finite(), "{v} at the reference of\n{text}");
+                    }
+                }
+            }
+            Err(e) => well_formed(&e, &text),
         }
     }
 }

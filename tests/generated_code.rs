@@ -278,3 +278,40 @@ impl MoleculeVisitor for Fused {
 fn fused_kinetic_and_gradient_equals_the_separate_functions() {
     for_each_molecule(Fused);
 }
+
+#[derive(Copy, Clone)]
+struct Ranges;
+impl MoleculeVisitor for Ranges {
+    type Output = ();
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) {
+        use rovib::runtime::units::CoordinateUnit;
+        for c in m.coordinates() {
+            let (low, high) = c.range;
+            assert!(low < high, "{}: {} has an empty range", m.name(), c.name);
+            if let CoordinateUnit::Length(_) = c.unit {
+                assert!(low >= 0.0, "{}: length {} may be negative", m.name(), c.name);
+            }
+        }
+        if let Some(q) = m.reference_geometry() {
+            assert_eq!(m.in_range(&q), Ok(()), "{}: reference geometry outside the ranges", m.name());
+            // Just past a bound is outside, and reported by index.
+            for (k, c) in m.coordinates().iter().enumerate() {
+                if c.range.1.is_finite() {
+                    let mut beyond = q;
+                    beyond[k] = c.range.1 * (1.0 + 1e-12) + 1e-300;
+                    assert_eq!(m.in_range(&beyond), Err(k), "{}: {}", m.name(), c.name);
+                }
+            }
+        }
+    }
+}
+
+/// Every coordinate's valid range is an interval, lengths are non-negative, the reference
+/// geometry lies inside, and bond angles end at π (as their definitions declare).
+#[test]
+fn coordinate_ranges_hold_the_reference_geometry() {
+    for_each_molecule(Ranges);
+    let water = rovib::molecules::H2o.coordinates();
+    assert_eq!(water[2].range, (0.0, std::f64::consts::PI));
+    assert_eq!(water[0].range, (0.0, f64::INFINITY));
+}

@@ -16,6 +16,8 @@
 //! name = "r1"
 //! unit = "angstrom"                # bohr | angstrom | rad | deg
 //! reference = 0.9578               # optional, in `unit`
+//! range = [0, "inf"]               # optional valid values in `unit` (default: lengths [0, inf],
+//!                                  # angles [-inf, inf]; bond angles declare [0, 180] deg)
 //!
 //! [[atoms]]
 //! label = "H1"                     # unique; the element is read from its leading letters
@@ -44,9 +46,9 @@ use toml::Spanned;
 
 use crate::diagnostic::{FileError, Source};
 use crate::elements;
-use crate::expr::{ExprId, Func, Graph};
+use crate::expr::{ExprId, Func, Graph, Node};
 use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
-use crate::units::{CoordinateUnit, EnergyUnit, LengthUnit};
+use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, EnergyUnit, LengthUnit};
 
 /// A problem in a definition file, with its place and a suggested fix (file, line, column,
 /// message, help), displayed like a rustc error.
@@ -72,6 +74,9 @@ pub struct CoordinateDef {
     pub unit: CoordinateUnit,
     /// Reference value in the declared unit.
     pub reference: Option<f64>,
+    /// The valid values, a closed interval in the declared unit: as declared, else
+    /// [`default_range`].
+    pub range: (f64, f64),
 }
 
 /// A validated molecule: metadata plus its positions and potential as expressions in one graph.
@@ -124,6 +129,8 @@ struct RawCoordinate {
     #[serde(default)]
     reference: Option<Spanned<f64>>,
     #[serde(default)]
+    range: Option<Spanned<Vec<Spanned<RawValue>>>>,
+    #[serde(default)]
     #[allow(dead_code)]
     description: Option<String>,
 }
@@ -158,6 +165,15 @@ enum RawValue {
     Int(i64),
     Float(f64),
     Expr(String),
+}
+
+/// The valid values of a coordinate that declares no range: lengths are positive,
+/// angles unbounded (dihedrals and torsions wrap; bond angles declare [0, 180] deg).
+pub fn default_range(unit: CoordinateUnit) -> (f64, f64) {
+    match unit {
+        CoordinateUnit::Length(_) => (0.0, f64::INFINITY),
+        CoordinateUnit::Angle(_) => (f64::NEG_INFINITY, f64::INFINITY),
+    }
 }
 
 /// Places inside expression strings.
@@ -280,6 +296,21 @@ impl Validator<'_> {
                 "use lowercase letters, digits and `_`, starting with a letter, e.g. \"h2o\"",
             ));
         }
+        if crate::names::is_keyword(&name) {
+            return Err(src.error(
+                raw.name.span(),
+                format!("molecule name `{name}` is a Rust keyword"),
+                "the name becomes a Rust module; choose another, e.g. \"h2o\" or \"water\"",
+            ));
+        }
+        let ty = crate::names::type_name(&name);
+        if crate::names::RESERVED_TYPE_NAMES.contains(&ty.as_str()) {
+            return Err(src.error(
+                raw.name.span(),
+                format!("molecule name `{name}` gives the type name `{ty}`, which generated code already uses"),
+                "choose another name (the type name is the name in CamelCase)",
+            ));
+        }
         if name != stem {
             return Err(src.error(
                 raw.name.span(),
@@ -313,6 +344,13 @@ impl Validator<'_> {
                 Some(r) if !r.get_ref().is_finite() => {
                     return Err(src.error(r.span(), "non-finite reference value", "write a finite number"));
                 }
+                Some(r) if !(r.get_ref() * unit.in_atomic_units()).is_finite() => {
+                    return Err(src.error(
+                        r.span(),
+                        format!("reference value {:?} {} overflows in atomic units", r.get_ref(), c.unit.get_ref()),
+                        "write the reference geometry's value of this coordinate, a number of ordinary size",
+                    ));
+                }
                 r => r.as_ref().map(|r| *r.get_ref()),
             };
             let var = self.graph.var(c.name.get_ref());
@@ -324,7 +362,23 @@ impl Validator<'_> {
                 self.graph.mul(factor, var)
             };
             self.names.insert(c.name.get_ref().clone(), symbol);
-            coordinates.push(CoordinateDef { name: c.name.get_ref().clone(), unit, reference });
+            let range = self.range(c, unit)?;
+            if let (Some(r), Some(value)) = (&c.reference, reference)
+                && !(range.0 <= value && value <= range.1)
+            {
+                return Err(src.error(
+                    r.span(),
+                    format!(
+                        "reference value {value:?} of `{}` is outside its range [{:?}, {:?}] {}",
+                        c.name.get_ref(),
+                        range.0,
+                        range.1,
+                        c.unit.get_ref()
+                    ),
+                    "correct the reference, or declare the range of valid values with range = [low, high]",
+                ));
+            }
+            coordinates.push(CoordinateDef { name: c.name.get_ref().clone(), unit, reference, range });
             coordinate_spans.push(c.name.span());
         }
 
@@ -348,6 +402,7 @@ impl Validator<'_> {
         let mut atoms = Vec::new();
         let mut positions = Vec::new();
         let mut labels: HashMap<String, Range<usize>> = HashMap::new();
+        let mut position_spans: Vec<Vec<Range<usize>>> = Vec::new();
         for a in &raw.atoms {
             let label = a.label.get_ref();
             if label.trim().is_empty() {
@@ -386,18 +441,23 @@ impl Validator<'_> {
             }
             atoms.push(AtomDef { label: label.clone(), element, mass_da });
             positions.push(xyz);
+            position_spans.push(position.get_ref().iter().map(|c| c.span()).collect::<Vec<_>>());
+        }
+
+        // The total mass divides every position (the centre-of-mass shift): it must be finite.
+        let total: f64 = atoms.iter().map(|a| a.mass_da * DALTON_IN_ELECTRON_MASSES).sum();
+        if !total.is_finite() {
+            return Err(src.whole_file(
+                format!("the total mass overflows in electron masses ({} atoms)", atoms.len()),
+                "give every mass in daltons, e.g. mass = 1.00782503223",
+            ));
         }
 
         // Every coordinate must move some atom, or the kinetic metric is singular.
         let roots: Vec<ExprId> = positions.iter().flatten().copied().collect();
         let reachable = self.graph.reachable(&roots);
         for (k, c) in coordinates.iter().enumerate() {
-            let used = self
-                .graph
-                .nodes()
-                .iter()
-                .enumerate()
-                .any(|(i, n)| reachable[i] && *n == crate::expr::Node::Var(k as u32));
+            let used = self.graph.nodes().iter().enumerate().any(|(i, n)| reachable[i] && *n == Node::Var(k as u32));
             if !used {
                 return Err(src.error(
                     coordinate_spans[k].clone(),
@@ -432,6 +492,38 @@ impl Validator<'_> {
         let scale = self.graph.constant(energy_unit.in_hartree());
         let potential = self.graph.mul(scale, u);
 
+        // Nothing non-finite where it can be known now: constant positions and a constant
+        // potential everywhere, and everything at the reference geometry if the file gives one.
+        let reference: Option<Vec<f64>> =
+            coordinates.iter().map(|c| c.reference.map(|r| r * c.unit.in_atomic_units())).collect();
+        // The value of `e` where it is known now, and where that is (for the message).
+        let known = |graph: &Graph, e: ExprId| -> Option<(f64, &'static str)> {
+            let varying = graph.reachable(&[e]).iter().zip(graph.nodes()).any(|(r, n)| *r && matches!(n, Node::Var(_)));
+            match (&reference, varying) {
+                (_, false) => Some((graph.eval(&[e], &[])[0], "(a constant)")),
+                (Some(q), true) => Some((graph.eval(&[e], q)[0], "at the reference geometry")),
+                (None, true) => None,
+            }
+        };
+        for (i, xyz) in positions.iter().enumerate() {
+            for (axis, &e) in xyz.iter().enumerate() {
+                if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
+                    return Err(src.error(
+                        position_spans[i][axis].clone(),
+                        format!("the {} coordinate of atom `{}` is {v} {place}", ["x", "y", "z"][axis], atoms[i].label),
+                        "check for a division by zero, the square root or logarithm of a negative number, or a number too large in bohr",
+                    ));
+                }
+            }
+        }
+        if let Some((v, place)) = known(&self.graph, potential).filter(|(v, _)| !v.is_finite()) {
+            return Err(src.error(
+                pot.expression.span(),
+                format!("the potential is {v} hartree {place}"),
+                "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
+            ));
+        }
+
         Ok(Definition {
             path: src.path.to_owned(),
             name,
@@ -443,6 +535,55 @@ impl Validator<'_> {
             potential,
             energy_unit,
         })
+    }
+
+    /// The declared range of a coordinate in its unit, or the default; checked to be an interval
+    /// that is also one in atomic units.
+    fn range(&self, c: &RawCoordinate, unit: CoordinateUnit) -> Result<(f64, f64), DefinitionError> {
+        let src = self.src;
+        let Some(range) = &c.range else { return Ok(default_range(unit)) };
+        let help = "write range = [low, high] in the coordinate's unit, low < high; numbers, `pi` and \
+                    `inf` (e.g. [0, \"pi\"], [0, 180], [-inf, inf])";
+        let [low, high] = range.get_ref().as_slice() else {
+            return Err(src.error(
+                range.span(),
+                format!("the range of `{}` has {} values instead of 2", c.name.get_ref(), range.get_ref().len()),
+                help,
+            ));
+        };
+        let bound = |v: &Spanned<RawValue>| -> Result<f64, DefinitionError> {
+            let x = match v.get_ref() {
+                RawValue::Int(i) => *i as f64,
+                RawValue::Float(x) => *x,
+                RawValue::Expr(text) if text.trim() == "inf" => f64::INFINITY,
+                RawValue::Expr(text) if text.trim() == "-inf" => f64::NEG_INFINITY,
+                RawValue::Expr(text) => {
+                    let mut g = Graph::new();
+                    let names = HashMap::new();
+                    let scope = Scope { names: &names, context: "a range" };
+                    let e = parse::parse_expression(&mut g, text, &scope)
+                        .map_err(|e| src.expression_error(v.span(), text, e))?;
+                    g.as_const(e).unwrap_or(f64::NAN)
+                }
+            };
+            if x.is_nan() || (x.is_finite() && !(x * unit.in_atomic_units()).is_finite()) {
+                return Err(src.error(
+                    v.span(),
+                    format!("invalid bound {x:?} in the range of `{}`", c.name.get_ref()),
+                    help,
+                ));
+            }
+            Ok(x)
+        };
+        let (low, high) = (bound(low)?, bound(high)?);
+        if low >= high {
+            return Err(src.error(
+                range.span(),
+                format!("the range of `{}` is empty: {low:?} is not below {high:?}", c.name.get_ref()),
+                help,
+            ));
+        }
+        Ok((low, high))
     }
 
     /// Evaluates the constants, each of which may use `pi` and other constants.
@@ -518,6 +659,13 @@ impl Validator<'_> {
                 return Err(src.error(
                     m.span(),
                     format!("the mass of atom `{label}` must be positive and finite, got {mass}"),
+                    "give the mass in daltons, e.g. mass = 1.00782503223",
+                ));
+            }
+            if !(mass * DALTON_IN_ELECTRON_MASSES).is_finite() {
+                return Err(src.error(
+                    m.span(),
+                    format!("the mass of atom `{label}` ({mass:?} Da) overflows in electron masses"),
                     "give the mass in daltons, e.g. mass = 1.00782503223",
                 ));
             }

@@ -347,7 +347,8 @@ impl Graph {
         }
         let (ca, xa) = self.split_coefficient(a);
         let (cb, xb) = self.split_coefficient(b);
-        if xa == xb && self.as_const(xa).is_none() {
+        // Like terms are collected only where the summed coefficient is finite.
+        if xa == xb && self.as_const(xa).is_none() && (ca + cb).is_finite() {
             return self.scaled(ca + cb, xa);
         }
         // A negative term is subtracted: `a + (−c)·y = a − c·y`, exactly, since negation is.
@@ -384,7 +385,7 @@ impl Graph {
         }
         let (ca, xa) = self.split_coefficient(a);
         let (cb, xb) = self.split_coefficient(b);
-        if xa == xb && self.as_const(xa).is_none() {
+        if xa == xb && self.as_const(xa).is_none() && (ca - cb).is_finite() {
             return self.scaled(ca - cb, xa);
         }
         if cb < 0.0 && xb != b {
@@ -787,6 +788,21 @@ mod tests {
         let minus_one = g.constant(-1.0);
         let nan = g.call(Func::Sqrt, minus_one);
         assert!(g.as_const(nan).is_none());
+    }
+
+    #[test]
+    fn like_terms_are_not_collected_into_an_infinite_coefficient() {
+        let mut g = Graph::new();
+        let x = g.var("x");
+        let big = g.constant(1e308);
+        let t = g.mul(big, x);
+        let sum = g.add(t, t);
+        let minus_t = g.neg(t);
+        let diff = g.sub(t, minus_t);
+        for e in [sum, diff] {
+            assert!(g.nodes().iter().all(|n| !matches!(n, Node::Const(b) if !f64::from_bits(*b).is_finite())));
+            assert_eq!(g.eval(&[e], &[0.5]), vec![1e308]);
+        }
     }
 
     #[test]

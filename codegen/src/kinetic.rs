@@ -53,7 +53,7 @@ pub struct KineticSet {
     pub inertia: [[ExprId; 3]; 3],
 }
 
-/// The names of the velocity variables added after the coordinates.
+/// The local variables of generated code that hold ω (graph variables n..n+3).
 pub const OMEGA_NAMES: [&str; 3] = ["omega_x", "omega_y", "omega_z"];
 
 /// Builds every expression for `def` into its graph.
@@ -80,8 +80,11 @@ pub fn build(def: &mut Definition) -> KineticExprs {
         .collect();
 
     // Velocity variables come after the coordinates, in this order.
-    let omega: Vec<ExprId> = OMEGA_NAMES.iter().map(|name| g.var(name)).collect();
-    let qdot: Vec<ExprId> = def.coordinates.iter().map(|c| g.var(&format!("qdot_{}", c.name))).collect();
+    // Their graph names are not identifiers, so no coordinate name can alias them (a coordinate
+    // called `omega_x` must stay a variable of its own).
+    let omega: Vec<ExprId> = ["ω_x", "ω_y", "ω_z"].iter().map(|name| g.var(name)).collect();
+    let qdot: Vec<ExprId> = def.coordinates.iter().map(|c| g.var(&format!("q̇_{}", c.name))).collect();
+    assert_eq!(g.var_count(), 2 * n + 3, "velocity variables are new variables");
     let mut kinetic_energy = g.zero();
     for (i, r) in positions.iter().enumerate() {
         // u_i = ω × R_i + Σ_j ∂R_i/∂q_j q̇_j, the body-frame velocity of atom i.

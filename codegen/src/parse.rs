@@ -57,6 +57,7 @@ pub fn parse_expression(graph: &mut Graph, text: &str, scope: &Scope<'_>) -> Res
             help: "write an expression, for example `0` or `r1 * cos(alpha / 2)`".into(),
         });
     }
+    check_shape(text, scope)?;
     let expr: Expr = syn::parse_str(text).map_err(|e| {
         let help = if text.contains("**") {
             "write powers as `pow(x, 2)`; `**` is not an operator here".to_owned()
@@ -65,20 +66,215 @@ pub fn parse_expression(graph: &mut Graph, text: &str, scope: &Scope<'_>) -> Res
         };
         ExprError::at(e.span(), format!("syntax error in {}: {e}", scope.context), help)
     })?;
-    Builder { graph, scope }.build(&expr)
+    let mut builder = Builder { graph, scope, tasks: vec![Task::Visit(expr)], values: Vec::new() };
+    let result = builder.run();
+    // Whatever an error left unvisited is taken apart without recursion.
+    dismantle(builder.tasks.drain(..).filter_map(|t| match t {
+        Task::Visit(e) => Some(e),
+        _ => None,
+    }));
+    result
 }
 
+/// The deepest nesting an expression may have: open parentheses plus pending prefix operators
+/// (`-(-(x))` is 4 deep). syn parses nesting recursively, so this bound keeps the build script's
+/// stack safe; no formula needs more, while a flat sum may have any number of terms.
+pub const MAX_NESTING: usize = 128;
+
+/// Rejects, before syn sees it, what could make syn or the builder recurse deeply or what no
+/// expression contains: characters outside the expression alphabet, Rust keywords, and nesting
+/// deeper than [`MAX_NESTING`]. Sums, products and calls in a row are not nesting.
+fn check_shape(text: &str, scope: &Scope<'_>) -> Result<(), ExprError> {
+    let (mut line, mut column) = (1usize, 0usize);
+    // Pending prefix operators of each open parenthesis level, innermost last.
+    let mut levels: Vec<usize> = vec![0];
+    let mut depth = 0usize;
+    // Whether the previous token ends an operand (so `-` or `*` after it is binary).
+    let mut after_operand = false;
+    let mut chars = text.chars().peekable();
+    let err = |line, column, message: String, help: &str| ExprError { line, column, message, help: help.to_owned() };
+    while let Some(c) = chars.next() {
+        let (l, col) = (line, column);
+        column += 1;
+        match c {
+            '\n' => {
+                line += 1;
+                column = 0;
+            }
+            c if c.is_whitespace() => {}
+            c if c.is_ascii_alphanumeric() || c == '_' => {
+                let mut word = String::from(c);
+                while let Some(&n) = chars.peek().filter(|n| n.is_ascii_alphanumeric() || **n == '_' || **n == '.') {
+                    // A `.` continues a number (`1.5`, `2.e3`) but ends a name (`x.sin`).
+                    if n == '.' && !word.starts_with(|d: char| d.is_ascii_digit()) {
+                        break;
+                    }
+                    // `1e-3`: the sign belongs to the exponent.
+                    word.push(n);
+                    chars.next();
+                    column += 1;
+                    if word.starts_with(|d: char| d.is_ascii_digit())
+                        && (n == 'e' || n == 'E')
+                        && let Some(&sign @ ('+' | '-')) = chars.peek()
+                    {
+                        word.push(sign);
+                        chars.next();
+                        column += 1;
+                    }
+                }
+                if syn::parse_str::<syn::Ident>(&word).is_err() && !word.starts_with(|d: char| d.is_ascii_digit()) {
+                    return Err(err(
+                        l,
+                        col,
+                        format!("`{word}` is not a name (it is a Rust keyword) in {}", scope.context),
+                        "expressions use numbers, names, + - * /, parentheses and calls such as sin(x) or pow(x, 2)",
+                    ));
+                }
+                after_operand = true;
+            }
+            '(' => {
+                levels.push(0);
+                depth += 1;
+                after_operand = false;
+            }
+            ')' => {
+                if levels.len() > 1 {
+                    depth -= 1 + levels.pop().unwrap_or(0);
+                }
+                after_operand = true;
+            }
+            '-' | '*' if !after_operand => {
+                *levels.last_mut().expect("the outermost level is never popped") += 1;
+                depth += 1;
+            }
+            '+' | '-' | '*' | '/' | '^' | ',' => {
+                // A binary operator or a comma ends the operand of every pending prefix operator.
+                let pending = levels.last_mut().expect("the outermost level is never popped");
+                depth -= *pending;
+                *pending = 0;
+                after_operand = false;
+            }
+            '.' => after_operand = false,
+            other => {
+                return Err(err(
+                    l,
+                    col,
+                    format!("unexpected character `{other}` in {}", scope.context),
+                    "expressions use numbers, names, + - * /, parentheses and calls such as sin(x) or pow(x, 2)",
+                ));
+            }
+        }
+        if depth > MAX_NESTING {
+            return Err(err(
+                l,
+                col,
+                format!("expression nested more than {MAX_NESTING} deep in {}", scope.context),
+                "flatten it: parentheses and unary minus signs may nest at most 128 deep (sums of any length are fine)",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Takes syn expressions apart with an explicit stack. Dropping a deep syn tree recurses once per
+/// level (a 10⁴-term sum is 10⁴ levels deep); this moves every child out first so each node is
+/// dropped alone. [`check_shape`] limits the trees to the variants handled here.
+fn dismantle(exprs: impl IntoIterator<Item = Expr>) {
+    let mut stack: Vec<Expr> = exprs.into_iter().collect();
+    while let Some(e) = stack.pop() {
+        match e {
+            Expr::Binary(b) => stack.extend([*b.left, *b.right]),
+            Expr::Unary(u) => stack.push(*u.expr),
+            Expr::Paren(p) => stack.push(*p.expr),
+            Expr::Group(g) => stack.push(*g.expr),
+            Expr::Call(c) => {
+                stack.push(*c.func);
+                stack.extend(c.args);
+            }
+            Expr::MethodCall(m) => {
+                stack.push(*m.receiver);
+                stack.extend(m.args);
+            }
+            Expr::Field(f) => stack.push(*f.base),
+            Expr::Index(i) => stack.extend([*i.expr, *i.index]),
+            Expr::Tuple(t) => stack.extend(t.elems),
+            Expr::Range(r) => stack.extend(r.start.into_iter().chain(r.end).map(|b| *b)),
+            Expr::Cast(c) => stack.push(*c.expr),
+            _ => {}
+        }
+    }
+}
+
+/// One step of the builder's post-order walk.
+// Tasks live in one Vec for the whole walk; boxing the large variant would only add allocations.
+#[allow(clippy::large_enum_variant)]
+enum Task {
+    /// Build this expression (push its value).
+    Visit(Expr),
+    /// Pop one value, push its negation.
+    Neg,
+    /// Pop two values (right on top), push the result.
+    Binary(fn(&mut Graph, ExprId, ExprId) -> ExprId),
+    /// Pop one value, push the function of it.
+    Call(Func),
+}
+
+/// Builds a syn expression into the graph, iteratively: a post-order walk with an explicit
+/// stack, so a sum of any length needs no stack depth. Operands are built left before right, as
+/// a recursive walk would, so node ids (and the generated code) do not depend on the walk.
 struct Builder<'g, 's> {
     graph: &'g mut Graph,
     scope: &'s Scope<'s>,
+    tasks: Vec<Task>,
+    values: Vec<ExprId>,
 }
 
 impl Builder<'_, '_> {
-    fn build(&mut self, expr: &Expr) -> Result<ExprId, ExprError> {
+    fn run(&mut self) -> Result<ExprId, ExprError> {
+        while let Some(task) = self.tasks.pop() {
+            match task {
+                Task::Visit(e) => self.visit(e)?,
+                Task::Neg => {
+                    let a = self.pop();
+                    let v = self.graph.neg(a);
+                    self.values.push(v);
+                }
+                Task::Binary(op) => {
+                    let r = self.pop();
+                    let l = self.pop();
+                    let v = op(self.graph, l, r);
+                    self.values.push(v);
+                }
+                Task::Call(f) => {
+                    let a = self.pop();
+                    let v = self.graph.call(f, a);
+                    self.values.push(v);
+                }
+            }
+        }
+        Ok(self.pop())
+    }
+
+    fn pop(&mut self) -> ExprId {
+        self.values.pop().expect("every task pushes the values its parent pops")
+    }
+
+    /// Pushes `first`, then `second` (if any), to be built in that order, after which `then`
+    /// combines them.
+    fn schedule(&mut self, then: Task, first: Expr, second: Option<Expr>) {
+        self.tasks.push(then);
+        self.tasks.extend(second.map(Task::Visit));
+        self.tasks.push(Task::Visit(first));
+    }
+
+    fn visit(&mut self, expr: Expr) -> Result<(), ExprError> {
         match expr {
-            Expr::Lit(lit) => self.literal(&lit.lit),
-            Expr::Paren(p) => self.build(&p.expr),
-            Expr::Group(g) => self.build(&g.expr),
+            Expr::Lit(lit) => {
+                let v = self.literal(&lit.lit)?;
+                self.values.push(v);
+            }
+            Expr::Paren(p) => self.tasks.push(Task::Visit(*p.expr)),
+            Expr::Group(g) => self.tasks.push(Task::Visit(*g.expr)),
             Expr::Path(path) => {
                 let Some(ident) = path.path.get_ident() else {
                     return Err(ExprError::at(
@@ -87,20 +283,18 @@ impl Builder<'_, '_> {
                         "names are single identifiers such as `r1` or `alpha`",
                     ));
                 };
-                self.name(&ident.to_string(), ident.span())
+                let v = self.name(&ident.to_string(), ident.span())?;
+                self.values.push(v);
             }
             Expr::Unary(u) => match u.op {
-                UnOp::Neg(_) => {
-                    let a = self.build(&u.expr)?;
-                    Ok(self.graph.neg(a))
-                }
-                _ => {
-                    let op = &u.op;
-                    Err(ExprError::at(
-                        u.op.span(),
+                UnOp::Neg(_) => self.schedule(Task::Neg, *u.expr, None),
+                op => {
+                    dismantle([*u.expr]);
+                    return Err(ExprError::at(
+                        op.span(),
                         format!("unsupported unary operator `{}` in {}", quote::quote!(#op), self.scope.context),
                         "only unary minus is supported; powers are `pow(x, y)`",
-                    ))
+                    ));
                 }
             },
             Expr::Binary(b) => {
@@ -109,96 +303,112 @@ impl Builder<'_, '_> {
                     BinOp::Sub(_) => Graph::sub,
                     BinOp::Mul(_) => Graph::mul,
                     BinOp::Div(_) => Graph::div,
-                    BinOp::BitXor(_) => {
-                        return Err(ExprError::at(
-                            b.op.span(),
-                            format!("`^` is not a power in {}", self.scope.context),
-                            "write powers as `pow(base, exponent)`, e.g. `pow(r1 - re, 2)`",
-                        ));
-                    }
-                    _ => {
-                        let op = &b.op;
-                        return Err(ExprError::at(
-                            b.op.span(),
-                            format!("unsupported operator `{}` in {}", quote::quote!(#op), self.scope.context),
-                            "the operators are + - * / and unary minus; powers are `pow(x, y)`",
-                        ));
+                    op => {
+                        dismantle([*b.left, *b.right]);
+                        return Err(if let BinOp::BitXor(_) = op {
+                            ExprError::at(
+                                op.span(),
+                                format!("`^` is not a power in {}", self.scope.context),
+                                "write powers as `pow(base, exponent)`, e.g. `pow(r1 - re, 2)`",
+                            )
+                        } else {
+                            ExprError::at(
+                                op.span(),
+                                format!("unsupported operator `{}` in {}", quote::quote!(#op), self.scope.context),
+                                "the operators are + - * / and unary minus; powers are `pow(x, y)`",
+                            )
+                        });
                     }
                 };
-                let l = self.build(&b.left)?;
-                let r = self.build(&b.right)?;
-                Ok(op(self.graph, l, r))
+                self.schedule(Task::Binary(op), *b.left, Some(*b.right));
             }
-            Expr::Call(call) => {
-                let name = match &*call.func {
-                    Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
-                    _ => None,
-                };
-                let Some(name) = name else {
-                    return Err(ExprError::at(
-                        call.func.span(),
-                        format!("only named functions can be called in {}", self.scope.context),
-                        function_help(),
-                    ));
-                };
-                let args: Vec<&Expr> = call.args.iter().collect();
-                let expected = if BINARY_FUNCTIONS.contains(&name.as_str()) {
-                    2
-                } else if Func::from_name(&name).is_some() {
-                    1
-                } else {
-                    let help = match name.as_str() {
-                        "log" => "the natural logarithm is `ln`".to_owned(),
-                        "powi" | "powf" | "sqr" => "write powers as `pow(base, exponent)`".to_owned(),
-                        _ => function_help(),
-                    };
-                    return Err(ExprError::at(
-                        call.func.span(),
-                        format!("unknown function `{name}` in {}", self.scope.context),
-                        help,
-                    ));
-                };
-                if args.len() != expected {
-                    return Err(ExprError::at(
-                        call.func.span(),
-                        format!(
-                            "`{name}` takes {expected} argument{} but {} {} given in {}",
-                            if expected == 1 { "" } else { "s" },
-                            args.len(),
-                            if args.len() == 1 { "was" } else { "were" },
-                            self.scope.context
-                        ),
-                        match name.as_str() {
-                            "pow" => "write `pow(base, exponent)`".to_owned(),
-                            "atan2" => "write `atan2(y, x)`".to_owned(),
-                            _ => format!("write `{name}(x)`"),
-                        },
-                    ));
-                }
-                let a = self.build(args[0])?;
-                match name.as_str() {
-                    "pow" => {
-                        let b = self.build(args[1])?;
-                        Ok(self.graph.pow(a, b))
-                    }
-                    "atan2" => {
-                        let b = self.build(args[1])?;
-                        Ok(self.graph.atan2(a, b))
-                    }
-                    _ => Ok(self.graph.call(Func::from_name(&name).expect("checked above"), a)),
-                }
+            Expr::Call(call) => self.call(call)?,
+            Expr::MethodCall(m) => {
+                let (method, span) = (m.method.to_string(), m.method.span());
+                dismantle([Expr::MethodCall(m)]);
+                return Err(ExprError::at(
+                    span,
+                    format!("method calls like `.{method}()` are not supported in {}", self.scope.context),
+                    format!("write `{method}(x)` instead of `x.{method}()`"),
+                ));
             }
-            Expr::MethodCall(m) => Err(ExprError::at(
-                m.method.span(),
-                format!("method calls like `.{}()` are not supported in {}", m.method, self.scope.context),
-                format!("write `{}(x)` instead of `x.{}()`", m.method, m.method),
-            )),
-            other => Err(ExprError::at(
-                other.span(),
-                format!("unsupported expression `{}` in {}", quote::quote!(#other), self.scope.context),
-                "expressions use numbers, names, + - * /, parentheses and calls such as sin(x) or pow(x, 2)",
-            )),
+            other => {
+                // Located at a token of the node itself: syn's `span()` of a whole expression
+                // walks all of it, recursively.
+                let (what, span) = match &other {
+                    Expr::Field(f) => ("a field access `.`".to_owned(), f.dot_token.span),
+                    Expr::Tuple(t) => ("a tuple `(a, b)`".to_owned(), t.paren_token.span.open()),
+                    Expr::Range(r) => ("a range `..`".to_owned(), r.limits.span()),
+                    Expr::Index(i) => ("indexing `[...]`".to_owned(), i.bracket_token.span.open()),
+                    Expr::Cast(c) => ("a cast `as`".to_owned(), c.as_token.span),
+                    _ => (format!("`{}`", quote::quote!(#other)), other.span()),
+                };
+                dismantle([other]);
+                return Err(ExprError::at(
+                    span,
+                    format!("unsupported expression {what} in {}", self.scope.context),
+                    "expressions use numbers, names, + - * /, parentheses and calls such as sin(x) or pow(x, 2)",
+                ));
+            }
         }
+        Ok(())
+    }
+
+    fn call(&mut self, call: syn::ExprCall) -> Result<(), ExprError> {
+        let name = match &*call.func {
+            Expr::Path(p) => p.path.get_ident().map(|i| i.to_string()),
+            _ => None,
+        };
+        let Some(name) = name else {
+            let span = call.paren_token.span.open();
+            dismantle([Expr::Call(call)]);
+            return Err(ExprError::at(
+                span,
+                format!("only named functions can be called in {}", self.scope.context),
+                function_help(),
+            ));
+        };
+        let span = call.func.span();
+        let args: Vec<Expr> = call.args.into_iter().collect();
+        let expected = if BINARY_FUNCTIONS.contains(&name.as_str()) {
+            2
+        } else if Func::from_name(&name).is_some() {
+            1
+        } else {
+            let help = match name.as_str() {
+                "log" => "the natural logarithm is `ln`".to_owned(),
+                "powi" | "powf" | "sqr" => "write powers as `pow(base, exponent)`".to_owned(),
+                _ => function_help(),
+            };
+            dismantle(args);
+            return Err(ExprError::at(span, format!("unknown function `{name}` in {}", self.scope.context), help));
+        };
+        if args.len() != expected {
+            let given = args.len();
+            dismantle(args);
+            return Err(ExprError::at(
+                span,
+                format!(
+                    "`{name}` takes {expected} argument{} but {given} {} given in {}",
+                    if expected == 1 { "" } else { "s" },
+                    if given == 1 { "was" } else { "were" },
+                    self.scope.context
+                ),
+                match name.as_str() {
+                    "pow" => "write `pow(base, exponent)`".to_owned(),
+                    "atan2" => "write `atan2(y, x)`".to_owned(),
+                    _ => format!("write `{name}(x)`"),
+                },
+            ));
+        }
+        let mut args = args.into_iter();
+        let first = args.next().expect("counted above");
+        match name.as_str() {
+            "pow" => self.schedule(Task::Binary(Graph::pow), first, args.next()),
+            "atan2" => self.schedule(Task::Binary(Graph::atan2), first, args.next()),
+            _ => self.schedule(Task::Call(Func::from_name(&name).expect("checked above")), first, None),
+        }
+        Ok(())
     }
 
     fn literal(&mut self, lit: &Lit) -> Result<ExprId, ExprError> {
@@ -322,6 +532,27 @@ mod tests {
         assert_eq!(e.message, "`pow` takes 2 arguments but 1 was given in the test");
         let e = parse("sin(x, x)").unwrap_err();
         assert_eq!(e.message, "`sin` takes 1 argument but 2 were given in the test");
+    }
+
+    #[test]
+    fn deep_nesting_keywords_and_stray_characters_are_located_errors() {
+        let limit = MAX_NESTING / 2;
+        assert!(parse(&format!("{}x{}", "-(".repeat(limit), ")".repeat(limit))).is_ok());
+        let e = parse(&format!("1 + {}x{}", "(".repeat(MAX_NESTING + 1), ")".repeat(MAX_NESTING + 1))).unwrap_err();
+        assert!(e.message.starts_with("expression nested more than 128 deep"), "{e:?}");
+        assert_eq!((e.line, e.column), (1, 4 + MAX_NESTING));
+        // A flat sum and a long run of minus signs separated by operators are not nesting.
+        let flat = vec!["x"; 20_000].join(" + ");
+        assert_eq!(value(&flat, 1.0), 20_000.0);
+        assert_eq!(value(&vec!["-x"; 1000].join(" - "), 1.0), 998.0);
+        let e = parse(&format!("{}x", "-".repeat(MAX_NESTING + 1))).unwrap_err();
+        assert!(e.message.starts_with("expression nested more than"), "{e:?}");
+        let e = parse("x +\n return x").unwrap_err();
+        assert_eq!(e.message, "`return` is not a name (it is a Rust keyword) in the test");
+        assert_eq!((e.line, e.column), (2, 1));
+        let e = parse("x == 1").unwrap_err();
+        assert_eq!(e.message, "unexpected character `=` in the test");
+        assert!(parse("1e-3 * x + 2.5E+2 - 1.").is_ok());
     }
 
     #[test]

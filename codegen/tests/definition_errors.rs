@@ -241,3 +241,131 @@ fn every_error_of_a_directory_is_reported() {
     assert!(std::fs::read_dir(&out).unwrap().next().is_none(), "nothing is written when a definition is bad");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Values that are finite as written but overflow in atomic units: located errors, not a
+/// panic while printing an infinite literal.
+#[test]
+fn values_that_overflow_in_atomic_units() {
+    let e = error(&with("label = \"O\"", "label = \"O\"\nmass = 1e306"));
+    assert_error(&e, 18, 8, "the mass of atom `O` (1e306 Da) overflows in electron masses", "daltons");
+    let e = error(&with(
+        "unit = \"bohr\"\n\n[[coordinates]]\nname = \"r2\"",
+        "unit = \"angstrom\"\nreference = 1e308\n\n[[coordinates]]\nname = \"r2\"",
+    ));
+    assert_error(&e, 7, 13, "reference value 1e308 angstrom overflows in atomic units", "reference geometry");
+    // Each mass fits, their sum does not.
+    let huge = "mass = 9e304";
+    let text = with("label = \"O\"", &format!("label = \"O\"\n{huge}"))
+        .replace("label = \"H1\"", &format!("label = \"H1\"\n{huge}"))
+        .replace("label = \"H2\"", &format!("label = \"H2\"\n{huge}"));
+    let e = error(&text);
+    assert_eq!(e.message, "the total mass overflows in electron masses (3 atoms)");
+}
+
+/// A molecule name becomes a module and a type: keywords and names the generated code uses are
+/// refused where the name is written.
+#[test]
+fn molecule_names_that_cannot_be_rust() {
+    for name in ["fn", "type", "self", "gen", "async"] {
+        let text = with("name = \"xy2\"", &format!("name = \"{name}\""));
+        let e = generate_molecule(&format!("molecules/{name}.toml"), &text).unwrap_err();
+        assert_eq!(e.message, format!("molecule name `{name}` is a Rust keyword"), "{e}");
+        assert_eq!((e.line, e.column), (1, 8));
+    }
+    for (name, ty) in [("result", "Result"), ("atom", "Atom"), ("kinetic_matrices", "KineticMatrices"), ("e", "E")] {
+        let text = with("name = \"xy2\"", &format!("name = \"{name}\""));
+        let e = generate_molecule(&format!("molecules/{name}.toml"), &text).unwrap_err();
+        assert_eq!(
+            e.message,
+            format!("molecule name `{name}` gives the type name `{ty}`, which generated code already uses")
+        );
+    }
+}
+
+/// A coordinate named like a velocity variable (`omega_x`, `qdot_r1`) is a coordinate of its
+/// own: the kinetic energy has one term per coordinate and ω component.
+#[test]
+fn coordinates_named_like_velocities_stay_coordinates() {
+    let text = GOOD
+        .replace("\"r1", "\"omega_x")
+        .replace("r1 ", "omega_x ")
+        .replace("(r1", "(omega_x")
+        .replace("\"alpha\"", "\"qdot_r2\"")
+        .replace("alpha /", "qdot_r2 /");
+    let m = generate_molecule("molecules/xy2.toml", &text).expect("valid");
+    let lets: Vec<&str> = m.source.lines().filter(|l| l.trim_start().starts_with("let q")).collect();
+    // Coordinates and velocities load from different inputs.
+    assert!(lets.iter().any(|l| l.contains("let q0_omega_x = q[0];")), "{lets:#?}");
+    assert!(m.source.contains("let omega_x = omega[0];"), "{}", m.source);
+    assert!(lets.iter().any(|l| l.contains("let qdot1_r2 = qdot[1];")), "{lets:#?}");
+    assert!(lets.iter().any(|l| l.contains("let q2_qdot_r2 = q[2];")), "{lets:#?}");
+}
+
+/// Non-finite positions and potentials are build errors where they can be known: constants
+/// always, everything else at the reference geometry when the file gives one.
+#[test]
+fn non_finite_positions_and_potentials() {
+    let e = error(&with("position = [0, 0, 0]", "position = [\"1 / 0\", 0, 0]"));
+    assert_error(&e, 18, 13, "the x coordinate of atom `O` is inf (a constant)", "division by zero");
+    let e = error(&with("position = [0, 0, 0]", "position = [0, \"sqrt(-1)\", 0]"));
+    assert_error(&e, 18, 16, "the y coordinate of atom `O` is NaN (a constant)", "square root");
+    // Finite in ångström, infinite in bohr.
+    let e = error(
+        &with("position = [0, 0, 0]", "position = [0, 0, 1e308]")
+            .replace("length_unit = \"bohr\"", "length_unit = \"angstrom\""),
+    );
+    assert_eq!(e.message, "the z coordinate of atom `O` is inf (a constant)");
+    let e = error(&with("position = [0, 0, 0]", "position = [0, 0, \"1e300 * 1e300\"]"));
+    assert_eq!(e.message, "the z coordinate of atom `O` is inf (a constant)");
+    let with_references = GOOD
+        .replace("\nunit = \"bohr\"", "\nunit = \"bohr\"\nreference = 1.8")
+        .replace("\nunit = \"rad\"", "\nunit = \"rad\"\nreference = 1.8");
+    let e = error(&with_references.replace("k * (pow(r1 - 1.8, 2) + pow(r2 - 1.8, 2))", "k * ln(r1 - 1.8)"));
+    assert_eq!(e.message, "the potential is -inf hartree at the reference geometry");
+    assert_eq!(e.line, 33);
+    let e = error(&with_references.replace("\"r1 * sin(alpha / 2)\"", "\"sqrt(1.7 - r1)\""));
+    assert_eq!(e.message, "the x coordinate of atom `H1` is NaN at the reference geometry");
+    let e = error(&with("k * (pow(r1 - 1.8, 2) + pow(r2 - 1.8, 2))", "1e200 * 1e200 + 0 * r1"));
+    assert_eq!(e.message, "the potential is inf hartree (a constant)");
+    // Like terms whose summed coefficient overflows are left uncollected: no reference, so no
+    // check, and generation must not fail on an infinite constant.
+    generate_molecule(
+        "molecules/xy2.toml",
+        &with("k * (pow(r1 - 1.8, 2) + pow(r2 - 1.8, 2))", "1e308 * r1 + 1e308 * r1"),
+    )
+    .expect("generates; the value overflows only at run time");
+}
+
+/// Coordinates carry valid ranges: declared ones are checked and emitted in atomic units, the
+/// defaults keep lengths positive, and a reference outside the range is an error.
+#[test]
+fn coordinate_ranges() {
+    let angle = |range: &str| with("unit = \"rad\"", &format!("unit = \"deg\"\nreference = 100\nrange = {range}"));
+    let m = generate_molecule("molecules/xy2.toml", &angle("[0, 180]")).expect("valid");
+    assert!(m.source.contains("range: (0.0, 3.141592653589793)"), "{}", m.source);
+    assert!(m.source.contains("range: (0.0, f64::INFINITY)"), "lengths default to positive");
+    let m = generate_molecule("molecules/xy2.toml", &angle("[-inf, \"inf\"]")).expect("valid");
+    assert!(m.source.contains("range: (f64::NEG_INFINITY, f64::INFINITY)"));
+    let m = generate_molecule("molecules/xy2.toml", &angle("[\"-pi\", \"180 * 2\"]")).expect("valid");
+    assert!(m.source.contains("range: (-0.05483113556160755, 6.283185307179586)"), "{}", m.source);
+
+    let e = error(&angle("[0, 90]"));
+    assert_error(
+        &e,
+        15,
+        13,
+        "reference value 100.0 of `alpha` is outside its range [0.0, 90.0] deg",
+        "range = [low, high]",
+    );
+    let e = error(&angle("[90, 0]"));
+    assert_eq!(e.message, "the range of `alpha` is empty: 90.0 is not below 0.0");
+    let e = error(&angle("[0, 90, 180]"));
+    assert_eq!(e.message, "the range of `alpha` has 3 values instead of 2");
+    let e = error(&angle("[0, nan]"));
+    assert_eq!(e.message, "invalid bound NaN in the range of `alpha`");
+    let e = error(&angle("[0, \"pi(\"]"));
+    assert!(e.message.starts_with("syntax error in a range"), "{e}");
+    // The default range of a length: positive.
+    let e = error(&with("name = \"r2\"\nunit = \"bohr\"", "name = \"r2\"\nunit = \"bohr\"\nreference = -2.05"));
+    assert_eq!(e.message, "reference value -2.05 of `r2` is outside its range [0.0, inf] bohr");
+}

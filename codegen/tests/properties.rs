@@ -5,7 +5,7 @@
 //! The emitted code is checked by parsing it back with syn and interpreting it, so the check
 //! covers what is actually printed (precedence, parentheses, temporaries, `sin_cos`).
 
-use std::collections::HashMap;
+mod common;
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
@@ -211,7 +211,7 @@ proptest! {
         let idents = vec![quote::format_ident!("x"), quote::format_ident!("y")];
         let (tokens, stats) = emit::emit_function(&g, &spec, &idents);
         let f: syn::ItemFn = syn::parse2(tokens).expect("emitted code parses");
-        let out = interpret(&f, &p, roots.len());
+        let (out, _) = common::interpret(&f.block, &p, roots.len());
         for i in 0..roots.len() {
             // Equal as numbers: a pruned structural zero is stored as +0.0 even where the graph
             // would give −0.0.
@@ -221,103 +221,4 @@ proptest! {
         }
         prop_assert!(stats.ops_emitted as f64 <= stats.ops_tree.max(stats.ops_per_output as f64) + 0.5);
     }
-}
-
-/// Interprets an emitted function `fn f(q: &[f64], out: &mut [f64])`.
-fn interpret(f: &syn::ItemFn, q: &[f64; 2], n_out: usize) -> Vec<f64> {
-    let mut env: HashMap<String, Value> = HashMap::new();
-    let mut out = vec![f64::NAN; n_out];
-    for stmt in &f.block.stmts {
-        match stmt {
-            syn::Stmt::Local(local) => {
-                let value = eval(&local.init.as_ref().expect("let has a value").expr, &env, q);
-                match (&local.pat, value) {
-                    (syn::Pat::Ident(id), v) => {
-                        env.insert(id.ident.to_string(), v);
-                    }
-                    (syn::Pat::Tuple(t), Value::Pair(s, c)) => {
-                        let names: Vec<String> = t
-                            .elems
-                            .iter()
-                            .map(|p| match p {
-                                syn::Pat::Ident(id) => id.ident.to_string(),
-                                _ => panic!("unexpected pattern"),
-                            })
-                            .collect();
-                        env.insert(names[0].clone(), Value::Num(s));
-                        env.insert(names[1].clone(), Value::Num(c));
-                    }
-                    _ => panic!("unexpected let"),
-                }
-            }
-            syn::Stmt::Expr(syn::Expr::Assign(a), _) => {
-                let syn::Expr::Index(ix) = &*a.left else { panic!("stores index into out") };
-                let i = literal_index(&ix.index);
-                out[i] = eval(&a.right, &env, q).num();
-            }
-            syn::Stmt::Expr(syn::Expr::MethodCall(m), _) if m.method == "fill" => {
-                out.iter_mut().for_each(|v| *v = 0.0);
-            }
-            other => panic!("unexpected statement {}", quote!(#other)),
-        }
-    }
-    out
-}
-
-#[derive(Clone, Copy, Debug)]
-enum Value {
-    Num(f64),
-    Pair(f64, f64),
-}
-
-impl Value {
-    fn num(self) -> f64 {
-        match self {
-            Value::Num(x) => x,
-            Value::Pair(..) => panic!("a pair where a number was expected"),
-        }
-    }
-}
-
-fn literal_index(e: &syn::Expr) -> usize {
-    match e {
-        syn::Expr::Lit(syn::ExprLit { lit: syn::Lit::Int(i), .. }) => i.base10_parse().expect("index"),
-        _ => panic!("non-literal index"),
-    }
-}
-
-fn eval(e: &syn::Expr, env: &HashMap<String, Value>, q: &[f64; 2]) -> Value {
-    let num = |e: &syn::Expr| eval(e, env, q).num();
-    Value::Num(match e {
-        syn::Expr::Lit(l) => match &l.lit {
-            syn::Lit::Float(f) => f.base10_parse().expect("float"),
-            syn::Lit::Int(i) => i.base10_parse::<u64>().expect("int") as f64,
-            _ => panic!("unexpected literal"),
-        },
-        syn::Expr::Path(p) => return env[&p.path.get_ident().expect("plain name").to_string()],
-        syn::Expr::Paren(p) => num(&p.expr),
-        syn::Expr::Unary(u) => -num(&u.expr),
-        syn::Expr::Index(ix) => q[literal_index(&ix.index)],
-        syn::Expr::Binary(b) => {
-            let (l, r) = (num(&b.left), num(&b.right));
-            match b.op {
-                syn::BinOp::Add(_) => l + r,
-                syn::BinOp::Sub(_) => l - r,
-                syn::BinOp::Mul(_) => l * r,
-                syn::BinOp::Div(_) => l / r,
-                _ => panic!("unexpected operator"),
-            }
-        }
-        syn::Expr::MethodCall(m) => {
-            let x = num(&m.receiver);
-            let name = m.method.to_string();
-            match name.as_str() {
-                "sin_cos" => return Value::Pair(x.sin(), x.cos()),
-                "powf" => x.powf(num(&m.args[0])),
-                "atan2" => x.atan2(num(&m.args[0])),
-                _ => Func::from_name(&name).expect("a known function").apply(x),
-            }
-        }
-        other => panic!("unexpected expression {}", quote!(#other)),
-    })
 }

@@ -45,6 +45,17 @@ pub struct Coordinate {
     pub unit: CoordinateUnit,
     /// The reference geometry from the definition file, in atomic units, if it gave one.
     pub reference: Option<f64>,
+    /// The valid values, a closed interval `(low, high)` in atomic units: the definition's
+    /// `range`, else `(0, ∞)` for lengths and `(−∞, ∞)` for angles. Bond angles declare
+    /// `(0, π)`; outside its range a coordinate describes a mirror image or no geometry at all.
+    pub range: (f64, f64),
+}
+
+impl Coordinate {
+    /// Whether `value` (atomic units) lies in [`Coordinate::range`], ends included; NaN does not.
+    pub fn contains(&self, value: f64) -> bool {
+        self.range.0 <= value && value <= self.range.1
+    }
 }
 
 /// The kinetic matrices `a` (n × n), `A` (3 × n) and `I` (3 × 3) of the seed's eq. (3), or one
@@ -145,6 +156,15 @@ pub trait Molecule<const N: usize, const NA: usize> {
         Some(q)
     }
 
+    /// `Ok` if every coordinate of `q` lies in its [`Coordinate::range`], else the index of the
+    /// first that does not (NaN counts as outside).
+    fn in_range(&self, q: &SVector<f64, N>) -> Result<(), usize> {
+        match self.coordinates().iter().zip(q.iter()).position(|(c, &x)| !c.contains(x)) {
+            Some(k) => Err(k),
+            None => Ok(()),
+        }
+    }
+
     /// The atomic masses in electron masses, in atom order.
     fn masses(&self) -> [f64; NA] {
         self.atoms().map(|a| a.mass)
@@ -163,4 +183,29 @@ pub trait MoleculeVisitor {
     fn visit<M, const N: usize, const NA: usize>(self, molecule: M) -> Self::Output
     where
         M: Molecule<N, NA> + Copy + Send + Sync + 'static;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::units::{AngleUnit, LengthUnit};
+
+    #[test]
+    fn a_range_is_closed_and_rejects_nan() {
+        let angle = Coordinate {
+            name: "alpha",
+            unit: CoordinateUnit::Angle(AngleUnit::Deg),
+            reference: None,
+            range: (0.0, core::f64::consts::PI),
+        };
+        assert!(angle.contains(0.0) && angle.contains(1.0) && angle.contains(core::f64::consts::PI));
+        assert!(!angle.contains(-1e-12) && !angle.contains(3.2) && !angle.contains(f64::NAN));
+        let length = Coordinate {
+            name: "r",
+            unit: CoordinateUnit::Length(LengthUnit::Bohr),
+            reference: None,
+            range: (0.0, f64::INFINITY),
+        };
+        assert!(length.contains(1e300) && !length.contains(-2.05));
+    }
 }

@@ -219,9 +219,14 @@ impl Molecule<3, 3> for Water {
     fn coordinates(&self) -> [Coordinate; 3] {
         let bohr = CoordinateUnit::Length(LengthUnit::Bohr);
         [
-            Coordinate { name: "r1", unit: bohr, reference: Some(Self::RE) },
-            Coordinate { name: "r2", unit: bohr, reference: Some(Self::RE) },
-            Coordinate { name: "alpha", unit: CoordinateUnit::Angle(AngleUnit::Rad), reference: Some(Self::ALPHA_E) },
+            Coordinate { name: "r1", unit: bohr, reference: Some(Self::RE), range: (0.0, f64::INFINITY) },
+            Coordinate { name: "r2", unit: bohr, reference: Some(Self::RE), range: (0.0, f64::INFINITY) },
+            Coordinate {
+                name: "alpha",
+                unit: CoordinateUnit::Angle(AngleUnit::Rad),
+                reference: Some(Self::ALPHA_E),
+                range: (0.0, std::f64::consts::PI),
+            },
         ]
     }
 

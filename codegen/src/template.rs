@@ -1,0 +1,373 @@
+//! What a generated molecule file contains: the `Molecule` impl around the emitted functions,
+//! the atom and coordinate tables, and the `molecules.rs` registry that declares every molecule.
+//!
+//! The pipeline before this (definition → parse → expr → diff → kinetic) builds the expressions
+//! and [`crate::emit`] turns each into a function body; this module decides which functions
+//! exist, with which signatures, and what surrounds them.
+
+use proc_macro2::{Ident, Span, TokenStream};
+use quote::quote;
+
+use crate::GeneratedMolecule;
+use crate::definition::Definition;
+use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_lines, index};
+use crate::expr;
+use crate::kinetic::{KineticExprs, KineticSet, OMEGA_NAMES};
+use crate::names::{self, type_name};
+use crate::units::{AngleUnit, CoordinateUnit, DALTON_IN_ELECTRON_MASSES, LengthUnit};
+
+/// Local variable names for the graph's variables, in variable order: the coordinates, ω, then
+/// the velocities, mangled so that no user name can clash with anything (see [`crate::names`]).
+fn var_idents(def: &Definition) -> Vec<Ident> {
+    let coordinate = |(k, c): (usize, &crate::definition::CoordinateDef)| names::coordinate_ident(k, &c.name);
+    let velocity = |(k, c): (usize, &crate::definition::CoordinateDef)| names::velocity_ident(k, &c.name);
+    let mut idents: Vec<Ident> =
+        def.coordinates.iter().enumerate().map(coordinate).map(|n| Ident::new(&n, Span::call_site())).collect();
+    idents.extend(OMEGA_NAMES.iter().map(|n| Ident::new(n, Span::call_site())));
+    idents.extend(def.coordinates.iter().enumerate().map(velocity).map(|n| Ident::new(&n, Span::call_site())));
+    idents
+}
+
+/// The generated file of molecule `name` in `OUT_DIR`; the prefix keeps it apart from the
+/// registry `molecules.rs` whatever the molecule is called.
+pub fn file_name(name: &str) -> String {
+    format!("molecule_{name}.rs")
+}
+
+fn float(x: f64) -> TokenStream {
+    let lit: proc_macro2::Literal = format!("{:?}", x.abs()).parse().expect("finite");
+    if x.is_sign_negative() { quote!(-#lit) } else { quote!(#lit) }
+}
+
+/// A range bound: a finite number, or ±infinity by name.
+fn bound(x: f64) -> TokenStream {
+    match x {
+        f64::INFINITY => quote!(f64::INFINITY),
+        f64::NEG_INFINITY => quote!(f64::NEG_INFINITY),
+        x => float(x),
+    }
+}
+
+fn unit_tokens(u: CoordinateUnit) -> TokenStream {
+    match u {
+        CoordinateUnit::Length(LengthUnit::Bohr) => quote!(CoordinateUnit::Length(LengthUnit::Bohr)),
+        CoordinateUnit::Length(LengthUnit::Angstrom) => quote!(CoordinateUnit::Length(LengthUnit::Angstrom)),
+        CoordinateUnit::Angle(AngleUnit::Rad) => quote!(CoordinateUnit::Angle(AngleUnit::Rad)),
+        CoordinateUnit::Angle(AngleUnit::Deg) => quote!(CoordinateUnit::Angle(AngleUnit::Deg)),
+    }
+}
+
+/// `base[i]`, or `[i]` for an empty base.
+fn ix(base: TokenStream, i: usize) -> TokenStream {
+    let i = index(i);
+    quote!(#base[#i])
+}
+
+/// `[(i, j)]`, a matrix index suffix.
+fn pair(i: usize, j: usize) -> TokenStream {
+    let (i, j) = (index(i), index(j));
+    quote!([(#i, #j)])
+}
+
+fn kinetic_groups(target: &TokenStream, set: &KineticSet) -> Vec<OutputGroup> {
+    let n = set.a.len();
+    let mut a = Vec::new();
+    for (j, row) in set.a.iter().enumerate() {
+        for (k, &e) in row.iter().enumerate() {
+            a.push((pair(j, k), e));
+        }
+    }
+    let mut coriolis = Vec::new();
+    for (axis, row) in set.coriolis.iter().enumerate() {
+        for (k, &e) in row.iter().enumerate().take(n) {
+            coriolis.push((pair(axis, k), e));
+        }
+    }
+    let mut inertia = Vec::new();
+    for (p, row) in set.inertia.iter().enumerate() {
+        for (q, &e) in row.iter().enumerate() {
+            inertia.push((pair(p, q), e));
+        }
+    }
+    vec![
+        OutputGroup { target: quote!(#target.a), entries: a },
+        OutputGroup { target: quote!(#target.coriolis), entries: coriolis },
+        OutputGroup { target: quote!(#target.inertia), entries: inertia },
+    ]
+}
+
+/// The items of one generated molecule file, and the statistics of its functions.
+pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<FunctionStats>) {
+    let (n, na) = (index(e.n), index(def.atoms.len()));
+    let ty = Ident::new(&type_name(&def.name), Span::call_site());
+    let idents = var_idents(def);
+    let nc = e.n;
+    let q_inputs: Vec<(u32, TokenStream)> = (0..nc).map(|k| (k as u32, ix(quote!(q), k))).collect();
+    let mut velocity_inputs = q_inputs.clone();
+    velocity_inputs.extend((0..3).map(|a| ((nc + a) as u32, ix(quote!(omega), a))));
+    velocity_inputs.extend((0..nc).map(|k| ((nc + 3 + k) as u32, ix(quote!(qdot), k))));
+
+    let positions_group = |target: TokenStream, rows: &[[expr::ExprId; 3]]| {
+        let mut entries = Vec::new();
+        for (atom, r) in rows.iter().enumerate() {
+            for (axis, &c) in r.iter().enumerate() {
+                entries.push((pair(axis, atom), c));
+            }
+        }
+        OutputGroup { target, entries }
+    };
+
+    let q_ty = quote!(&SVector<f64, #n>);
+    let specs = vec![
+        FunctionSpec {
+            name: "positions",
+            doc: "Body-frame positions R_i(q) in bohr (column i is atom i), centre of mass at the origin.".into(),
+            signature: quote!(fn positions(&self, q: #q_ty, r: &mut SMatrix<f64, 3, #na>)),
+            inputs: q_inputs.clone(),
+            groups: vec![positions_group(quote!(r), &e.positions)],
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        },
+        FunctionSpec {
+            name: "positions_jacobian",
+            doc: "`dr[k]` = ∂R/∂q_k, bohr per unit of q_k.".into(),
+            signature: quote!(fn positions_jacobian(&self, q: #q_ty, dr: &mut [SMatrix<f64, 3, #na>; #n])),
+            inputs: q_inputs.clone(),
+            groups: e.jacobian.iter().enumerate().map(|(k, rows)| positions_group(ix(quote!(dr), k), rows)).collect(),
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        },
+        FunctionSpec {
+            name: "kinetic",
+            doc: "The kinetic matrices a, A (coriolis) and I at q.".into(),
+            signature: quote!(fn kinetic(&self, q: #q_ty, k: &mut KineticMatrices<#n>)),
+            inputs: q_inputs.clone(),
+            groups: kinetic_groups(&quote!(k), &e.kinetic),
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        },
+        FunctionSpec {
+            name: "kinetic_jacobian",
+            doc: "`dk[l]` holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
+            signature: quote!(fn kinetic_jacobian(&self, q: #q_ty, dk: &mut [KineticMatrices<#n>; #n])),
+            inputs: q_inputs.clone(),
+            groups: e
+                .kinetic_jacobian
+                .iter()
+                .enumerate()
+                .flat_map(|(l, set)| kinetic_groups(&ix(quote!(dk), l), set))
+                .collect(),
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        },
+        FunctionSpec {
+            name: "kinetic_energy_gradient",
+            doc: "∂T/∂q at fixed body-frame angular velocity and q̇; returns T.".into(),
+            signature: quote!(
+                fn kinetic_energy_gradient(
+                    &self,
+                    q: #q_ty,
+                    omega: &Vector3<f64>,
+                    qdot: #q_ty,
+                    grad: &mut SVector<f64, #n>,
+                ) -> f64
+            ),
+            inputs: velocity_inputs.clone(),
+            groups: vec![OutputGroup {
+                target: quote!(grad),
+                entries: e.kinetic_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
+            }],
+            ret: Some(e.kinetic_energy),
+            ret_wrap: None,
+            barrier: None,
+        },
+        FunctionSpec {
+            name: "kinetic_and_gradient",
+            doc: "The kinetic matrices into `k`, then (ω, q̇) from `velocities(k)`, then ∂T/∂q at those\n\
+                  velocities into `grad`; both halves share every position term. Returns (ω, q̇, T)."
+                .into(),
+            signature: quote!(
+                fn kinetic_and_gradient<E>(
+                    &self,
+                    q: #q_ty,
+                    k: &mut KineticMatrices<#n>,
+                    velocities: impl FnOnce(&KineticMatrices<#n>) -> Result<(Vector3<f64>, SVector<f64, #n>), E>,
+                    grad: &mut SVector<f64, #n>,
+                ) -> Result<(Vector3<f64>, SVector<f64, #n>, f64), E>
+            ),
+            inputs: velocity_inputs.clone(),
+            groups: {
+                let mut groups = kinetic_groups(&quote!(k), &e.kinetic);
+                groups.push(OutputGroup {
+                    target: quote!(grad),
+                    entries: e.kinetic_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
+                });
+                groups
+            },
+            ret: Some(e.kinetic_energy),
+            ret_wrap: Some(|t| quote!(Ok((omega, qdot, #t)))),
+            barrier: Some(Barrier {
+                groups_before: 3,
+                statement: quote!(let (omega, qdot) = velocities(k)?;),
+                late_vars: (nc..2 * nc + 3).map(|v| v as u32).collect(),
+            }),
+        },
+        FunctionSpec {
+            name: "potential",
+            doc: "The potential energy U(q) in hartree.".into(),
+            signature: quote!(fn potential(&self, q: #q_ty) -> f64),
+            inputs: q_inputs.clone(),
+            groups: vec![],
+            ret: Some(e.potential),
+            ret_wrap: None,
+            barrier: None,
+        },
+        FunctionSpec {
+            name: "potential_gradient",
+            doc: "∂U/∂q in hartree per unit of q; returns U.".into(),
+            signature: quote!(fn potential_gradient(&self, q: #q_ty, grad: &mut SVector<f64, #n>) -> f64),
+            inputs: q_inputs,
+            groups: vec![OutputGroup {
+                target: quote!(grad),
+                entries: e.potential_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
+            }],
+            ret: Some(e.potential),
+            ret_wrap: None,
+            barrier: None,
+        },
+    ];
+    let mut functions = Vec::new();
+    let mut stats = Vec::new();
+    for spec in &specs {
+        let (tokens, s) = emit::emit_function(&def.graph, spec, &idents);
+        functions.push(tokens);
+        stats.push(s);
+    }
+
+    let atoms = def.atoms.iter().map(|a| {
+        let (label, element) = (&a.label, &a.element);
+        let (mass_da, mass) = (float(a.mass_da), float(a.mass_da * DALTON_IN_ELECTRON_MASSES));
+        quote!(Atom { label: #label, element: #element, mass_da: #mass_da, mass: #mass })
+    });
+    let coordinates = def.coordinates.iter().map(|c| {
+        let name = &c.name;
+        let unit = unit_tokens(c.unit);
+        let reference = match c.reference {
+            Some(r) => {
+                let r = float(r * c.unit.in_atomic_units());
+                quote!(Some(#r))
+            }
+            None => quote!(None),
+        };
+        let (low, high) = (bound(c.range.0 * c.unit.in_atomic_units()), bound(c.range.1 * c.unit.in_atomic_units()));
+        quote!(Coordinate { name: #name, unit: #unit, reference: #reference, range: (#low, #high) })
+    });
+    let name = &def.name;
+    let path = &def.path;
+    let labels: Vec<&str> = def.atoms.iter().map(|a| a.label.as_str()).collect();
+    let coord_names: Vec<&str> = def.coordinates.iter().map(|c| c.name.as_str()).collect();
+    let doc = if def.description.is_empty() { def.name.clone() } else { def.description.clone() };
+    let doc = format!(
+        "{doc}\n\nGenerated from `{path}`: {na} atoms ({}), {nc} internal coordinates ({}).",
+        labels.join(", "),
+        if coord_names.is_empty() { "rigid".to_owned() } else { coord_names.join(", ") },
+        na = def.atoms.len()
+    );
+    let doc = doc_lines(&doc);
+    // Import only the unit types the coordinate table names, so no import is unused.
+    let mut unit_names: Vec<&str> = Vec::new();
+    for c in &def.coordinates {
+        unit_names.push("CoordinateUnit");
+        unit_names.push(match c.unit {
+            CoordinateUnit::Length(_) => "LengthUnit",
+            CoordinateUnit::Angle(_) => "AngleUnit",
+        });
+    }
+    unit_names.sort_unstable();
+    unit_names.dedup();
+    let unit_idents = unit_names.iter().map(|n| Ident::new(n, Span::call_site()));
+    let unit_imports =
+        if unit_names.is_empty() { quote!() } else { quote!(use ::rovib_runtime::units::{#(#unit_idents),*};) };
+    let items = quote! {
+        use ::rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
+        #unit_imports
+        use ::rovib_runtime::{Atom, Coordinate, KineticMatrices, Molecule};
+
+        #doc
+        #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+        pub struct #ty;
+
+        impl #ty {
+            /// Number of internal coordinates.
+            pub const N: usize = #n;
+            /// Number of atoms.
+            pub const NA: usize = #na;
+        }
+
+        impl Molecule<#n, #na> for #ty {
+            fn name(&self) -> &'static str {
+                #name
+            }
+
+            fn source(&self) -> &'static str {
+                #path
+            }
+
+            fn atoms(&self) -> [Atom; #na] {
+                [#(#atoms),*]
+            }
+
+            fn coordinates(&self) -> [Coordinate; #n] {
+                [#(#coordinates),*]
+            }
+
+            #(#functions)*
+        }
+    };
+    (items, stats)
+}
+
+/// The generated `molecules.rs`: one module per molecule, their names, and a dispatcher from a
+/// name to the monomorphised code (`visit`).
+pub(crate) fn registry(molecules: &[GeneratedMolecule], display_dir: &str) -> String {
+    let modules = molecules.iter().map(|m| {
+        let module = Ident::new(&m.name, Span::call_site());
+        let ty = Ident::new(&m.type_name, Span::call_site());
+        let file = format!("/{}", file_name(&m.name));
+        let doc = format!(" Generated from `{display_dir}/{}.toml`.", m.name);
+        quote! {
+            #[doc = #doc]
+            pub mod #module {
+                include!(concat!(env!("OUT_DIR"), #file));
+            }
+            pub use #module::#ty;
+        }
+    });
+    let names: Vec<&str> = molecules.iter().map(|m| m.name.as_str()).collect();
+    let count = names.len();
+    let arms = molecules.iter().map(|m| {
+        let name = &m.name;
+        let ty = Ident::new(&m.type_name, Span::call_site());
+        quote!(#name => Some(visitor.visit(#ty)),)
+    });
+    let items = quote! {
+        #(#modules)*
+
+        /// The names of all compiled-in molecules, sorted.
+        pub const NAMES: [&str; #count] = [#(#names),*];
+
+        /// Calls `visitor` with the molecule called `name`, or returns `None` if there is none.
+        pub fn visit<V: ::rovib_runtime::MoleculeVisitor>(name: &str, visitor: V) -> Option<V::Output> {
+            match name {
+                #(#arms)*
+                _ => None,
+            }
+        }
+    };
+    let header = format!("// @generated from {display_dir}/*.toml by rovib-codegen; do not edit.");
+    emit::format_file(&header, items).expect("the registry is valid Rust")
+}
