@@ -1,4 +1,4 @@
-//! The `rovib` commands: `list`, `eval`, `run`, `bench`.
+//! The `rovib` commands: `list`, `eval`, `run`, `ensemble`, `bench`.
 //!
 //! Each command is generic over the molecule: [`crate::molecules::visit`] calls it with the
 //! generated type, so it runs on fixed-size, monomorphised code.
@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 use crate::runtime::diagnostic::FileError;
 
 pub mod bench;
+pub mod ensemble;
 mod eval;
 mod list;
 pub mod run;
@@ -47,6 +48,21 @@ pub enum Command {
         /// Output directory [default: out/SCENE_NAME].
         #[arg(long)]
         out: Option<PathBuf>,
+        /// No progress bar and no report on stdout.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Run an ensemble: sample initial states, integrate every trajectory on every core, write
+    /// ensemble.csv, histograms.csv, correlations.csv, summary.json and SVG plots.
+    Ensemble {
+        /// A scene with an [ensemble] table (see the README's "Ensembles").
+        scene: PathBuf,
+        /// Output directory [default: out/SCENE_NAME].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads [default: the scene's `threads`, else every core].
+        #[arg(long)]
+        threads: Option<usize>,
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
@@ -113,6 +129,10 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             let json = eval::eval(&molecule, state.as_deref())?;
             say(&format!("{json}\n"))
         }
+        Command::Run { scene, out, quiet } if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) => {
+            run_ensemble(&scene, out.as_deref(), None, quiet)
+        }
+        Command::Ensemble { scene, out, threads, quiet } => run_ensemble(&scene, out.as_deref(), threads, quiet),
         Command::Run { scene, out, quiet } => {
             let report = run::run(&scene, out.as_deref(), quiet)?;
             if !quiet {
@@ -146,6 +166,20 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             say(&text)
         }
     }
+}
+
+/// `rovib ensemble` (and `rovib run` on a scene with `[ensemble]`).
+fn run_ensemble(
+    scene: &std::path::Path,
+    out: Option<&std::path::Path>,
+    threads: Option<usize>,
+    quiet: bool,
+) -> Result<(), CliError> {
+    let report = ensemble::ensemble(scene, out, threads, quiet)?;
+    if !quiet {
+        say(&ensemble::describe(&report))?;
+    }
+    Ok(())
 }
 
 /// Writes to stdout. A closed pipe (`rovib list | head -1`) ends the output quietly instead of
