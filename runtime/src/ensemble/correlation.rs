@@ -72,7 +72,12 @@ impl CorrelationWorkspace {
 
     fn correlate(&mut self, x: &[f64], shift: f64, out: &mut [f64]) {
         let n = self.n;
-        assert!(x.len() == n && out.len() == n, "series of length {} and {} for a workspace of {n}", x.len(), out.len());
+        assert!(
+            x.len() == n && out.len() == n,
+            "series of length {} and {} for a workspace of {n}",
+            x.len(),
+            out.len()
+        );
         for (b, &v) in self.buffer.iter_mut().zip(x) {
             *b = Complex::new(v - shift, 0.0);
         }
@@ -115,7 +120,12 @@ mod tests {
             let direct = autocorrelation_direct(&x);
             let scale = direct[0].abs();
             for tau in 0..n {
-                assert!((c[tau] - direct[tau]).abs() <= 1e-13 * scale, "n = {n}, tau = {tau}: {} vs {}", c[tau], direct[tau]);
+                assert!(
+                    (c[tau] - direct[tau]).abs() <= 1e-13 * scale,
+                    "n = {n}, tau = {tau}: {} vs {}",
+                    c[tau],
+                    direct[tau]
+                );
             }
         }
     }

@@ -20,7 +20,9 @@ pub struct Histogram {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum HistogramError {
     /// No bins, or a range that is empty or not finite.
-    #[error("a histogram needs at least one bin and a finite range with low < high (got {bins} bins over [{low}, {high}])")]
+    #[error(
+        "a histogram needs at least one bin and a finite range with low < high (got {bins} bins over [{low}, {high}])"
+    )]
     Shape {
         /// Bins asked for.
         bins: usize,
@@ -41,7 +43,14 @@ impl Histogram {
             return Err(HistogramError::Shape { bins, low, high });
         }
         // The ends are stored as bits so that the type can be `Eq` (shapes compare exactly).
-        Ok(Self { low: low.to_bits(), high: high.to_bits(), counts: vec![0; bins], below: 0, above: 0, not_a_number: 0 })
+        Ok(Self {
+            low: low.to_bits(),
+            high: high.to_bits(),
+            counts: vec![0; bins],
+            below: 0,
+            above: 0,
+            not_a_number: 0,
+        })
     }
 
     /// The lower end of the range.
