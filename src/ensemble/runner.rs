@@ -120,8 +120,8 @@ impl Accumulators {
 pub struct Failure {
     /// Trajectory index.
     pub index: u64,
-    /// Category: "sampler", "invalid initial state", "ill-conditioned metric", "singular
-    /// metric", "non-finite", "energy guard", "too many steps", "step size too small",
+    /// Category: "sampler", "invalid initial state" (not finite, or not representable by the
+    /// system), "ill-conditioned metric", "singular metric", "non-finite", "energy guard", "too many steps", "step size too small",
     /// "not converged", "invalid integrator settings", "output".
     pub reason: String,
     /// When it happened, a.u. (none for the sampler).
@@ -387,6 +387,14 @@ where
                 continue;
             }
         };
+        let finite = state.q.iter().chain(state.p.iter()).chain(state.j.iter()).all(|v| v.is_finite())
+            && state.orientation.coords.iter().all(|v| v.is_finite());
+        if !finite {
+            let detail = format!("the drawn state is not finite: {state:?}");
+            outcome.fail(failure("invalid initial state", Some(0.0), detail), progress);
+            progress.done();
+            continue;
+        }
         // The sampled state is the template: frozen coordinates stay at its values.
         let mut system = ReducedSystem::from_body(plan.molecule, plan.reduction, &state).with_min_pivot(plan.min_pivot);
         if let Err(e) = system.reduce_body(&state, &mut y0) {
