@@ -20,9 +20,12 @@ use rovib::scene::{Scene, parse_scene};
 /// rad), p Gaussian (0.5 ħ/bohr, 0.5 ħ), J Gaussian (5 ħ per component), orientation uniform;
 /// drawn from trajectory `i`'s own stream. Chosen states can be replaced to provoke failures,
 /// and drawing one index can raise a stop flag (an interrupt at a known place).
+/// Changes a drawn state (to provoke a failure).
+type Edit = fn(&mut BodyState<3>);
+
 struct Gaussian {
     seed: u64,
-    replace: Vec<(u64, fn(&mut BodyState<3>))>,
+    replace: Vec<(u64, Edit)>,
     stop_at: Option<(u64, Arc<AtomicBool>)>,
     refuse: Option<u64>,
 }

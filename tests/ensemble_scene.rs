@@ -78,7 +78,8 @@ fn energy_below_the_minimum() {
 
 #[test]
 fn missing_seed_takes_the_documented_default() {
-    let text = format!("molecule = \"h2o\"\n[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\n{RUN}");
+    let text =
+        format!("molecule = \"h2o\"\n[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\n{RUN}");
     let e = parse_ensemble(&parse_scene("ok.toml", &text).unwrap()).unwrap();
     assert_eq!((e.seed, e.seed_given, DEFAULT_SEED), (0, false, 0));
     let text = text.replace("[ensemble]\n", "[ensemble]\nseed = 42\n");
@@ -215,7 +216,8 @@ fn a_bad_number_in_the_states_file_is_located_in_that_file() {
     let dir = std::env::temp_dir().join(format!("rovib-ensemble-states-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("states.csv"), "r1,r2,alpha\n1.8,1.8,1.82\n1.8,oops,1.82\n").unwrap();
-    let text = format!("molecule = \"h2o\"\n[ensemble]\ntrajectories = 2\nmethod = \"file\"\nfile = \"states.csv\"\n{RUN}");
+    let text =
+        format!("molecule = \"h2o\"\n[ensemble]\ntrajectories = 2\nmethod = \"file\"\nfile = \"states.csv\"\n{RUN}");
     let path = dir.join("scene.toml");
     std::fs::write(&path, text).unwrap();
     let scene = rovib::ensemble::load_scene(&path).unwrap();

@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 use crate::runtime::diagnostic::FileError;
 
 pub mod bench;
+pub mod bench_ensemble;
 pub mod ensemble;
 mod eval;
 mod list;
@@ -78,6 +79,13 @@ pub enum Command {
         /// Fewer tolerances and steps (a smoke test of the diagram).
         #[arg(long)]
         quick: bool,
+        /// Ensemble throughput instead (1 and 2 threads, with and without statistics; a scene
+        /// with [initial] and [ensemble], e.g. scenes/h2o_ensemble_bench.toml).
+        #[arg(long)]
+        ensemble: bool,
+        /// With --ensemble: the number of trajectories [default: the scene's].
+        #[arg(long, requires = "ensemble")]
+        trajectories: Option<u64>,
     },
 }
 
@@ -153,7 +161,15 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             }
             Ok(())
         }
-        Command::Bench { scene, out, quick } => {
+        Command::Bench { scene, out, ensemble: true, trajectories, .. } => {
+            let report = bench_ensemble::bench(&scene, out.as_deref(), trajectories)?;
+            let mut text = report.table.clone();
+            for f in &report.files {
+                text.push_str(&format!("wrote {}\n", f.display()));
+            }
+            say(&text)
+        }
+        Command::Bench { scene, out, quick, .. } => {
             let report = bench::bench(&scene, out.as_deref(), quick)?;
             let mut text = format!(
                 "{} runs; reference final-state error ~{:.1e} bohr\n",
