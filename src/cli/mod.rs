@@ -195,6 +195,15 @@ fn run_ensemble(
     if !quiet {
         say(&ensemble::describe(&report))?;
     }
+    if report.status == crate::ensemble::Status::Interrupted {
+        let dir = report.files.first().and_then(|f| f.parent()).map_or(String::new(), |d| d.display().to_string());
+        return Err(CliError::Message(format!(
+            "interrupted: {} of {} trajectories completed ({} failed); consistent outputs for them are in {dir}",
+            report.outcome.completed,
+            report.requested,
+            report.outcome.failed_count()
+        )));
+    }
     Ok(())
 }
 
