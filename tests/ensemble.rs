@@ -338,3 +338,62 @@ fn a_states_file_starts_trajectory_i_from_row_i_and_kept_trajectories_are_writte
     }
     assert!(!dir.join("out/trajectories/1").exists());
 }
+
+/// The unit of work an MPI layer would shard: blocks of indices run apart, shipped as JSON and
+/// merged, in either order, give the statistics of one pass over all the trajectories.
+#[test]
+fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
+    use std::sync::atomic::AtomicU64;
+
+    use rovib::ensemble::output_times;
+    use rovib::ensemble::runner::{Outcome, Plan, Progress, run_block};
+    use rovib::ensemble::scene::parse_ensemble;
+
+    let s = scene(120, STATISTICS, DOP853, 1000.0);
+    let ensemble = parse_ensemble(&s).unwrap();
+    let times = output_times(s.t_end, s.output_interval);
+    let bound = ensemble.bind(&H2o, &s, &times).unwrap();
+    let plan = Plan {
+        molecule: &H2o,
+        reduction: Reduction::none(),
+        method: s.method,
+        t_end: s.t_end,
+        interval: s.output_interval,
+        times,
+        quantities: bound.quantities,
+        n_means: bound.n_means,
+        histograms: bound.histograms,
+        correlations: bound.correlations,
+        max_energy_error: s.max_energy_error,
+        min_pivot: s.min_metric_pivot,
+        keep: None,
+        time_scale: 1.0,
+    };
+    let sampler = Gaussian::new(31);
+    let stop = AtomicBool::new(false);
+    let progress = Progress { bar: None, failures: AtomicU64::new(0) };
+    let blocks: Vec<Outcome> =
+        (0..4).map(|b| run_block(&plan, &sampler, b * 30..(b + 1) * 30, &stop, &progress)).collect();
+    let shipped: Vec<Outcome> =
+        blocks.iter().map(|b| serde_json::from_str(&serde_json::to_string(b).unwrap()).unwrap()).collect();
+    assert!(shipped == blocks, "the JSON round trip is exact");
+    let whole = run_block(&plan, &sampler, 0..120, &stop, &progress);
+    let mut f2 = Outcome::new(rovib::ensemble::runner::Accumulators::new(&plan));
+    shipped.iter().for_each(|b| f2.merge(b));
+    let mut b2 = Outcome::new(rovib::ensemble::runner::Accumulators::new(&plan));
+    shipped.iter().rev().for_each(|b| b2.merge(b));
+    for o in [&f2, &b2] {
+        assert_eq!(o.completed, 120);
+        assert_eq!(o.statistics.histograms, whole.statistics.histograms, "counts merge exactly");
+        for (a, b) in o.statistics.means.iter().zip(&whole.statistics.means) {
+            assert_eq!(a.count(), b.count());
+            assert!((a.mean() - b.mean()).abs() <= 1e-13 * b.mean().abs().max(1e-6), "{} vs {}", a.mean(), b.mean());
+            assert!((a.variance() - b.variance()).abs() <= 1e-9 * b.variance(), "{} vs {}", a.variance(), b.variance());
+        }
+        for (ca, cb) in o.statistics.correlations.iter().zip(&whole.statistics.correlations) {
+            for (a, b) in ca.iter().zip(cb) {
+                assert!((a.mean() - b.mean()).abs() <= 1e-12 * cb[0].mean(), "{} vs {}", a.mean(), b.mean());
+            }
+        }
+    }
+}

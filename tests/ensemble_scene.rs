@@ -163,6 +163,24 @@ fn histogram_with_no_bins() {
 }
 
 #[test]
+fn histogram_with_too_many_bins() {
+    let e = error(
+        "[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\n\
+         [statistics]\nhistograms = [{ quantity = \"r1\", bins = 1000000000000, range = [1.0, 2.0] }]",
+    );
+    check(&e, 7, "a histogram of 1000000000000 bins is more than the 1000000 allowed", "fewer bins");
+}
+
+#[test]
+fn too_many_output_times() {
+    let text = "molecule = \"h2o\"\n[ensemble]\ntrajectories = 1\nmethod = \"thermal\"\ntemperature = 1\n\
+                [run]\nend = 1e9\noutput_interval = 1\n";
+    let e = parse_ensemble(&parse_scene("bad.toml", text).unwrap()).unwrap_err();
+    assert!(e.message.contains("output times, more than the 1000000 an ensemble allows"), "{e}");
+    assert!(e.help.contains("raise run.output_interval"), "{e}");
+}
+
+#[test]
 fn histogram_time_outside_the_run() {
     let e = error(
         "[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\n\
@@ -233,4 +251,43 @@ fn a_bad_number_in_the_states_file_is_located_in_that_file() {
     };
     assert_eq!(e.line, 3, "{e}");
     assert!(e.message.contains("has 1 states but trajectories = 2") && e.help.contains("at most 1"), "{e}");
+}
+
+/// Every line of the shipped ensemble scenes deleted or its value replaced by something wrong:
+/// parsing and binding never panic, and every error is located in the file.
+#[test]
+fn mutated_ensemble_scenes_never_panic_and_every_error_is_located() {
+    use rovib::ensemble::output_times;
+    use rovib::molecules::H2o;
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");
+    let mut checked = 0;
+    for name in ["h2o_thermal.toml", "h2o_quasiclassical.toml", "h2o_ensemble_bench.toml"] {
+        let original = std::fs::read_to_string(format!("{dir}/{name}")).unwrap();
+        let lines: Vec<&str> = original.lines().collect();
+        for i in 0..lines.len() {
+            let Some((key, _)) = lines[i].split_once('=') else { continue };
+            for replacement in ["", "-1", "0", "1e400", "\"nonsense\"", "[]", "[1, 2, 3]", "{ x = 1 }", "1.5"] {
+                let mut mutated = lines.clone();
+                let line = if replacement.is_empty() { String::new() } else { format!("{key}= {replacement}") };
+                mutated[i] = &line;
+                let text = mutated.join("\n");
+                let scene = match parse_scene("bad.toml", &text) {
+                    Ok(s) => s,
+                    Err(e) => {
+                        assert!(!e.message.is_empty() && !e.help.is_empty(), "{e}");
+                        continue;
+                    }
+                };
+                let result = parse_ensemble(&scene)
+                    .and_then(|e| e.bind(&H2o, &scene, &output_times(scene.t_end, scene.output_interval)).map(|_| ()));
+                if let Err(e) = result {
+                    assert_eq!(e.path, "bad.toml");
+                    assert!(!e.message.is_empty() && !e.help.is_empty(), "{e}");
+                    assert!(e.line >= 1 || e.message.contains("[ensemble]") || e.message.contains("missing"), "{e}");
+                }
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 50, "{checked}");
 }

@@ -22,6 +22,13 @@ use crate::scene::Scene;
 /// The seed of an ensemble whose scene gives none.
 pub const DEFAULT_SEED: u64 = 0;
 
+/// The most bins a histogram may have.
+pub const MAX_BINS: usize = 1_000_000;
+
+/// The most output times an ensemble may have (each trajectory buffers its observations at
+/// every output time: 10⁶ times × a few quantities is tens of MB per thread).
+pub const MAX_OUTPUT_TIMES: usize = 1_000_000;
+
 /// The sampling methods, as spelt in scenes.
 pub const METHODS: [&str; 4] = ["thermal", "microcanonical", "normal-modes", "file"];
 
@@ -270,6 +277,14 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
     };
     let eh = energy_unit.in_hartree();
 
+    // Every trajectory keeps its observations at all output times until it ends.
+    let n_times = scene.t_end / scene.output_interval;
+    if n_times.is_nan() || n_times > MAX_OUTPUT_TIMES as f64 {
+        return Err(src.whole_file(
+            format!("run.end / run.output_interval = {n_times:.3e} output times, more than the {MAX_OUTPUT_TIMES} an ensemble allows"),
+            "raise run.output_interval (the statistics' time grid) or shorten run.end",
+        ));
+    }
     let method_name = e.method.get_ref().as_str();
     if !METHODS.contains(&method_name) {
         let help = match did_you_mean(method_name, METHODS) {
@@ -470,6 +485,13 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
             for h in &s.histograms {
                 let h = h.get_ref();
                 let bins = *h.bins.get_ref();
+                if bins > MAX_BINS as i64 {
+                    return Err(src.error(
+                        h.bins.span(),
+                        format!("a histogram of {bins} bins is more than the {MAX_BINS} allowed"),
+                        "use fewer bins",
+                    ));
+                }
                 if bins < 1 {
                     return Err(src.error(
                         h.bins.span(),
