@@ -56,7 +56,7 @@ pub enum Command {
     /// Run an ensemble: sample initial states, integrate every trajectory on every core, write
     /// ensemble.csv, histograms.csv, correlations.csv, summary.json and SVG plots.
     Ensemble {
-        /// A scene with an [ensemble] table (see the README's "Ensembles").
+        /// A scene with an `[ensemble]` table (see the README's "Ensembles").
         scene: PathBuf,
         /// Output directory [default: out/SCENE_NAME].
         #[arg(long)]
@@ -80,7 +80,7 @@ pub enum Command {
         #[arg(long)]
         quick: bool,
         /// Ensemble throughput instead (1 and 2 threads, with and without statistics; a scene
-        /// with [initial] and [ensemble], e.g. scenes/h2o_ensemble_bench.toml).
+        /// with `[initial]` and `[ensemble]`, e.g. scenes/h2o_ensemble_bench.toml).
         #[arg(long)]
         ensemble: bool,
         /// With --ensemble: the number of trajectories [default: the scene's].
