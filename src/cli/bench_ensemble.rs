@@ -132,9 +132,9 @@ impl MoleculeVisitor for Visit<'_> {
                     .iter()
                     .any(|c| c.name == *n && matches!(c.unit, crate::runtime::units::CoordinateUnit::Angle(_)))
                 {
-                    "[0.0, 3.2]"
+                    "[1.2, 2.4]"
                 } else {
-                    "[0.5, 5.0]"
+                    "[1.0, 3.0]"
                 };
                 format!(
                     "{{ quantity = \"{n}\", bins = 50, range = {range}, times = [0, {}] }}",

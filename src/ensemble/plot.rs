@@ -36,19 +36,25 @@ fn escape(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
-/// Numbers for tick labels: short, but enough digits to tell ticks apart.
-fn tick(v: f64) -> String {
-    if v == 0.0 {
-        "0".into()
-    } else if v.abs() >= 1e4 || v.abs() < 1e-2 {
-        format!("{v:.3e}")
+/// A tick label for `v` on an axis whose ticks are `step` apart: as many digits as tell
+/// neighbouring ticks apart (a mean that barely moves needs many).
+fn tick(v: f64, step: f64) -> String {
+    if v == 0.0 || !step.is_finite() || step <= 0.0 {
+        return "0".into();
+    }
+    let magnitude = v.abs().log10().floor();
+    let resolution = step.log10().floor();
+    if (-2.0..4.0).contains(&magnitude) {
+        let decimals = (-resolution + 1.0).clamp(0.0, 15.0) as usize;
+        format!("{v:.decimals$}")
     } else {
-        format!("{v:.4}").trim_end_matches('0').trim_end_matches('.').to_owned()
+        let digits = (magnitude - resolution + 1.0).clamp(1.0, 15.0) as usize;
+        format!("{v:.digits$e}")
     }
 }
 
 /// `[lo, hi]` widened a little, and never empty.
-fn range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+fn range(values: impl Iterator<Item = f64>, padding: f64) -> Option<(f64, f64)> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite()) {
         lo = lo.min(v);
@@ -61,7 +67,7 @@ fn range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
         let pad = if lo == 0.0 { 1.0 } else { 1e-6 * lo.abs() };
         return Some((lo - pad, hi + pad));
     }
-    let pad = 0.05 * (hi - lo);
+    let pad = padding * (hi - lo);
     Some((lo - pad, hi + pad))
 }
 
@@ -81,10 +87,12 @@ fn panel(svg: &mut String, p: &Panel, x0: f64, y0: f64) {
         y0 + 20.0,
         escape(&p.title)
     );
-    let (Some((xlo, xhi)), Some((ylo, yhi))) = (range(xs.into_iter()), range(ys.into_iter())) else {
+    let (Some((xlo, xhi)), Some((ylo, yhi))) = (range(xs.into_iter(), 0.0), range(ys.into_iter(), 0.05)) else {
         let _ = write!(svg, r#"<text x="{:.1}" y="{:.1}">no data</text>"#, left + 10.0, top + ph / 2.0);
         return;
     };
+    // Bars stand on zero.
+    let ylo = if matches!(p.content, Content::Bars(_)) { 0.0 } else { ylo };
     let px = |x: f64| left + (x - xlo) / (xhi - xlo) * pw;
     let py = |y: f64| top + ph - (y - ylo) / (yhi - ylo) * ph;
     let _ = write!(svg, r##"<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="none" stroke="#444"/>"##);
@@ -96,14 +104,14 @@ fn panel(svg: &mut String, p: &Panel, x0: f64, y0: f64) {
             r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="10">{}</text>"#,
             px(x),
             top + ph + 14.0,
-            tick(x)
+            tick(x, (xhi - xlo) / 4.0)
         );
         let _ = write!(
             svg,
             r#"<text x="{:.1}" y="{:.1}" text-anchor="end" font-size="10">{}</text>"#,
             left - 4.0,
             py(y) + 3.0,
-            tick(y)
+            tick(y, (yhi - ylo) / 4.0)
         );
     }
     let _ = write!(
@@ -168,9 +176,28 @@ pub fn svg(panels: &[Panel]) -> String {
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" viewBox="0 0 {width} {height}" font-family="sans-serif">"#
     );
     s.push_str(r#"<rect width="100%" height="100%" fill="white"/>"#);
+    if panels.is_empty() {
+        s.push_str(
+            r#"<text x="20" y="40" font-size="13">nothing to plot: the scene's [statistics] asks for none</text>"#,
+        );
+    }
     for (i, p) in panels.iter().enumerate() {
         panel(&mut s, p, W * (i % COLUMNS) as f64, H * (i / COLUMNS) as f64);
     }
     s.push_str("</svg>\n");
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_have_the_digits_that_tell_them_apart() {
+        assert_eq!(tick(8.7751234, 2.5e-5), "8.775123");
+        assert_eq!(tick(2500.0, 2500.0), "2500");
+        assert_eq!(tick(4.5691e-3, 1e-9), "4.5691000e-3");
+        assert_eq!(tick(0.0, 1.0), "0");
+        assert_eq!(tick(-1.5, 0.25), "-1.50");
+    }
 }
