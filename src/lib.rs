@@ -6,6 +6,8 @@
 //! Hamilton's equations and trajectories. The [`cli`] is the `rovib` command.
 
 pub mod cli;
+pub mod ensemble;
+pub mod interrupt;
 pub mod molecules;
 pub mod output;
 pub mod plot;

@@ -147,8 +147,12 @@ pub struct Scene {
     pub molecule: Spanned<String>,
     /// One-line description.
     pub description: String,
-    /// The initial condition.
+    /// The initial condition (the reference geometry at rest for an ensemble scene without
+    /// `[initial]`).
     pub initial: Initial,
+    /// Whether the scene has an `[ensemble]` table: `rovib ensemble` parses it and
+    /// `[statistics]` (`crate::ensemble::scene`); here they are only let through.
+    pub ensemble: bool,
     /// The integrator.
     pub method: Method,
     /// End time, a.u. (the run starts at 0).
@@ -186,7 +190,10 @@ struct RawScene {
     description: Option<String>,
     #[serde(default)]
     units: RawUnits,
-    initial: Spanned<RawInitial>,
+    initial: Option<Spanned<RawInitial>>,
+    // Parsed with their places by `crate::ensemble::scene`.
+    ensemble: Option<toml::Value>,
+    statistics: Option<toml::Value>,
     #[serde(default)]
     integrator: Option<Spanned<RawIntegrator>>,
     run: Spanned<RawRun>,
@@ -283,7 +290,28 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     )?;
     let (l, a, t) = (length.in_bohr(), angle.in_rad(), time.in_au());
 
-    let initial = initial(&src, &raw.initial, l, a, t)?;
+    let initial = match (&raw.initial, &raw.ensemble) {
+        (Some(i), _) => initial(&src, i, l, a, t)?,
+        // An ensemble draws its own initial states.
+        (None, Some(_)) => Initial::Internal {
+            q: Vec::new(),
+            momenta: Momenta::P(Vec::new()),
+            euler: [0.0, std::f64::consts::FRAC_PI_2, 0.0],
+            rotation: Rotation::J([0.0; 3]),
+        },
+        (None, None) => {
+            return Err(src.whole_file(
+                "missing field `initial`",
+                "add an [initial] table (one trajectory) or an [ensemble] table (many), see the README",
+            ));
+        }
+    };
+    if raw.statistics.is_some() && raw.ensemble.is_none() {
+        return Err(src.whole_file(
+            "a [statistics] table without an [ensemble] table",
+            "add [ensemble] (see the README's \"Ensembles\") or remove [statistics]",
+        ));
+    }
 
     let run = raw.run.get_ref();
     let t_end = positive(&src, &run.end, "run.end")? * t;
@@ -326,6 +354,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         molecule: raw.molecule,
         description: raw.description.unwrap_or_default(),
         initial,
+        ensemble: raw.ensemble.is_some(),
         method,
         t_end,
         output_interval,

@@ -10,6 +10,7 @@
 //! energies in hartree, time in ħ/E_h (≈ 0.024 188 fs). See [`units`] for the conversions.
 
 pub mod diagnostic;
+pub mod ensemble;
 pub mod frames;
 pub mod hamiltonian;
 pub mod integrate;

@@ -1,4 +1,4 @@
-//! The `rovib` commands: `list`, `eval`, `run`, `bench`.
+//! The `rovib` commands: `list`, `eval`, `run`, `ensemble`, `bench`.
 //!
 //! Each command is generic over the molecule: [`crate::molecules::visit`] calls it with the
 //! generated type, so it runs on fixed-size, monomorphised code.
@@ -11,6 +11,8 @@ use clap::{Parser, Subcommand};
 use crate::runtime::diagnostic::FileError;
 
 pub mod bench;
+pub mod bench_ensemble;
+pub mod ensemble;
 mod eval;
 mod list;
 pub mod run;
@@ -51,6 +53,21 @@ pub enum Command {
         #[arg(long, short)]
         quiet: bool,
     },
+    /// Run an ensemble: sample initial states, integrate every trajectory on every core, write
+    /// ensemble.csv, histograms.csv, correlations.csv, summary.json and SVG plots.
+    Ensemble {
+        /// A scene with an `[ensemble]` table (see the README's "Ensembles").
+        scene: PathBuf,
+        /// Output directory [default: out/SCENE_NAME].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads [default: the scene's `threads`, else every core].
+        #[arg(long)]
+        threads: Option<usize>,
+        /// No progress bar and no report on stdout.
+        #[arg(long, short)]
+        quiet: bool,
+    },
     /// Work-precision diagram: every integrator over a range of tolerances or steps, wall time
     /// against error; writes bench.csv, bench.md and bench.svg.
     Bench {
@@ -62,6 +79,13 @@ pub enum Command {
         /// Fewer tolerances and steps (a smoke test of the diagram).
         #[arg(long)]
         quick: bool,
+        /// Ensemble throughput instead (1 and 2 threads, with and without statistics; a scene
+        /// with `[initial]` and `[ensemble]`, e.g. scenes/h2o_ensemble_bench.toml).
+        #[arg(long)]
+        ensemble: bool,
+        /// With --ensemble: the number of trajectories [default: the scene's].
+        #[arg(long, requires = "ensemble")]
+        trajectories: Option<u64>,
     },
 }
 
@@ -113,6 +137,10 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             let json = eval::eval(&molecule, state.as_deref())?;
             say(&format!("{json}\n"))
         }
+        Command::Run { scene, out, quiet } if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) => {
+            run_ensemble(&scene, out.as_deref(), None, quiet)
+        }
+        Command::Ensemble { scene, out, threads, quiet } => run_ensemble(&scene, out.as_deref(), threads, quiet),
         Command::Run { scene, out, quiet } => {
             let report = run::run(&scene, out.as_deref(), quiet)?;
             if !quiet {
@@ -133,7 +161,15 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             }
             Ok(())
         }
-        Command::Bench { scene, out, quick } => {
+        Command::Bench { scene, out, ensemble: true, trajectories, .. } => {
+            let report = bench_ensemble::bench(&scene, out.as_deref(), trajectories)?;
+            let mut text = report.table.clone();
+            for f in &report.files {
+                text.push_str(&format!("wrote {}\n", f.display()));
+            }
+            say(&text)
+        }
+        Command::Bench { scene, out, quick, .. } => {
             let report = bench::bench(&scene, out.as_deref(), quick)?;
             let mut text = format!(
                 "{} runs; reference final-state error ~{:.1e} bohr\n",
@@ -146,6 +182,29 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             say(&text)
         }
     }
+}
+
+/// `rovib ensemble` (and `rovib run` on a scene with `[ensemble]`).
+fn run_ensemble(
+    scene: &std::path::Path,
+    out: Option<&std::path::Path>,
+    threads: Option<usize>,
+    quiet: bool,
+) -> Result<(), CliError> {
+    let report = ensemble::ensemble(scene, out, threads, quiet)?;
+    if !quiet {
+        say(&ensemble::describe(&report))?;
+    }
+    if report.status == crate::ensemble::Status::Interrupted {
+        let dir = report.files.first().and_then(|f| f.parent()).map_or(String::new(), |d| d.display().to_string());
+        return Err(CliError::Message(format!(
+            "interrupted: {} of {} trajectories completed ({} failed); consistent outputs for them are in {dir}",
+            report.outcome.completed,
+            report.requested,
+            report.outcome.failed_count()
+        )));
+    }
+    Ok(())
 }
 
 /// Writes to stdout. A closed pipe (`rovib list | head -1`) ends the output quietly instead of

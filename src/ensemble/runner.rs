@@ -1,0 +1,502 @@
+//! The unit of work of an ensemble: a block of consecutive trajectory indices → its
+//! accumulators, failures and counts ([`run_block`]), and how block outcomes merge.
+//!
+//! Trajectory `i` draws its initial state from the sampler (its own random stream, a function
+//! of `(seed, i)` only), is integrated with the production system, observed at the output
+//! times into a fixed-size buffer and folded into the block's accumulators; no history is kept.
+//! Blocks have a fixed size ([`BLOCK`]) and are merged in index order, so the statistics are
+//! bit-identical whatever the number of threads (or, later, processes) and whatever order the
+//! blocks finish in.
+
+use std::collections::BTreeMap;
+use std::ops::{ControlFlow, Range};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use indicatif::ProgressBar;
+use serde::{Deserialize, Serialize};
+
+use super::quantity::Quantity;
+use crate::output::TrajectoryCsv;
+use crate::runtime::HamiltonianError;
+use crate::runtime::Molecule;
+use crate::runtime::ensemble::{CorrelationWorkspace, Histogram, Moments};
+use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
+use crate::runtime::integrate::{Dop853, GaussLegendre, InvalidInput, Method, Observer, Rk4, SolveError, Stats};
+use crate::runtime::sample::Sampler;
+
+/// Trajectories per block: the grain of parallel work and of the fixed merge order.
+pub const BLOCK: u64 = 64;
+
+/// How many failures an outcome lists individually (the first, by index); all are counted.
+pub const LISTED_FAILURES: usize = 10;
+
+/// Everything one ensemble run needs to integrate and observe a trajectory.
+pub struct Plan<'m, M, const N: usize, const NA: usize> {
+    /// The molecule.
+    pub molecule: &'m M,
+    /// Frozen coordinates; the rotation is always free (the reduction does not depend on the
+    /// sampled state).
+    pub reduction: Reduction<N>,
+    /// The integrator.
+    pub method: Method,
+    /// End time, a.u.
+    pub t_end: f64,
+    /// Output interval, a.u.
+    pub interval: f64,
+    /// The output times, a.u. (the grid `solve` observes).
+    pub times: Vec<f64>,
+    /// Every quantity observed; the first `n_means` have their means accumulated.
+    pub quantities: Vec<Quantity>,
+    /// See `quantities`.
+    pub n_means: usize,
+    /// Histograms: quantity index, bins, range, output-time indices.
+    pub histograms: Vec<(usize, usize, [f64; 2], Vec<usize>)>,
+    /// Correlated quantities (indices into `quantities`).
+    pub correlations: Vec<usize>,
+    /// The largest relative energy change at an output time before a trajectory fails.
+    pub max_energy_error: f64,
+    /// The smallest relative pivot of the metric.
+    pub min_pivot: f64,
+    /// Keep the trajectory of every k-th index in `dir/trajectories/INDEX/trajectory.csv`.
+    pub keep: Option<(u64, PathBuf)>,
+    /// Scale from a.u. of time to the scene's time unit, for kept trajectories.
+    pub time_scale: f64,
+}
+
+/// Sums over the trajectories of a block (or of the whole ensemble), mergeable.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Accumulators {
+    /// Output times.
+    pub n_times: usize,
+    /// Quantities with means.
+    pub n_means: usize,
+    /// Means: `[time][quantity]`, flattened (`k · n_means + j`).
+    pub means: Vec<Moments>,
+    /// One histogram per (histogram, time), in scene order.
+    pub histograms: Vec<Histogram>,
+    /// Per correlated quantity, the moments of `C(τ)` over trajectories, per lag.
+    pub correlations: Vec<Vec<Moments>>,
+}
+
+impl Accumulators {
+    /// Empty accumulators of `plan`'s shape.
+    pub fn new<M, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>) -> Self {
+        let mut histograms = Vec::new();
+        for (_, bins, range, at) in &plan.histograms {
+            for _ in at {
+                // The range was checked when the scene was parsed.
+                histograms.push(Histogram::new(*bins, range[0], range[1]).expect("a checked histogram range"));
+            }
+        }
+        Self {
+            n_times: plan.times.len(),
+            n_means: plan.n_means,
+            means: vec![Moments::new(); plan.times.len() * plan.n_means],
+            histograms,
+            correlations: vec![vec![Moments::new(); plan.times.len()]; plan.correlations.len()],
+        }
+    }
+
+    /// Merges `other` (the trajectories after this one's) in.
+    pub fn merge(&mut self, other: &Accumulators) {
+        for (a, b) in self.means.iter_mut().zip(&other.means) {
+            a.merge(b);
+        }
+        for (a, b) in self.histograms.iter_mut().zip(&other.histograms) {
+            // Same plan, same shapes.
+            a.merge(b).expect("histograms of one plan have one shape");
+        }
+        for (a, b) in self.correlations.iter_mut().zip(&other.correlations) {
+            for (x, y) in a.iter_mut().zip(b) {
+                x.merge(y);
+            }
+        }
+    }
+}
+
+/// A trajectory that did not finish: its index, a short category, the time (a.u.) and details.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Failure {
+    /// Trajectory index.
+    pub index: u64,
+    /// Category: "sampler", "invalid initial state" (not finite, or not representable by the
+    /// system), "ill-conditioned metric", "singular metric", "non-finite", "energy guard", "too many steps", "step size too small",
+    /// "not converged", "invalid integrator settings", "output".
+    pub reason: String,
+    /// When it happened, a.u. (none for the sampler).
+    pub time: Option<f64>,
+    /// The full message.
+    pub detail: String,
+}
+
+/// What a block (or the ensemble so far) produced.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Outcome {
+    /// Statistics of the completed trajectories.
+    pub statistics: Accumulators,
+    /// Trajectories completed (in the statistics).
+    pub completed: u64,
+    /// Failed trajectories by category.
+    pub failed: BTreeMap<String, u64>,
+    /// The first [`LISTED_FAILURES`] failures by index.
+    pub first_failures: Vec<Failure>,
+    /// Trajectories not run or cut short because of an interrupt.
+    pub interrupted: u64,
+    /// Integrator work of the completed trajectories.
+    pub steps: u64,
+    /// Right-hand-side evaluations of the completed trajectories.
+    pub rhs_evaluations: u64,
+}
+
+impl Outcome {
+    /// Nothing yet.
+    pub fn new(statistics: Accumulators) -> Self {
+        Self {
+            statistics,
+            completed: 0,
+            failed: BTreeMap::new(),
+            first_failures: Vec::new(),
+            interrupted: 0,
+            steps: 0,
+            rhs_evaluations: 0,
+        }
+    }
+
+    /// Merges the outcome of the next block in.
+    pub fn merge(&mut self, other: &Outcome) {
+        self.statistics.merge(&other.statistics);
+        self.completed += other.completed;
+        for (k, v) in &other.failed {
+            *self.failed.entry(k.clone()).or_default() += v;
+        }
+        for f in &other.first_failures {
+            if self.first_failures.len() < LISTED_FAILURES {
+                self.first_failures.push(f.clone());
+            }
+        }
+        self.interrupted += other.interrupted;
+        self.steps += other.steps;
+        self.rhs_evaluations += other.rhs_evaluations;
+    }
+
+    /// Failed trajectories in all.
+    pub fn failed_count(&self) -> u64 {
+        self.failed.values().sum()
+    }
+
+    fn fail(&mut self, f: Failure, progress: &Progress) {
+        *self.failed.entry(f.reason.clone()).or_default() += 1;
+        if self.first_failures.len() < LISTED_FAILURES {
+            self.first_failures.push(f);
+        }
+        progress.failed();
+    }
+}
+
+/// The progress bar (if any) and the live count of failures it shows.
+pub struct Progress {
+    /// The bar, on a terminal.
+    pub bar: Option<ProgressBar>,
+    /// Failures so far.
+    pub failures: AtomicU64,
+}
+
+impl Progress {
+    fn done(&self) {
+        if let Some(b) = &self.bar {
+            b.inc(1);
+        }
+    }
+
+    fn failed(&self) {
+        let n = self.failures.fetch_add(1, Ordering::Relaxed) + 1;
+        if let Some(b) = &self.bar {
+            b.set_message(format!("{n} failed"));
+        }
+    }
+}
+
+/// One integrator, created once per block and reused for its trajectories.
+enum Integrator {
+    Dop853(Dop853),
+    GaussLegendre(GaussLegendre),
+    Rk4(Rk4),
+}
+
+impl Integrator {
+    fn new(method: &Method, dim: usize) -> Result<Self, InvalidInput> {
+        Ok(match method {
+            Method::Dop853(o) => Self::Dop853(Dop853::new(dim, *o)?),
+            Method::GaussLegendre(o) => Self::GaussLegendre(GaussLegendre::new(dim, *o)?),
+            Method::Rk4(o) => Self::Rk4(Rk4::new(dim, *o)?),
+        })
+    }
+
+    fn integrate<S: crate::runtime::integrate::OdeSystem, O: Observer>(
+        &mut self,
+        system: &mut S,
+        y0: &[f64],
+        t_end: f64,
+        interval: f64,
+        observer: &mut O,
+    ) -> Result<Stats, SolveError<S::Error>> {
+        match self {
+            Self::Dop853(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
+            Self::GaussLegendre(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
+            Self::Rk4(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
+        }
+    }
+}
+
+fn hamiltonian_reason(e: &HamiltonianError) -> &'static str {
+    match e {
+        HamiltonianError::IllConditionedMetric { .. } => "ill-conditioned metric",
+        HamiltonianError::SingularMetric { .. } => "singular metric",
+        HamiltonianError::NonFinite { .. } => "non-finite",
+        _ => "right-hand side",
+    }
+}
+
+fn solve_reason(e: &SolveError<HamiltonianError>) -> (&'static str, String) {
+    match e {
+        SolveError::Rhs { source, .. } => (hamiltonian_reason(source), format!("{e}: {source}")),
+        SolveError::NonFinite { .. } => ("non-finite", e.to_string()),
+        SolveError::StepSizeTooSmall { .. } => ("step size too small", e.to_string()),
+        SolveError::TooManySteps { .. } => ("too many steps", e.to_string()),
+        SolveError::NotConverged { .. } => ("not converged", e.to_string()),
+        SolveError::InvalidInput(_) => ("invalid integrator settings", e.to_string()),
+    }
+}
+
+/// Observes one trajectory at the output times into `buffer` (`[time][quantity]`).
+struct Watch<'a, 'm, M, const N: usize, const NA: usize> {
+    system: ReducedSystem<'m, M, N, NA>,
+    plan: &'a Plan<'m, M, N, NA>,
+    buffer: &'a mut [f64],
+    needs_potential: bool,
+    k: usize,
+    initial_energy: f64,
+    stop: &'a AtomicBool,
+    failure: Option<(&'static str, f64, String)>,
+    interrupted: bool,
+    csv: Option<TrajectoryCsv>,
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_, '_, M, N, NA> {
+    fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
+        if self.stop.load(Ordering::Relaxed) {
+            self.interrupted = true;
+            return ControlFlow::Break(());
+        }
+        let nq = self.plan.quantities.len();
+        if self.k >= self.plan.times.len() {
+            self.failure =
+                Some(("output", t, format!("an output at t = {t} beyond the {} expected", self.plan.times.len())));
+            return ControlFlow::Break(());
+        }
+        let (body, h) = match self.system.expand_body_and_energy(y) {
+            Ok(x) => x,
+            Err(e) => {
+                self.failure = Some((hamiltonian_reason(&e), t, e.to_string()));
+                return ControlFlow::Break(());
+            }
+        };
+        if self.k == 0 {
+            self.initial_energy = h;
+        }
+        let h0 = self.initial_energy;
+        let drift = if h0 == 0.0 { (h - h0).abs() } else { ((h - h0) / h0).abs() };
+        if drift.is_nan() || drift > self.plan.max_energy_error {
+            self.failure = Some((
+                "energy guard",
+                t,
+                format!(
+                    "the energy changed by {drift:.1e} relative to H(0) = {h0} hartree, more than run.max_energy_error = {:e}",
+                    self.plan.max_energy_error
+                ),
+            ));
+            return ControlFlow::Break(());
+        }
+        let u = if self.needs_potential { self.plan.molecule.potential(&body.q) } else { f64::NAN };
+        let rotation = body.rotation();
+        let row = &mut self.buffer[self.k * nq..(self.k + 1) * nq];
+        for (v, q) in row.iter_mut().zip(&self.plan.quantities) {
+            *v = q.value(&body, h, u, &rotation);
+        }
+        if let Some(csv) = &mut self.csv {
+            let phase = body.to_phase();
+            let values = phase.q.iter().chain(phase.p.iter()).chain(phase.euler.iter()).chain(phase.pe.iter());
+            if let Err(e) = csv.row(t / self.plan.time_scale, values.copied().chain([h])) {
+                self.failure = Some(("output", t, e));
+                return ControlFlow::Break(());
+            }
+        }
+        self.k += 1;
+        ControlFlow::Continue(())
+    }
+}
+
+/// Runs trajectories `indices` (a block) and returns their outcome. Never panics on a bad
+/// trajectory: each failure is recorded and the block goes on. Stops starting trajectories
+/// (and cuts running ones short at their next output time) once `stop` is set.
+pub fn run_block<M, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    sampler: &dyn Sampler<N>,
+    indices: Range<u64>,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Outcome
+where
+    M: Molecule<N, NA> + Sync,
+{
+    let mut outcome = Outcome::new(Accumulators::new(plan));
+    let dim = plan.reduction.dim();
+    let mut integrator = match Integrator::new(&plan.method, dim) {
+        Ok(i) => i,
+        Err(e) => {
+            for index in indices {
+                let f =
+                    Failure { index, reason: "invalid integrator settings".into(), time: None, detail: e.to_string() };
+                outcome.fail(f, progress);
+            }
+            return outcome;
+        }
+    };
+    let n_times = plan.times.len();
+    let nq = plan.quantities.len();
+    let needs_potential = plan.quantities.iter().any(Quantity::needs_potential);
+    let mut buffer = vec![0.0; n_times * nq];
+    let mut y0 = vec![0.0; dim];
+    let mut workspace = (!plan.correlations.is_empty()).then(|| CorrelationWorkspace::new(n_times));
+    let mut series = vec![0.0; n_times];
+    let mut correlation = vec![0.0; n_times];
+
+    for index in indices {
+        if stop.load(Ordering::Relaxed) {
+            outcome.interrupted += 1;
+            continue;
+        }
+        let failure =
+            |reason: &str, time: Option<f64>, detail: String| Failure { index, reason: reason.into(), time, detail };
+        let state = match sampler.draw(index) {
+            Ok(s) => s,
+            Err(e) => {
+                outcome.fail(failure("sampler", None, e.to_string()), progress);
+                progress.done();
+                continue;
+            }
+        };
+        let finite = state.q.iter().chain(state.p.iter()).chain(state.j.iter()).all(|v| v.is_finite())
+            && state.orientation.coords.iter().all(|v| v.is_finite());
+        if !finite {
+            let detail = format!("the drawn state is not finite: {state:?}");
+            outcome.fail(failure("invalid initial state", Some(0.0), detail), progress);
+            progress.done();
+            continue;
+        }
+        // The sampled state is the template: frozen coordinates stay at its values.
+        let mut system = ReducedSystem::from_body(plan.molecule, plan.reduction, &state).with_min_pivot(plan.min_pivot);
+        if let Err(e) = system.reduce_body(&state, &mut y0) {
+            outcome.fail(failure("invalid initial state", Some(0.0), e.to_string()), progress);
+            progress.done();
+            continue;
+        }
+        let csv = match &plan.keep {
+            Some((k, dir)) if index % k == 0 => {
+                let dir = dir.join(index.to_string());
+                let names: Vec<&str> = plan.molecule.coordinates().iter().map(|c| c.name).collect();
+                match std::fs::create_dir_all(&dir)
+                    .map_err(|e| e.to_string())
+                    .and_then(|()| TrajectoryCsv::create(&dir, &names))
+                {
+                    Ok(c) => Some(c),
+                    Err(e) => {
+                        outcome.fail(failure("output", Some(0.0), e), progress);
+                        progress.done();
+                        continue;
+                    }
+                }
+            }
+            _ => None,
+        };
+        let mut watch = Watch {
+            system,
+            plan,
+            buffer: &mut buffer,
+            needs_potential,
+            k: 0,
+            initial_energy: 0.0,
+            stop,
+            failure: None,
+            interrupted: false,
+            csv,
+        };
+        let result = integrator.integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch);
+        if let Some(csv) = &mut watch.csv
+            && let Err(e) = csv.flush()
+        {
+            watch.failure.get_or_insert(("output", plan.t_end, e));
+        }
+        let (k, interrupted, observed) = (watch.k, watch.interrupted, watch.failure.take());
+        match (result, observed) {
+            (Err(e), _) => {
+                let (reason, detail) = solve_reason(&e);
+                outcome.fail(failure(reason, e.time(), detail), progress);
+            }
+            (Ok(_), Some((reason, t, detail))) => outcome.fail(failure(reason, Some(t), detail), progress),
+            (Ok(_), None) if interrupted => {
+                outcome.interrupted += 1;
+                continue;
+            }
+            (Ok(_), None) if k != n_times => {
+                let detail = format!("{k} output times observed, {n_times} expected");
+                outcome.fail(failure("output", Some(plan.t_end), detail), progress);
+            }
+            (Ok(stats), None) => {
+                outcome.completed += 1;
+                outcome.steps += stats.steps;
+                outcome.rhs_evaluations += stats.rhs_evals;
+                fold(plan, &mut outcome.statistics, &buffer, workspace.as_mut(), &mut series, &mut correlation);
+            }
+        }
+        progress.done();
+    }
+    outcome
+}
+
+/// Folds one completed trajectory's observations into the accumulators.
+fn fold<M, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    acc: &mut Accumulators,
+    buffer: &[f64],
+    workspace: Option<&mut CorrelationWorkspace>,
+    series: &mut [f64],
+    correlation: &mut [f64],
+) {
+    let nq = plan.quantities.len();
+    let nm = plan.n_means;
+    for k in 0..plan.times.len() {
+        for j in 0..nm {
+            acc.means[k * nm + j].add(buffer[k * nq + j]);
+        }
+    }
+    let mut h = 0;
+    for (qi, _, _, at) in &plan.histograms {
+        for &k in at {
+            acc.histograms[h].add(buffer[k * nq + qi]);
+            h += 1;
+        }
+    }
+    if let Some(ws) = workspace {
+        for (ci, &qi) in plan.correlations.iter().enumerate() {
+            for (k, s) in series.iter_mut().enumerate() {
+                *s = buffer[k * nq + qi];
+            }
+            ws.fluctuation_autocorrelation(series, correlation);
+            for (m, &c) in acc.correlations[ci].iter_mut().zip(correlation.iter()) {
+                m.add(c);
+            }
+        }
+    }
+}

@@ -1,0 +1,717 @@
+//! The `[ensemble]` and `[statistics]` tables of a scene: parsed with their places, checked,
+//! converted to atomic units, and bound to the molecule (names to indices, the sampling
+//! [`Spec`]). Every error names the file, the line and what to change.
+//!
+//! `crate::scene` parses the rest of the scene and only lets these two tables through.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::quantity::Quantity;
+use super::states_file::read_states;
+use crate::runtime::Molecule;
+use crate::runtime::diagnostic::{FileError, Source};
+use crate::runtime::nalgebra::Vector3;
+use crate::runtime::sample::{ModeEnergies, Region, RotationSampling, Spec};
+use crate::runtime::units::{CoordinateUnit, EnergyUnit};
+use crate::scene::Scene;
+
+/// The seed of an ensemble whose scene gives none.
+pub const DEFAULT_SEED: u64 = 0;
+
+/// The most bins a histogram may have.
+pub const MAX_BINS: usize = 1_000_000;
+
+/// The most output times an ensemble may have (each trajectory buffers its observations at
+/// every output time: 10⁶ times × a few quantities is tens of MB per thread).
+pub const MAX_OUTPUT_TIMES: usize = 1_000_000;
+
+/// The sampling methods, as spelt in scenes.
+pub const METHODS: [&str; 4] = ["thermal", "microcanonical", "normal-modes", "file"];
+
+/// A parsed `[ensemble]` (with `[statistics]`), in atomic units, names not yet bound.
+#[derive(Clone, Debug)]
+pub struct EnsembleScene {
+    /// Number of trajectories.
+    pub trajectories: u64,
+    /// The seed of every trajectory's random stream.
+    pub seed: u64,
+    /// Whether the seed was given (else [`DEFAULT_SEED`]).
+    pub seed_given: bool,
+    /// What to sample.
+    pub method: MethodSpec,
+    /// Worker threads (`None`: every core).
+    pub threads: Option<usize>,
+    /// Write the trajectory of every k-th trajectory (index divisible by k).
+    pub keep_trajectories: Option<u64>,
+    /// What to reduce the ensemble to.
+    pub statistics: StatisticsSpec,
+    method_span: Range<usize>,
+    trajectories_span: Range<usize>,
+}
+
+/// A sampling method with its parameters (energies in hartree, temperatures in kelvin, J in ħ).
+#[derive(Clone, Debug)]
+pub enum MethodSpec {
+    /// Canonical at `temperature` kelvin.
+    Thermal {
+        /// Kelvin.
+        temperature: f64,
+        /// The bounded region.
+        region: RegionSpec,
+    },
+    /// On the energy shell.
+    Microcanonical {
+        /// Total energy, hartree, and where it is written.
+        energy: (f64, Range<usize>),
+        /// Fixed |J|, ħ.
+        angular_momentum: Option<f64>,
+        /// The bounded region.
+        region: RegionSpec,
+    },
+    /// Normal-mode sampling.
+    NormalModes {
+        /// Energies per mode.
+        energies: ModeEnergies,
+        /// Rotation.
+        rotation: RotationSampling,
+    },
+    /// States read from a file (path resolved against the scene's folder).
+    File {
+        /// The file.
+        path: PathBuf,
+        /// Where `file = ...` is written.
+        span: Range<usize>,
+    },
+}
+
+/// `region = { energy_cap = ..., limits = { name = [lo, hi] } }`, cap in hartree, limits in the
+/// scene's units until bound.
+#[derive(Clone, Debug, Default)]
+pub struct RegionSpec {
+    /// The cap on `U(q) − U(q_ref)`, hartree, and where it is written.
+    pub energy_cap: Option<(f64, Range<usize>)>,
+    /// Limits by coordinate name, in the scene's length or angle unit.
+    pub limits: Vec<(Spanned<String>, [f64; 2])>,
+}
+
+/// The `[statistics]` table, names not yet bound.
+#[derive(Clone, Debug)]
+pub struct StatisticsSpec {
+    /// Quantities whose ensemble means are written (`None`: the default set).
+    pub means: Option<Vec<Spanned<String>>>,
+    /// Histograms.
+    pub histograms: Vec<HistogramSpec>,
+    /// Quantities whose autocorrelation functions are written.
+    pub correlations: Vec<Spanned<String>>,
+}
+
+/// One histogram: a quantity over a range, at some output times.
+#[derive(Clone, Debug)]
+pub struct HistogramSpec {
+    /// The quantity.
+    pub quantity: Spanned<String>,
+    /// Number of bins.
+    pub bins: usize,
+    /// The range, in the quantity's atomic unit.
+    pub range: [f64; 2],
+    /// Times, a.u. (each taken at the nearest output time).
+    pub times: Vec<f64>,
+}
+
+/// The ensemble bound to a molecule: what to sample and what to compute.
+pub struct Bound<const N: usize> {
+    /// The sampling specification.
+    pub spec: Spec<N>,
+    /// One line saying how the states are drawn, for summary.json.
+    pub description: String,
+    /// Every quantity observed, means first.
+    pub quantities: Vec<Quantity>,
+    /// How many of `quantities` have their means written.
+    pub n_means: usize,
+    /// Histograms: index into `quantities`, bins, range, output-time indices.
+    pub histograms: Vec<(usize, usize, [f64; 2], Vec<usize>)>,
+    /// Correlations: indices into `quantities`.
+    pub correlations: Vec<usize>,
+}
+
+#[derive(Deserialize)]
+struct RawFile {
+    ensemble: Option<Spanned<RawEnsemble>>,
+    statistics: Option<Spanned<RawStatistics>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawEnsemble {
+    trajectories: Spanned<i64>,
+    seed: Option<Spanned<i64>>,
+    method: Spanned<String>,
+    temperature: Option<Spanned<f64>>,
+    energy: Option<Spanned<f64>>,
+    energy_unit: Option<Spanned<String>>,
+    angular_momentum: Option<Spanned<f64>>,
+    region: Option<Spanned<RawRegion>>,
+    quanta: Option<Spanned<Vec<i64>>>,
+    mode_energies: Option<Spanned<Vec<f64>>>,
+    j: Option<Spanned<Vec<f64>>>,
+    file: Option<Spanned<String>>,
+    threads: Option<Spanned<i64>>,
+    keep_trajectories: Option<Spanned<i64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRegion {
+    energy_cap: Option<Spanned<f64>>,
+    #[serde(default)]
+    limits: std::collections::BTreeMap<Spanned<String>, Spanned<Vec<f64>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStatistics {
+    means: Option<Vec<Spanned<String>>>,
+    #[serde(default)]
+    histograms: Vec<Spanned<RawHistogram>>,
+    #[serde(default)]
+    correlations: Vec<Spanned<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHistogram {
+    quantity: Spanned<String>,
+    bins: Spanned<i64>,
+    range: Spanned<Vec<f64>>,
+    times: Option<Spanned<Vec<f64>>>,
+}
+
+/// The closest of `candidates` to `word` by edit distance, if it is close enough to be a typo.
+pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    fn distance(a: &str, b: &str) -> usize {
+        let b: Vec<char> = b.chars().collect();
+        let mut row: Vec<usize> = (0..=b.len()).collect();
+        for (i, ca) in a.chars().enumerate() {
+            let mut prev = row[0];
+            row[0] = i + 1;
+            for j in 0..b.len() {
+                let cur = row[j + 1];
+                row[j + 1] = (prev + usize::from(ca != b[j])).min(row[j] + 1).min(cur + 1);
+                prev = cur;
+            }
+        }
+        row[b.len()]
+    }
+    let (best, d) =
+        candidates.into_iter().map(|c| (c, distance(&word.to_lowercase(), &c.to_lowercase()))).min_by_key(|x| x.1)?;
+    (d <= 2.max(word.len() / 3)).then_some(best)
+}
+
+/// Parses the `[ensemble]` and `[statistics]` tables of `scene` (which must have `[ensemble]`).
+pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
+    let src = scene.source();
+    let raw: RawFile = toml::from_str(&scene.text).map_err(|e| {
+        let message = e.message().trim_end().trim_end_matches('.').to_owned();
+        let help = "the README's \"Ensembles\" section lists every key of [ensemble] and [statistics]";
+        match e.span() {
+            Some(span) => src.error(span, message, help),
+            None => src.whole_file(message, help),
+        }
+    })?;
+    let Some(ensemble) = raw.ensemble else {
+        return Err(src.whole_file(
+            "the scene has no [ensemble] table",
+            "add [ensemble] with trajectories, seed and method (see the README's \"Ensembles\"), or use `rovib run`",
+        ));
+    };
+
+    let e = ensemble.into_inner();
+
+    let trajectories = *e.trajectories.get_ref();
+    if trajectories < 1 {
+        return Err(src.error(
+            e.trajectories.span(),
+            format!("`ensemble.trajectories` must be at least 1, got {trajectories}"),
+            "write the number of trajectories to run, e.g. trajectories = 1000",
+        ));
+    }
+    let seed = match &e.seed {
+        Some(s) if *s.get_ref() < 0 => {
+            return Err(src.error(
+                s.span(),
+                format!("`ensemble.seed` must be a non-negative integer, got {}", s.get_ref()),
+                "write a seed from 0 to 9223372036854775807",
+            ));
+        }
+        Some(s) => *s.get_ref() as u64,
+        None => DEFAULT_SEED,
+    };
+    let count = |x: &Option<Spanned<i64>>, what: &str, help: &str| -> Result<Option<u64>, FileError> {
+        match x {
+            Some(v) if *v.get_ref() < 1 => {
+                Err(src.error(v.span(), format!("`ensemble.{what}` must be at least 1, got {}", v.get_ref()), help))
+            }
+            Some(v) => Ok(Some(*v.get_ref() as u64)),
+            None => Ok(None),
+        }
+    };
+    let threads = count(&e.threads, "threads", "remove it to use every core, or give the number of worker threads")?
+        .map(|t| t as usize);
+    let keep_trajectories =
+        count(&e.keep_trajectories, "keep_trajectories", "write k to keep the trajectory of every k-th trajectory")?;
+
+    let energy_unit = match &e.energy_unit {
+        None => EnergyUnit::Hartree,
+        Some(u) => EnergyUnit::parse(u.get_ref()).ok_or_else(|| {
+            let names: Vec<&str> = EnergyUnit::SPELLINGS.iter().map(|s| s.0).collect();
+            src.error(
+                u.span(),
+                format!("unknown energy unit `{}`", u.get_ref()),
+                format!("use one of {}", names.iter().map(|n| format!("\"{n}\"")).collect::<Vec<_>>().join(", ")),
+            )
+        })?,
+    };
+    let eh = energy_unit.in_hartree();
+
+    // Every trajectory keeps its observations at all output times until it ends.
+    let n_times = scene.t_end / scene.output_interval;
+    if n_times.is_nan() || n_times > MAX_OUTPUT_TIMES as f64 {
+        return Err(src.whole_file(
+            format!("run.end / run.output_interval = {n_times:.3e} output times, more than the {MAX_OUTPUT_TIMES} an ensemble allows"),
+            "raise run.output_interval (the statistics' time grid) or shorten run.end",
+        ));
+    }
+    let method_name = e.method.get_ref().as_str();
+    if !METHODS.contains(&method_name) {
+        let help = match did_you_mean(method_name, METHODS) {
+            Some(m) => format!("did you mean \"{m}\"? the methods are {}", quoted(&METHODS)),
+            None => format!("the methods are {}", quoted(&METHODS)),
+        };
+        return Err(src.error(e.method.span(), format!("unknown ensemble method `{method_name}`"), help));
+    }
+    // Which keys each method takes; any other parameter given is an error that says so.
+    let allowed: &[&str] = match method_name {
+        "thermal" => &["temperature", "energy_unit", "region"],
+        "microcanonical" => &["energy", "energy_unit", "angular_momentum", "region"],
+        "normal-modes" => &["energy", "energy_unit", "quanta", "mode_energies", "temperature", "j"],
+        _ => &["file"],
+    };
+    let given: [(&str, Option<Range<usize>>); 9] = [
+        ("temperature", e.temperature.as_ref().map(|x| x.span())),
+        ("energy", e.energy.as_ref().map(|x| x.span())),
+        ("energy_unit", e.energy_unit.as_ref().map(|x| x.span())),
+        ("angular_momentum", e.angular_momentum.as_ref().map(|x| x.span())),
+        ("region", e.region.as_ref().map(|x| x.span())),
+        ("quanta", e.quanta.as_ref().map(|x| x.span())),
+        ("mode_energies", e.mode_energies.as_ref().map(|x| x.span())),
+        ("j", e.j.as_ref().map(|x| x.span())),
+        ("file", e.file.as_ref().map(|x| x.span())),
+    ];
+    for (key, at) in &given {
+        if let Some(at) = at
+            && !allowed.contains(key)
+        {
+            return Err(src.error(
+                at.clone(),
+                format!("`{key}` does not apply to the {method_name} method"),
+                format!(
+                    "the {method_name} method takes {}; remove `{key}` or choose another method",
+                    allowed.join(", ")
+                ),
+            ));
+        }
+    }
+    let needs = |what: &str, unit: &str| {
+        src.error(
+            e.method.span(),
+            format!("the {method_name} method needs `{what}`"),
+            format!("add {what} = ... ({unit}) to [ensemble]"),
+        )
+    };
+    let temperature = |t: &Spanned<f64>| -> Result<f64, FileError> {
+        let v = *t.get_ref();
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err(src.error(
+                t.span(),
+                format!("`ensemble.temperature` must be a positive finite number of kelvin, got {v}"),
+                "write a temperature above 0 K, e.g. temperature = 300",
+            ))
+        }
+    };
+    let region = |r: &Option<Spanned<RawRegion>>| -> Result<RegionSpec, FileError> {
+        let Some(r) = r else { return Ok(RegionSpec::default()) };
+        let r = r.get_ref();
+        let energy_cap = match &r.energy_cap {
+            Some(c) if !(c.get_ref().is_finite() && *c.get_ref() > 0.0) => {
+                return Err(src.error(
+                    c.span(),
+                    format!("`region.energy_cap` must be a positive finite energy, got {}", c.get_ref()),
+                    "give the largest U(q) − U(reference) to sample, in ensemble.energy_unit",
+                ));
+            }
+            Some(c) => Some((c.get_ref() * eh, c.span())),
+            None => None,
+        };
+        let mut limits = Vec::new();
+        for (name, v) in &r.limits {
+            let x = v.get_ref();
+            if x.len() != 2 || !x.iter().all(|x| x.is_finite()) || x[0] >= x[1] {
+                return Err(src.error(
+                    v.span(),
+                    format!(
+                        "the limits of `{}` must be two finite numbers [low, high] with low < high",
+                        name.get_ref()
+                    ),
+                    format!("write {} = [low, high] in the scene's length or angle unit", name.get_ref()),
+                ));
+            }
+            limits.push((name.clone(), [x[0], x[1]]));
+        }
+        Ok(RegionSpec { energy_cap, limits })
+    };
+    let finite_energy = |x: &Spanned<f64>, what: &str| -> Result<f64, FileError> {
+        if x.get_ref().is_finite() {
+            Ok(x.get_ref() * eh)
+        } else {
+            Err(src.error(x.span(), format!("`ensemble.{what}` is not a finite number"), "write a finite energy"))
+        }
+    };
+
+    let method = match method_name {
+        "thermal" => {
+            let t = e.temperature.as_ref().ok_or_else(|| needs("temperature", "kelvin"))?;
+            MethodSpec::Thermal { temperature: temperature(t)?, region: region(&e.region)? }
+        }
+        "microcanonical" => {
+            let energy =
+                e.energy.as_ref().ok_or_else(|| needs("energy", "in ensemble.energy_unit, default hartree"))?;
+            let angular_momentum = match &e.angular_momentum {
+                Some(j) if !(j.get_ref().is_finite() && *j.get_ref() >= 0.0) => {
+                    return Err(src.error(
+                        j.span(),
+                        format!("`ensemble.angular_momentum` must be a non-negative |J| in hbar, got {}", j.get_ref()),
+                        "write |J| in units of hbar, or remove it to sample J too",
+                    ));
+                }
+                Some(j) => Some(*j.get_ref()),
+                None => None,
+            };
+            MethodSpec::Microcanonical {
+                energy: (finite_energy(energy, "energy")?, energy.span()),
+                angular_momentum,
+                region: region(&e.region)?,
+            }
+        }
+        "normal-modes" => {
+            let energies = match (&e.quanta, &e.mode_energies, &e.energy) {
+                (Some(q), None, None) => {
+                    if let Some(bad) = q.get_ref().iter().find(|v| **v < 0 || **v > i64::from(u32::MAX)) {
+                        return Err(src.error(
+                            q.span(),
+                            format!("quantum number {bad} is not a non-negative integer"),
+                            "write one vibrational quantum number v ≥ 0 per mode",
+                        ));
+                    }
+                    ModeEnergies::Quantum(q.get_ref().iter().map(|&v| v as u32).collect())
+                }
+                (None, Some(m), None) => {
+                    if m.get_ref().iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+                        return Err(src.error(
+                            m.span(),
+                            "mode energies must be non-negative finite numbers",
+                            "write one energy per mode in ensemble.energy_unit",
+                        ));
+                    }
+                    ModeEnergies::Fixed(m.get_ref().iter().map(|v| v * eh).collect())
+                }
+                (None, None, Some(total)) => ModeEnergies::Random { total: finite_energy(total, "energy")? },
+                (None, None, None) => {
+                    return Err(src.error(
+                        e.method.span(),
+                        "the normal-modes method needs the mode energies",
+                        "add quanta = [v1, v2, ...] (quasiclassical), mode_energies = [...] or energy = ... (random over the modes)",
+                    ));
+                }
+                _ => {
+                    return Err(src.error(
+                        e.method.span(),
+                        "more than one of quanta, mode_energies and energy is given",
+                        "give exactly one of quanta, mode_energies and energy",
+                    ));
+                }
+            };
+            let rotation = match (&e.temperature, &e.j) {
+                (Some(t), None) => RotationSampling::Thermal { temperature: temperature(t)? },
+                (None, Some(j)) => {
+                    let v = j.get_ref();
+                    if v.len() != 3 || !v.iter().all(|x| x.is_finite()) {
+                        return Err(src.error(
+                            j.span(),
+                            "`ensemble.j` must be three finite numbers",
+                            "write j = [Jx, Jy, Jz] in hbar",
+                        ));
+                    }
+                    RotationSampling::Fixed(Vector3::new(v[0], v[1], v[2]))
+                }
+                (None, None) => RotationSampling::Fixed(Vector3::zeros()),
+                (Some(_), Some(j)) => {
+                    return Err(src.error(
+                        j.span(),
+                        "both a rotational temperature and a fixed j are given",
+                        "give temperature (thermal rotation) or j (fixed body-frame J), not both",
+                    ));
+                }
+            };
+            MethodSpec::NormalModes { energies, rotation }
+        }
+        _ => {
+            let file = e.file.as_ref().ok_or_else(|| needs("file", "a path relative to the scene"))?;
+            let base = Path::new(&scene.path).parent().unwrap_or(Path::new(""));
+            MethodSpec::File { path: base.join(file.get_ref()), span: file.span() }
+        }
+    };
+
+    let statistics = match raw.statistics {
+        None => StatisticsSpec { means: None, histograms: Vec::new(), correlations: Vec::new() },
+        Some(s) => {
+            let s = s.into_inner();
+            let mut histograms = Vec::new();
+            for h in &s.histograms {
+                let h = h.get_ref();
+                let bins = *h.bins.get_ref();
+                if bins > MAX_BINS as i64 {
+                    return Err(src.error(
+                        h.bins.span(),
+                        format!("a histogram of {bins} bins is more than the {MAX_BINS} allowed"),
+                        "use fewer bins",
+                    ));
+                }
+                if bins < 1 {
+                    return Err(src.error(
+                        h.bins.span(),
+                        format!("a histogram needs at least one bin, got {bins}"),
+                        "write bins = 50, for example",
+                    ));
+                }
+                let r = h.range.get_ref();
+                if r.len() != 2 || !r.iter().all(|x| x.is_finite()) || r[0] >= r[1] {
+                    return Err(src.error(
+                        h.range.span(),
+                        "a histogram's range must be two finite numbers [low, high] with low < high",
+                        "write range = [low, high] in the quantity's atomic unit (bohr, rad, hartree, hbar)",
+                    ));
+                }
+                let times = match &h.times {
+                    None => vec![0.0],
+                    Some(t) => {
+                        let mut times = Vec::new();
+                        for &x in t.get_ref() {
+                            if !(x.is_finite() && (0.0..=scene.t_end / scene.units.time * (1.0 + 1e-12)).contains(&x)) {
+                                return Err(src.error(
+                                    t.span(),
+                                    format!(
+                                        "histogram time {x} is outside the run, 0 to run.end = {}",
+                                        scene.t_end / scene.units.time
+                                    ),
+                                    "write times between 0 and run.end, in the scene's time unit",
+                                ));
+                            }
+                            times.push(x * scene.units.time);
+                        }
+                        times
+                    }
+                };
+                histograms.push(HistogramSpec {
+                    quantity: h.quantity.clone(),
+                    bins: bins as usize,
+                    range: [r[0], r[1]],
+                    times,
+                });
+            }
+            StatisticsSpec { means: s.means, histograms, correlations: s.correlations }
+        }
+    };
+    Ok(EnsembleScene {
+        trajectories: trajectories as u64,
+        seed,
+        seed_given: e.seed.is_some(),
+        method,
+        threads,
+        keep_trajectories,
+        statistics,
+        method_span: e.method.span(),
+        trajectories_span: e.trajectories.span(),
+    })
+}
+
+fn quoted(names: &[&str]) -> String {
+    names.iter().map(|n| format!("\"{n}\"")).collect::<Vec<_>>().join(", ")
+}
+
+impl EnsembleScene {
+    /// Binds the ensemble to molecule `m`: coordinate names, units, the sampling [`Spec`]
+    /// (reading the states file), the quantities and the output-time indices of histograms.
+    pub fn bind<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+        &self,
+        m: &M,
+        scene: &Scene,
+        times: &[f64],
+    ) -> Result<Bound<N>, FileError> {
+        let src = scene.source();
+        let coords = m.coordinates();
+        let reference_energy = || -> Result<f64, FileError> {
+            let q = m.reference_geometry().ok_or_else(|| {
+                src.error(
+                    self.method_span.clone(),
+                    format!("{} has no reference geometry to measure energies from", m.name()),
+                    format!("add `reference` values to the coordinates in {}", m.source()),
+                )
+            })?;
+            Ok(m.potential(&q))
+        };
+        let region = |r: &RegionSpec| -> Result<Region<N>, FileError> {
+            let mut limits = [None; N];
+            for (name, [lo, hi]) in &r.limits {
+                let k = coords.iter().position(|c| c.name == name.get_ref()).ok_or_else(|| {
+                    unknown_name(&src, name, &format!("{} has no coordinate", m.name()), coords.iter().map(|c| c.name))
+                })?;
+                let s = match coords[k].unit {
+                    CoordinateUnit::Length(_) => scene.units.length,
+                    CoordinateUnit::Angle(_) => scene.units.angle,
+                };
+                limits[k] = Some((lo * s, hi * s));
+            }
+            Ok(Region { energy_cap: r.energy_cap.as_ref().map(|c| c.0), limits })
+        };
+        let (spec, description) = match &self.method {
+            MethodSpec::Thermal { temperature, region: r } => (
+                Spec::Thermal { temperature: *temperature, region: region(r)? },
+                format!("thermal (canonical) at {temperature} K"),
+            ),
+            MethodSpec::Microcanonical { energy, angular_momentum, region: r } => {
+                let u0 = reference_energy()?;
+                if energy.0 < u0 {
+                    return Err(src.error(
+                        energy.1.clone(),
+                        format!(
+                            "the energy {} hartree is below the potential at the reference geometry, {u0} hartree",
+                            energy.0
+                        ),
+                        "give a total energy above the minimum of the potential (same zero as the potential)",
+                    ));
+                }
+                if let Some((cap, at)) = &r.energy_cap
+                    && *cap < energy.0 - u0
+                {
+                    return Err(src.error(
+                        at.clone(),
+                        format!(
+                            "the energy cap {cap} hartree is below the energy above the reference, E − U(reference) = {} hartree",
+                            energy.0 - u0
+                        ),
+                        "raise region.energy_cap above E − U(reference), or lower the energy",
+                    ));
+                }
+                let d = match angular_momentum {
+                    Some(j) => format!("microcanonical at E = {} hartree, |J| = {j} hbar", energy.0),
+                    None => format!("microcanonical at E = {} hartree", energy.0),
+                };
+                (Spec::Microcanonical { energy: energy.0, angular_momentum: *angular_momentum, region: region(r)? }, d)
+            }
+            MethodSpec::NormalModes { energies, rotation } => (
+                Spec::NormalModes { energies: energies.clone(), rotation: rotation.clone() },
+                format!("normal modes, energies {energies:?}, rotation {rotation:?}"),
+            ),
+            MethodSpec::File { path, span } => {
+                let states = read_states(m, path, scene).map_err(|e| match e {
+                    Ok(located) => located,
+                    Err(message) => src.error(
+                        span.clone(),
+                        message,
+                        "give a readable CSV file of states (see the README's \"Ensembles\")",
+                    ),
+                })?;
+                if (states.len() as u64) < self.trajectories {
+                    return Err(src.error(
+                        self.trajectories_span.clone(),
+                        format!(
+                            "{} has {} states but trajectories = {}",
+                            path.display(),
+                            states.len(),
+                            self.trajectories
+                        ),
+                        format!("lower trajectories to at most {}, or add states to the file", states.len()),
+                    ));
+                }
+                (Spec::States(states), format!("{} states from {}", self.trajectories, path.display()))
+            }
+        };
+
+        // Quantities: means (or the default set), then those only histogrammed or correlated.
+        let lookup = |name: &Spanned<String>| -> Result<Quantity, FileError> {
+            Quantity::parse(name.get_ref(), m).ok_or_else(|| {
+                unknown_name(&src, name, "no quantity is called", Quantity::names(m).iter().map(String::as_str))
+            })
+        };
+        let mut quantities: Vec<Quantity> = match &self.statistics.means {
+            Some(list) => list.iter().map(lookup).collect::<Result<_, _>>()?,
+            None => Quantity::default_set::<M, N, NA>(),
+        };
+        quantities.dedup();
+        let n_means = quantities.len();
+        let mut index_of = |q: Quantity| match quantities.iter().position(|x| *x == q) {
+            Some(i) => i,
+            None => {
+                quantities.push(q);
+                quantities.len() - 1
+            }
+        };
+        let mut histograms = Vec::new();
+        for h in &self.statistics.histograms {
+            let qi = index_of(lookup(&h.quantity)?);
+            let at: Vec<usize> = h.times.iter().map(|&t| nearest(times, t)).collect();
+            histograms.push((qi, h.bins, h.range, at));
+        }
+        let mut correlations = Vec::new();
+        for c in &self.statistics.correlations {
+            correlations.push(index_of(lookup(c)?));
+        }
+        Ok(Bound { spec, description, quantities, n_means, histograms, correlations })
+    }
+
+    /// Where `method = ...` is written, for errors of the sampler.
+    pub fn method_span(&self) -> Range<usize> {
+        self.method_span.clone()
+    }
+}
+
+/// The index of the output time nearest to `t`.
+fn nearest(times: &[f64], t: f64) -> usize {
+    let mut best = 0;
+    for (i, &x) in times.iter().enumerate() {
+        if (x - t).abs() < (times[best] - t).abs() {
+            best = i;
+        }
+    }
+    best
+}
+
+fn unknown_name<'a>(
+    src: &Source<'_>,
+    name: &Spanned<String>,
+    what: &str,
+    known: impl Iterator<Item = &'a str> + Clone,
+) -> FileError {
+    let list: Vec<&str> = known.clone().collect();
+    let help = match did_you_mean(name.get_ref(), known) {
+        Some(s) => format!("did you mean `{s}`? the names are {}", list.join(", ")),
+        None => format!("the names are {}", list.join(", ")),
+    };
+    src.error(name.span(), format!("{what} `{}`", name.get_ref()), help)
+}

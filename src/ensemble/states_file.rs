@@ -1,0 +1,134 @@
+//! Initial states from a CSV file (`method = "file"`): one state per row, in atomic units.
+//!
+//! Header: every internal coordinate by name (bohr, rad), optionally `p_NAME` (ħ/bohr, ħ;
+//! missing ones are 0), optionally the Euler angles `phi, theta, psi` (rad, z-x-z; default
+//! `0, π/2, 0`) and either `p_phi, p_theta, p_psi` or the body-frame `Jx, Jy, Jz` (ħ; default
+//! 0). Other columns (`t`, `H`) are ignored, so a `trajectory.csv` written by `rovib run` is a
+//! valid states file. Errors name the CSV file, line and column.
+
+use std::path::Path;
+
+use crate::runtime::Molecule;
+use crate::runtime::diagnostic::{FileError, Source};
+use crate::runtime::hamiltonian::PhaseState;
+use crate::runtime::hamiltonian::fast::{BodyState, quaternion_of_euler};
+use crate::runtime::nalgebra::{SVector, Vector3};
+use crate::scene::Scene;
+
+/// Reads the states in `path`. `Err(Ok(e))` is an error located in the file, `Err(Err(m))` a
+/// file that cannot be read at all.
+pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    path: &Path,
+    _scene: &Scene,
+) -> Result<Vec<BodyState<N>>, Result<FileError, String>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Err(format!("cannot read the states file {}: {e}", path.display())))?;
+    let name = path.display().to_string();
+    let src = Source { path: &name, text: &text };
+    let mut lines = text.lines().scan(0usize, |offset, line| {
+        let start = *offset;
+        *offset += line.len() + 1;
+        Some((start, line))
+    });
+    let Some((_, header)) = lines.next() else {
+        return Err(Ok(
+            src.whole_file("the states file is empty", "write a header line of column names, then one state per line")
+        ));
+    };
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    let find = |name: &str| columns.iter().position(|c| *c == name);
+    let coords = m.coordinates();
+    let mut q_col = [0usize; N];
+    for k in 0..N {
+        q_col[k] = find(coords[k].name).ok_or_else(|| {
+            Ok(src.error(
+                0..header.len(),
+                format!("the states file has no column `{}`", coords[k].name),
+                format!(
+                    "the header must name every coordinate of {}: {}",
+                    m.name(),
+                    coords.iter().map(|c| c.name).collect::<Vec<_>>().join(", ")
+                ),
+            ))
+        })?;
+    }
+    let p_col: Vec<Option<usize>> = (0..N).map(|k| find(&format!("p_{}", coords[k].name))).collect();
+    let triple = |names: [&str; 3]| -> Result<Option<[usize; 3]>, Result<FileError, String>> {
+        let found = names.map(find);
+        match found {
+            [Some(a), Some(b), Some(c)] => Ok(Some([a, b, c])),
+            [None, None, None] => Ok(None),
+            _ => Err(Ok(src.error(
+                0..header.len(),
+                format!("the states file has only some of the columns {}", names.join(", ")),
+                format!("give all of {} or none", names.join(", ")),
+            ))),
+        }
+    };
+    let euler_col = triple(["phi", "theta", "psi"])?;
+    let pe_col = triple(["p_phi", "p_theta", "p_psi"])?;
+    let j_col = triple(["Jx", "Jy", "Jz"])?;
+    if pe_col.is_some() && j_col.is_some() {
+        return Err(Ok(src.error(
+            0..header.len(),
+            "the states file gives both p_phi, p_theta, p_psi and Jx, Jy, Jz",
+            "keep one of them",
+        )));
+    }
+
+    let mut states = Vec::new();
+    let mut values = Vec::with_capacity(columns.len());
+    for (start, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        values.clear();
+        let mut offset = start;
+        for field in line.split(',') {
+            let v: f64 = field.trim().parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
+                Ok(src.error(
+                    offset..offset + field.len(),
+                    format!("`{}` is not a finite number", field.trim()),
+                    "write a number in atomic units",
+                ))
+            })?;
+            values.push(v);
+            offset += field.len() + 1;
+        }
+        if values.len() != columns.len() {
+            return Err(Ok(src.error(
+                start..start + line.len(),
+                format!("this row has {} values but the header names {} columns", values.len(), columns.len()),
+                "write one value per column",
+            )));
+        }
+        let mut q = SVector::<f64, N>::zeros();
+        let mut p = SVector::<f64, N>::zeros();
+        for k in 0..N {
+            q[k] = values[q_col[k]];
+            if let Some(c) = p_col[k] {
+                p[k] = values[c];
+            }
+        }
+        let pick = |c: [usize; 3]| Vector3::new(values[c[0]], values[c[1]], values[c[2]]);
+        let euler = euler_col.map_or(Vector3::new(0.0, std::f64::consts::FRAC_PI_2, 0.0), pick);
+        let state = match (pe_col, j_col) {
+            (Some(c), _) => BodyState::from_phase(&PhaseState { q, p, euler, pe: pick(c) }).map_err(|e| {
+                Ok(src.error(
+                    start..start + line.len(),
+                    format!("this state: {e}"),
+                    "give Jx, Jy, Jz instead of the Euler momenta at gimbal lock",
+                ))
+            })?,
+            (None, j) => {
+                BodyState { q, p, orientation: quaternion_of_euler(&euler), j: j.map_or(Vector3::zeros(), pick) }
+            }
+        };
+        states.push(state);
+    }
+    if states.is_empty() {
+        return Err(Ok(src.whole_file("the states file has a header but no states", "add one line per initial state")));
+    }
+    Ok(states)
+}
