@@ -246,3 +246,23 @@ def test_run_ensemble_means_conserve_energy(tmp_path):
     t, t_err = e.mean("T")
     kt = 300.0 * 3.166811563e-6
     assert abs(t[0] - 3 * kt) < 4 * t_err[0]
+
+
+def test_lab_xyz_reads_in_ase_and_matches_to_lab_of_the_csv(tmp_path):
+    import ase.io
+
+    t = rovib.run(H2O_SCENE, tmp_path / "out")
+    frames = ase.io.read(os.path.join(t.out_dir, "lab.xyz"), index=":")
+    assert len(frames) == len(t)
+    names = rovib.molecule_info("h2o")["coordinates"]["names"]
+    for k in (0, 400, 1000):
+        state = {
+            "q": [column(t, n)[k] for n in names],
+            "p": [column(t, n, "p_")[k] for n in names],
+            "euler": [t[c][k] for c in _euler_names(t)],
+            "pe": [t[c][k] for c in _pe_names(t)],
+        }
+        x, _ = rovib.to_lab("h2o", state)
+        assert frames[k].get_chemical_symbols() == ["O", "H", "H"]
+        # lab.xyz prints positions to at least 12 decimals in Å.
+        assert np.allclose(frames[k].get_positions(), x, rtol=0, atol=1e-9), k
