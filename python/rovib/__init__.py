@@ -1,0 +1,242 @@
+"""rovib from Python: classical rotation-vibration dynamics of polyatomic molecules.
+
+A thin layer over the Rust library (the extension module ``rovib._rovib``): every function runs
+the same code as the ``rovib`` command, so results equal the CLI's. Units are atomic unless
+stated: bohr, rad, electron masses, hartree, time in hbar/E_h (ħ/E_h ≈ 0.0242 fs); masses of
+atoms in Da; lab-frame positions in Å and velocities in Å/fs. Errors raise :class:`RovibError`
+(a ``ValueError``) with the CLI's message.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Tuple, Union
+
+import numpy as np
+
+from . import _rovib
+from ._rovib import AU_TIME_IN_FS, BOHR_IN_ANGSTROM, RovibError
+
+__all__ = [
+    "RovibError",
+    "Trajectory",
+    "Ensemble",
+    "molecules",
+    "molecule_info",
+    "evaluate",
+    "run",
+    "run_ensemble",
+    "from_lab",
+    "to_lab",
+    "BOHR_IN_ANGSTROM",
+    "AU_TIME_IN_FS",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+def molecules() -> List[str]:
+    """The names of the compiled-in molecules, sorted (as ``rovib list``)."""
+    return list(_rovib.molecules_list())
+
+
+def molecule_info(name: str) -> Dict[str, Any]:
+    """Atoms and internal coordinates of molecule ``name``.
+
+    Returns ``{"name", "atoms": {"labels", "elements", "masses_da"}, "coordinates": {"names",
+    "units", "reference"}}``: masses in Da; each coordinate's atomic unit ("bohr" or "rad") and
+    its reference value in that unit (None if the definition gives none).
+    """
+    return _rovib.molecule_info(name)
+
+
+def evaluate(name: str, q=None, p=None, euler=None, pe=None) -> Dict[str, Any]:
+    """Everything about one state of molecule ``name``, as ``rovib eval`` prints it.
+
+    ``q`` (bohr or rad, default the reference geometry), ``p`` (ħ/bohr or ħ, default 0),
+    ``euler`` (φ, θ, ψ in rad, default (0, π/2, 0)), ``pe`` (p_φ, p_θ, p_ψ in ħ, default 0).
+    Returns ``H``, ``U``, ``T`` (hartree), ``positions`` (body frame, bohr, one row per atom), the
+    kinetic matrices ``a``, ``A``, ``I``, the G matrices ``G11``, ``G12``, ``G22``, the body-frame
+    angular momentum ``J`` (ħ) and ``rhs`` (dq/dt, dp/dt, deuler/dt, dpe/dt per ħ/E_h).
+    """
+    return _rovib.evaluate(name, _vec(q), _vec(p), _vec(euler), _vec(pe))
+
+
+def _vec(x) -> Optional[List[float]]:
+    return None if x is None else [float(v) for v in np.asarray(x, dtype=float).ravel()]
+
+
+def _rows(x) -> Optional[List[List[float]]]:
+    if x is None:
+        return None
+    a = np.asarray(x, dtype=float)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise RovibError(f"error: expected an array of shape (atoms, 3), got shape {a.shape}")
+    return a.tolist()
+
+
+@dataclass
+class Trajectory:
+    """A finished run: the columns of ``trajectory.csv`` as NumPy arrays, and ``summary.json``.
+
+    ``columns`` maps each CSV header name to its array (``t`` in the scene's time unit,
+    ``summary["time_unit"]``; q in bohr or rad, p in ħ/bohr or ħ, Euler angles in rad, H in
+    hartree). ``units`` maps names to units when the run wrote ``trajectory.units.json``, else it
+    is empty. ``out_dir`` holds every file written (lab.xyz, plots ...).
+    """
+
+    out_dir: str
+    columns: Dict[str, np.ndarray]
+    summary: Dict[str, Any]
+    units: Dict[str, str] = field(default_factory=dict)
+    files: List[str] = field(default_factory=list)
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    def __len__(self) -> int:
+        return len(next(iter(self.columns.values()))) if self.columns else 0
+
+    @property
+    def names(self) -> List[str]:
+        """The column names, in file order."""
+        return list(self.columns)
+
+
+@dataclass
+class Ensemble:
+    """A finished ensemble: means and standard errors per output time and quantity.
+
+    ``means[k, j]`` and ``stderr[k, j]`` are quantity ``quantities[j]`` (unit ``units[j]``) at
+    ``times[k]`` (hbar/E_h); ``summary`` is summary.json; ``out_dir`` holds every file written.
+    """
+
+    out_dir: str
+    times: np.ndarray
+    quantities: List[str]
+    units: List[str]
+    means: np.ndarray
+    stderr: np.ndarray
+    summary: Dict[str, Any]
+    report: Dict[str, Any]
+
+    def mean(self, quantity: str) -> Tuple[np.ndarray, np.ndarray]:
+        """The mean of ``quantity`` and its standard error at every output time."""
+        j = self.quantities.index(quantity)
+        return self.means[:, j], self.stderr[:, j]
+
+
+def _scene_path(scene, out_dir: str) -> str:
+    """A scene file for ``scene``: the path itself, or a dict written as TOML to out_dir/scene.toml
+    (kept there, so that error messages point to a file that exists)."""
+    if isinstance(scene, dict):
+        path = os.path.join(out_dir, "scene.toml")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(_rovib.scene_toml(scene))
+        return path
+    return os.fspath(scene)
+
+
+def _out_dir(out_dir: Optional[PathLike]) -> str:
+    if out_dir is None:
+        return tempfile.mkdtemp(prefix="rovib-")
+    os.makedirs(out_dir, exist_ok=True)
+    return os.fspath(out_dir)
+
+
+def read_trajectory(out_dir: PathLike) -> Trajectory:
+    """Reads the outputs of a finished run in ``out_dir`` (trajectory.csv, summary.json, and
+    trajectory.units.json when present)."""
+    out_dir = os.fspath(out_dir)
+    path = os.path.join(out_dir, "trajectory.csv")
+    with open(path, newline="", encoding="utf-8") as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        rows = [[float(x) for x in row] for row in reader if row]
+    data = np.array(rows, dtype=float).reshape(len(rows), len(header))
+    columns = {name: data[:, j].copy() for j, name in enumerate(header)}
+    summary = _read_json(os.path.join(out_dir, "summary.json")) or {}
+    units = _read_json(os.path.join(out_dir, "trajectory.units.json")) or {}
+    if "columns" in units and isinstance(units["columns"], dict):
+        units = units["columns"]
+    return Trajectory(out_dir=out_dir, columns=columns, summary=summary, units=units)
+
+
+def _read_json(path: str):
+    if not os.path.exists(path):
+        return None
+    with open(path, encoding="utf-8") as f:
+        return json.load(f)
+
+
+def run(scene: Union[PathLike, Dict[str, Any]], out_dir: Optional[PathLike] = None) -> Trajectory:
+    """Runs a scene exactly as ``rovib run SCENE --out OUT_DIR`` does and reads its outputs.
+
+    ``scene`` is a scene file's path or a dict with the same keys (written to
+    ``OUT_DIR/scene.toml``; relative paths inside it then resolve from OUT_DIR). ``out_dir``
+    defaults to a new temporary directory, which is kept. The scene must write "trajectory"
+    (the default outputs do).
+    """
+    out = _out_dir(out_dir)
+    path = _scene_path(scene, out)
+    files = [os.fspath(f) for f in _rovib.run_scene(path, out)]
+    if not os.path.exists(os.path.join(out, "trajectory.csv")):
+        raise RovibError(f"error: the run wrote no trajectory.csv into {out} (add \"trajectory\" to the scene's outputs)")
+    trajectory = read_trajectory(out)
+    trajectory.files = files
+    return trajectory
+
+
+def run_ensemble(
+    scene: Union[PathLike, Dict[str, Any]], out_dir: Optional[PathLike] = None, threads: Optional[int] = None
+) -> Ensemble:
+    """Runs the ensemble of a scene with an ``[ensemble]`` table as ``rovib ensemble`` does.
+
+    ``threads`` overrides the scene's (default: the scene's, else every core); the statistics
+    do not depend on it. Returns the means and standard errors per output time (ħ/E_h).
+    """
+    out = _out_dir(out_dir)
+    path = _scene_path(scene, out)
+    report = _rovib.run_ensemble_scene(path, out, threads)
+    summary = _read_json(os.path.join(out, "summary.json")) or {}
+    return Ensemble(
+        out_dir=out,
+        times=report["times"],
+        quantities=list(report["quantities"]),
+        units=list(report["units"]),
+        means=report["means"],
+        stderr=report["stderr"],
+        summary=summary,
+        report=report,
+    )
+
+
+def from_lab(name: str, positions, velocities=None, initial_q=None) -> Dict[str, Any]:
+    """rovib's phase state of lab-frame Cartesians of molecule ``name``.
+
+    ``positions`` in Å and ``velocities`` in Å/fs (default zero), shape (atoms, 3) in the
+    molecule's atom order. Returns ``q``, ``p``, ``euler``, ``pe`` (atomic units), ``com``
+    (``position`` in bohr, ``velocity`` in bohr per ħ/E_h) and ``fit`` (residuals of the fit;
+    velocity parts the internal coordinates cannot represent are discarded and reported).
+    """
+    return _rovib.from_lab_frame(name, _rows(positions), _rows(velocities), _vec(initial_q))
+
+
+def to_lab(name: str, state: Dict[str, Any]) -> Tuple[np.ndarray, np.ndarray]:
+    """Lab-frame positions (Å) and velocities (Å/fs), shape (atoms, 3), of a state of molecule
+    ``name``: a dict with ``q``, ``p``, ``euler``, ``pe`` (atomic units) and optionally ``com``
+    as :func:`from_lab` returns it (default at rest at the origin)."""
+    com = state.get("com") or {}
+    return _rovib.to_lab_frame(
+        name,
+        _vec(state.get("q")),
+        _vec(state.get("p")),
+        _vec(state.get("euler")),
+        _vec(state.get("pe")),
+        _vec(com.get("position")),
+        _vec(com.get("velocity")),
+    )

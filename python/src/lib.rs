@@ -1,0 +1,508 @@
+//! `rovib._rovib`: the Python extension module, a thin layer over the rovib library.
+//!
+//! Every function calls the same library code as the `rovib` command (`cli::run::run`,
+//! `ensemble::run_ensemble`, `runtime::hamiltonian::evaluate`, `runtime::frames`), so results
+//! from Python equal the CLI's by construction. Errors become `rovib.RovibError` (a
+//! `ValueError`) with the CLI's message text. The pure-Python package `rovib` (python/rovib/)
+//! wraps these functions: reading the CSV outputs into NumPy arrays, dict scenes, ASE.
+
+use std::path::PathBuf;
+
+use numpy::{PyArray1, PyArray2};
+use pyo3::create_exception;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+
+use rovib::cli::CliError;
+use rovib::ensemble::{EnsembleOptions, EnsembleReport};
+use rovib::molecules;
+use rovib::runtime::hamiltonian::{PhaseState, evaluate as evaluate_state};
+use rovib::runtime::nalgebra::{DMatrix, SMatrix, SVector, Vector3};
+use rovib::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM};
+use rovib::runtime::{CentreOfMass, FitOptions, LabState, Molecule, MoleculeVisitor, from_lab, to_lab};
+
+create_exception!(
+    _rovib,
+    RovibError,
+    PyValueError,
+    "An error of rovib, with the same message as the `rovib` command prints."
+);
+
+/// A `RovibError` with the CLI's text for `e` (a located file error is already `error: ...`).
+fn cli_error(e: CliError) -> PyErr {
+    match e {
+        CliError::File(f) => RovibError::new_err(f.to_string()),
+        CliError::Message(_) => RovibError::new_err(format!("error: {e}")),
+    }
+}
+
+/// A `RovibError` from a one-line message, formatted as the CLI prints it.
+fn message(m: impl std::fmt::Display) -> PyErr {
+    RovibError::new_err(format!("error: {m}"))
+}
+
+/// The CLI's text for a molecule name that is not compiled in.
+fn unknown_molecule(name: &str) -> PyErr {
+    message(format!(
+        "unknown molecule `{name}`; the compiled-in molecules are {} (add molecules/{name}.toml and rebuild to add it)",
+        molecules::NAMES.join(", ")
+    ))
+}
+
+/// Lab-frame velocity conversion: 1 Å/fs in bohr per ħ/E_h.
+fn angstrom_per_fs_in_au() -> f64 {
+    AU_TIME_IN_FS / BOHR_IN_ANGSTROM
+}
+
+/// A dense matrix as a list of rows.
+fn rows(m: DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows()).map(|i| (0..m.ncols()).map(|j| m[(i, j)]).collect()).collect()
+}
+
+fn dense<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Vec<Vec<f64>> {
+    rows(DMatrix::from_column_slice(R, C, m.as_slice()))
+}
+
+/// One state array given from Python, checked for length and finiteness (as `rovib eval` does).
+fn vector<const K: usize>(
+    name: &str,
+    field: &str,
+    meaning: &str,
+    values: &Option<Vec<f64>>,
+    default: SVector<f64, K>,
+) -> Result<SVector<f64, K>, String> {
+    let Some(values) = values else { return Ok(default) };
+    if values.len() != K {
+        return Err(format!("{name}: `{field}` has {} entries, expected {K} ({meaning})", values.len()));
+    }
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(format!("{name}: `{field}[{i}]` is not a finite number ({meaning})"));
+    }
+    Ok(SVector::from_column_slice(values))
+}
+
+/// A phase state as four optional arrays (atomic units).
+#[derive(Clone, Default)]
+struct StateArgs {
+    q: Option<Vec<f64>>,
+    p: Option<Vec<f64>>,
+    euler: Option<Vec<f64>>,
+    pe: Option<Vec<f64>>,
+}
+
+impl StateArgs {
+    /// The phase state for `m`: `q` defaults to the reference geometry, `p` and `pe` to zero,
+    /// `euler` to (0, π/2, 0) rad, as in `rovib eval`.
+    fn phase<M: Molecule<N, NA>, const N: usize, const NA: usize>(&self, m: &M) -> Result<PhaseState<N>, String> {
+        let reference = m.reference_geometry();
+        if self.q.is_none() && reference.is_none() {
+            return Err(format!(
+                "state: `q` is missing and {} has no reference geometry to default to (give q)",
+                m.name()
+            ));
+        }
+        let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
+        let coordinates = format!("one per coordinate of {}: {}, in bohr or rad", m.name(), names.join(", "));
+        let momenta = format!("one momentum per coordinate of {}: {}", m.name(), names.join(", "));
+        Ok(PhaseState {
+            q: vector("state", "q", &coordinates, &self.q, reference.unwrap_or_else(SVector::zeros))?,
+            p: vector("state", "p", &momenta, &self.p, SVector::zeros())?,
+            euler: vector(
+                "state",
+                "euler",
+                "phi, theta, psi in rad",
+                &self.euler,
+                Vector3::new(0.0, std::f64::consts::FRAC_PI_2, 0.0),
+            )?,
+            pe: vector("state", "pe", "p_phi, p_theta, p_psi in hbar", &self.pe, Vector3::zeros())?,
+        })
+    }
+}
+
+/// What `molecule_info` returns, in plain Rust data.
+struct Info {
+    labels: Vec<&'static str>,
+    elements: Vec<&'static str>,
+    masses_da: Vec<f64>,
+    coordinates: Vec<&'static str>,
+    units: Vec<&'static str>,
+    reference: Vec<Option<f64>>,
+}
+
+struct InfoVisitor;
+
+impl MoleculeVisitor for InfoVisitor {
+    type Output = Info;
+
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Info {
+        Info {
+            labels: m.atoms().iter().map(|a| a.label).collect(),
+            elements: m.atoms().iter().map(|a| a.element).collect(),
+            masses_da: m.atoms().iter().map(|a| a.mass_da).collect(),
+            coordinates: m.coordinates().iter().map(|c| c.name).collect(),
+            units: m.coordinates().iter().map(|c| c.unit.atomic().name()).collect(),
+            reference: m.coordinates().iter().map(|c| c.reference).collect(),
+        }
+    }
+}
+
+/// What `evaluate` returns, in plain Rust data.
+struct Evaluated {
+    h: f64,
+    u: f64,
+    t: f64,
+    positions: Vec<Vec<f64>>,
+    a: Vec<Vec<f64>>,
+    coriolis: Vec<Vec<f64>>,
+    inertia: Vec<Vec<f64>>,
+    g11: Vec<Vec<f64>>,
+    g12: Vec<Vec<f64>>,
+    g22: Vec<Vec<f64>>,
+    j: Vec<f64>,
+    rhs: [Vec<f64>; 4],
+}
+
+struct EvalVisitor(StateArgs);
+
+impl MoleculeVisitor for EvalVisitor {
+    type Output = Result<Evaluated, String>;
+
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        let state = self.0.phase(&m)?;
+        let e = evaluate_state(&m, &state).map_err(|e| format!("cannot evaluate {}: {e}", m.name()))?;
+        Ok(Evaluated {
+            h: e.hamiltonian,
+            u: e.potential,
+            t: e.kinetic_energy,
+            positions: dense(&e.positions.transpose()),
+            a: dense(&e.kinetic.a),
+            coriolis: dense(&e.kinetic.coriolis),
+            inertia: dense(&e.kinetic.inertia),
+            g11: dense(&e.g.g11),
+            g12: dense(&e.g.g12),
+            g22: dense(&e.g.g22),
+            j: e.angular_momentum.as_slice().to_vec(),
+            rhs: [
+                e.rhs.q.as_slice().to_vec(),
+                e.rhs.p.as_slice().to_vec(),
+                e.rhs.euler.as_slice().to_vec(),
+                e.rhs.pe.as_slice().to_vec(),
+            ],
+        })
+    }
+}
+
+/// A state converted from the lab frame.
+struct FromLab {
+    state: [Vec<f64>; 4],
+    com: [Vec<f64>; 2],
+    report: [f64; 3],
+    iterations: usize,
+}
+
+struct FromLabVisitor {
+    /// Positions, bohr, one row per atom.
+    positions: Vec<[f64; 3]>,
+    /// Velocities, bohr per ħ/E_h, one row per atom.
+    velocities: Vec<[f64; 3]>,
+    initial_q: Option<Vec<f64>>,
+}
+
+/// A 3 × NA matrix from rows per atom, or the message for a wrong atom count.
+fn columns<const NA: usize>(name: &str, what: &str, rows: &[[f64; 3]]) -> Result<SMatrix<f64, 3, NA>, String> {
+    if rows.len() != NA {
+        return Err(format!("{what} have {} rows, expected one per atom of {name} ({NA})", rows.len()));
+    }
+    Ok(SMatrix::from_fn(|i, j| rows[j][i]))
+}
+
+impl MoleculeVisitor for FromLabVisitor {
+    type Output = Result<FromLab, String>;
+
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        let lab = LabState {
+            positions: columns::<NA>(m.name(), "positions", &self.positions)?,
+            velocities: columns::<NA>(m.name(), "velocities", &self.velocities)?,
+        };
+        let mut options = FitOptions::<N>::default();
+        if let Some(q) = &self.initial_q {
+            options.initial_q = Some(vector(
+                "from_lab",
+                "initial_q",
+                "one per coordinate, bohr or rad",
+                &Some(q.clone()),
+                SVector::zeros(),
+            )?);
+        }
+        let (s, com, report) =
+            from_lab(&m, &lab, &options).map_err(|e| format!("cannot convert the lab state of {}: {e}", m.name()))?;
+        Ok(FromLab {
+            state: [
+                s.q.as_slice().to_vec(),
+                s.p.as_slice().to_vec(),
+                s.euler.as_slice().to_vec(),
+                s.pe.as_slice().to_vec(),
+            ],
+            com: [com.position.as_slice().to_vec(), com.velocity.as_slice().to_vec()],
+            report: [report.position_residual, report.velocity_residual, report.discarded_kinetic_energy],
+            iterations: report.iterations,
+        })
+    }
+}
+
+struct ToLabVisitor {
+    state: StateArgs,
+    com: [[f64; 3]; 2],
+}
+
+impl MoleculeVisitor for ToLabVisitor {
+    /// Positions (bohr) and velocities (bohr per ħ/E_h), one row per atom.
+    type Output = Result<(Vec<Vec<f64>>, Vec<Vec<f64>>), String>;
+
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        let state = self.state.phase(&m)?;
+        let com = CentreOfMass { position: Vector3::from(self.com[0]), velocity: Vector3::from(self.com[1]) };
+        let lab: LabState<NA> = to_lab(&m, &state, &com)
+            .map_err(|e| format!("cannot convert the state of {} to the lab frame: {e}", m.name()))?;
+        Ok((dense(&lab.positions.transpose()), dense(&lab.velocities.transpose())))
+    }
+}
+
+/// The names of the compiled-in molecules, sorted.
+#[pyfunction]
+fn molecules_list() -> Vec<&'static str> {
+    molecules::NAMES.to_vec()
+}
+
+/// Atoms and coordinates of molecule `name`: atom labels, elements and masses (Da); coordinate
+/// names, their atomic units (bohr or rad) and reference values in those units (None if the
+/// definition gives none).
+#[pyfunction]
+fn molecule_info<'py>(py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyDict>> {
+    let info = molecules::visit(name, InfoVisitor).ok_or_else(|| unknown_molecule(name))?;
+    let d = PyDict::new(py);
+    d.set_item("name", name)?;
+    let atoms = PyDict::new(py);
+    atoms.set_item("labels", info.labels)?;
+    atoms.set_item("elements", info.elements)?;
+    atoms.set_item("masses_da", PyArray1::from_vec(py, info.masses_da))?;
+    d.set_item("atoms", atoms)?;
+    let coordinates = PyDict::new(py);
+    coordinates.set_item("names", info.coordinates)?;
+    coordinates.set_item("units", info.units)?;
+    coordinates.set_item("reference", info.reference)?;
+    d.set_item("coordinates", coordinates)?;
+    Ok(d)
+}
+
+fn matrix<'py>(py: Python<'py>, rows: &[Vec<f64>]) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    Ok(PyArray2::from_vec2(py, rows)?)
+}
+
+/// H, U, T, the kinetic and G matrices, J and the right-hand side at a state (atomic units).
+#[pyfunction]
+#[pyo3(signature = (name, q=None, p=None, euler=None, pe=None))]
+fn evaluate<'py>(
+    py: Python<'py>,
+    name: &str,
+    q: Option<Vec<f64>>,
+    p: Option<Vec<f64>>,
+    euler: Option<Vec<f64>>,
+    pe: Option<Vec<f64>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let e = molecules::visit(name, EvalVisitor(StateArgs { q, p, euler, pe }))
+        .ok_or_else(|| unknown_molecule(name))?
+        .map_err(message)?;
+    let d = PyDict::new(py);
+    d.set_item("H", e.h)?;
+    d.set_item("U", e.u)?;
+    d.set_item("T", e.t)?;
+    d.set_item("positions", matrix(py, &e.positions)?)?;
+    d.set_item("a", matrix(py, &e.a)?)?;
+    d.set_item("A", matrix(py, &e.coriolis)?)?;
+    d.set_item("I", matrix(py, &e.inertia)?)?;
+    d.set_item("G11", matrix(py, &e.g11)?)?;
+    d.set_item("G12", matrix(py, &e.g12)?)?;
+    d.set_item("G22", matrix(py, &e.g22)?)?;
+    d.set_item("J", PyArray1::from_slice(py, &e.j))?;
+    let rhs = PyDict::new(py);
+    for (key, v) in ["q", "p", "euler", "pe"].iter().zip(&e.rhs) {
+        rhs.set_item(*key, PyArray1::from_slice(py, v))?;
+    }
+    d.set_item("rhs", rhs)?;
+    Ok(d)
+}
+
+/// Runs the scene file at `path` into `out_dir` exactly as `rovib run` does; returns the files
+/// written.
+#[pyfunction]
+fn run_scene(py: Python<'_>, path: PathBuf, out_dir: PathBuf) -> PyResult<Vec<PathBuf>> {
+    let report = py.detach(|| rovib::cli::run::run(&path, Some(&out_dir), true)).map_err(cli_error)?;
+    Ok(report.files)
+}
+
+/// Runs the ensemble of the scene file at `path` into `out_dir` as `rovib ensemble` does.
+#[pyfunction]
+#[pyo3(signature = (path, out_dir, threads=None))]
+fn run_ensemble_scene<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    out_dir: PathBuf,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let report: EnsembleReport = py
+        .detach(|| {
+            let scene = rovib::ensemble::load_scene(&path)?;
+            let mut options = EnsembleOptions::new(out_dir);
+            options.threads = threads;
+            rovib::ensemble::run_ensemble(&scene, &options)
+        })
+        .map_err(cli_error)?;
+    let (k, nq) = (report.times.len(), report.quantities.len());
+    let mut means = vec![vec![f64::NAN; nq]; k];
+    let mut stderr = vec![vec![f64::NAN; nq]; k];
+    for (i, row) in means.iter_mut().enumerate() {
+        for (j, q) in report.quantities.iter().enumerate() {
+            if let Some((m, s)) = report.mean(q, i) {
+                row[j] = m;
+                stderr[i][j] = s;
+            }
+        }
+    }
+    let d = PyDict::new(py);
+    d.set_item("status", report.status.name())?;
+    d.set_item("requested", report.requested)?;
+    d.set_item("completed", report.outcome.completed)?;
+    d.set_item("failed", report.outcome.failed.clone())?;
+    d.set_item("times", PyArray1::from_slice(py, &report.times))?;
+    d.set_item("quantities", report.quantities.clone())?;
+    d.set_item("units", report.units.clone())?;
+    d.set_item("means", matrix(py, &means)?)?;
+    d.set_item("stderr", matrix(py, &stderr)?)?;
+    d.set_item("seed", report.seed)?;
+    d.set_item("threads", report.threads)?;
+    d.set_item("sampler", report.sampler.clone())?;
+    d.set_item("wall_time_s", report.wall_time)?;
+    d.set_item("files", report.files.clone())?;
+    Ok(d)
+}
+
+/// The phase state (atomic units), centre of mass (bohr, bohr per ħ/E_h) and fit report of
+/// lab-frame positions (Å, one row per atom) and velocities (Å/fs).
+#[pyfunction]
+#[pyo3(signature = (name, positions, velocities=None, initial_q=None))]
+fn from_lab_frame<'py>(
+    py: Python<'py>,
+    name: &str,
+    positions: Vec<[f64; 3]>,
+    velocities: Option<Vec<[f64; 3]>>,
+    initial_q: Option<Vec<f64>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let to_bohr = 1.0 / BOHR_IN_ANGSTROM;
+    let v = angstrom_per_fs_in_au();
+    let velocities = velocities.unwrap_or_else(|| vec![[0.0; 3]; positions.len()]);
+    let visitor = FromLabVisitor {
+        positions: positions.iter().map(|r| r.map(|x| x * to_bohr)).collect(),
+        velocities: velocities.iter().map(|r| r.map(|x| x * v)).collect(),
+        initial_q,
+    };
+    let out = molecules::visit(name, visitor).ok_or_else(|| unknown_molecule(name))?.map_err(message)?;
+    let d = PyDict::new(py);
+    for (key, values) in ["q", "p", "euler", "pe"].iter().zip(&out.state) {
+        d.set_item(*key, PyArray1::from_slice(py, values))?;
+    }
+    let com = PyDict::new(py);
+    com.set_item("position", PyArray1::from_slice(py, &out.com[0]))?;
+    com.set_item("velocity", PyArray1::from_slice(py, &out.com[1]))?;
+    d.set_item("com", com)?;
+    let fit = PyDict::new(py);
+    fit.set_item("iterations", out.iterations)?;
+    fit.set_item("position_residual_bohr", out.report[0])?;
+    fit.set_item("velocity_residual_au", out.report[1])?;
+    fit.set_item("discarded_kinetic_energy_hartree", out.report[2])?;
+    d.set_item("fit", fit)?;
+    Ok(d)
+}
+
+/// Lab-frame positions (Å) and velocities (Å/fs), one row per atom, of a phase state (atomic
+/// units) with its centre of mass (bohr, bohr per ħ/E_h; default at rest at the origin).
+#[pyfunction]
+#[pyo3(signature = (name, q=None, p=None, euler=None, pe=None, com_position=None, com_velocity=None))]
+fn to_lab_frame<'py>(
+    py: Python<'py>,
+    name: &str,
+    q: Option<Vec<f64>>,
+    p: Option<Vec<f64>>,
+    euler: Option<Vec<f64>>,
+    pe: Option<Vec<f64>>,
+    com_position: Option<[f64; 3]>,
+    com_velocity: Option<[f64; 3]>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let visitor = ToLabVisitor {
+        state: StateArgs { q, p, euler, pe },
+        com: [com_position.unwrap_or_default(), com_velocity.unwrap_or_default()],
+    };
+    let (x, v) = molecules::visit(name, visitor).ok_or_else(|| unknown_molecule(name))?.map_err(message)?;
+    let x: Vec<Vec<f64>> = x.iter().map(|r| r.iter().map(|c| c * BOHR_IN_ANGSTROM).collect()).collect();
+    let v: Vec<Vec<f64>> = v.iter().map(|r| r.iter().map(|c| c / angstrom_per_fs_in_au()).collect()).collect();
+    PyTuple::new(py, [matrix(py, &x)?.into_any(), matrix(py, &v)?.into_any()])
+}
+
+/// A Python value of a scene (dict, list, str, int, float, bool) as TOML; `at` names it in
+/// messages.
+fn toml_value(v: &Bound<'_, PyAny>, at: &str) -> PyResult<toml::Value> {
+    // bool before int: Python's bool is an int.
+    if v.is_instance_of::<PyBool>() {
+        Ok(toml::Value::Boolean(v.extract()?))
+    } else if v.is_instance_of::<PyInt>() {
+        Ok(toml::Value::Integer(v.extract()?))
+    } else if v.is_instance_of::<PyFloat>() {
+        Ok(toml::Value::Float(v.extract()?))
+    } else if v.is_instance_of::<PyString>() {
+        Ok(toml::Value::String(v.extract()?))
+    } else if let Ok(d) = v.cast::<PyDict>() {
+        let mut table = toml::Table::new();
+        for (k, item) in d.iter() {
+            let key: String = k.extract().map_err(|_| message(format!("scene: the keys of `{at}` must be strings")))?;
+            let path = if at.is_empty() { key.clone() } else { format!("{at}.{key}") };
+            table.insert(key, toml_value(&item, &path)?);
+        }
+        Ok(toml::Value::Table(table))
+    } else if v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>() || v.hasattr("tolist")? {
+        let items: Vec<Bound<'_, PyAny>> =
+            if v.hasattr("tolist")? { v.call_method0("tolist")?.extract()? } else { v.extract()? };
+        let values: PyResult<Vec<toml::Value>> =
+            items.iter().enumerate().map(|(i, x)| toml_value(x, &format!("{at}[{i}]"))).collect();
+        Ok(toml::Value::Array(values?))
+    } else {
+        Err(message(format!(
+            "scene: `{at}` is a {}, which a scene cannot hold (use a dict, list, str, int, float or bool)",
+            v.get_type().name()?
+        )))
+    }
+}
+
+/// The TOML text of a scene given as a dict (the same keys as a scene file).
+#[pyfunction]
+fn scene_toml(scene: &Bound<'_, PyDict>) -> PyResult<String> {
+    let value = toml_value(scene.as_any(), "")?;
+    toml::to_string(&value).map_err(|e| message(format!("scene: cannot write it as toml: {e}")))
+}
+
+/// The module.
+#[pymodule]
+fn _rovib(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("RovibError", m.py().get_type::<RovibError>())?;
+    m.add_function(wrap_pyfunction!(molecules_list, m)?)?;
+    m.add_function(wrap_pyfunction!(molecule_info, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(run_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(run_ensemble_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(from_lab_frame, m)?)?;
+    m.add_function(wrap_pyfunction!(to_lab_frame, m)?)?;
+    m.add_function(wrap_pyfunction!(scene_toml, m)?)?;
+    m.add("BOHR_IN_ANGSTROM", BOHR_IN_ANGSTROM)?;
+    m.add("AU_TIME_IN_FS", AU_TIME_IN_FS)?;
+    Ok(())
+}
