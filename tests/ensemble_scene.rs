@@ -223,10 +223,11 @@ fn a_scene_needs_initial_or_ensemble() {
 
 #[test]
 fn the_samplers_own_refusal_is_located_at_the_method() {
-    // One quantum number for water's three modes: refused by the sampler (today because
-    // normal-mode sampling is not there yet, later because of the count), located at `method`.
+    // One quantum number for water's three modes: refused by the normal-mode sampler (the
+    // count), located at `method`.
     let e = error("[ensemble]\ntrajectories = 10\nmethod = \"normal-modes\"\nquanta = [0]");
     check(&e, 4, "cannot sample this ensemble", "change the method or its parameters");
+    assert!(e.message.contains("give 3 quantum numbers"), "{e}");
 }
 
 #[test]

@@ -1,8 +1,8 @@
 //! `rovib bench --ensemble SCENE.toml`: ensemble throughput (trajectories per second) on 1 and
 //! 2 threads, the parallel efficiency, and the cost of the statistics against the integration.
 //!
-//! Initial states come from the scene's own sampler when it can be built; otherwise (until the
-//! thermal sampler exists) from a Gaussian spread about the scene's `[initial]` state: q ± 0.02
+//! Initial states come from the scene's own sampler when it can be built; otherwise (a scene
+//! whose method cannot be sampled) from a Gaussian spread about the scene's `[initial]` state: q ± 0.02
 //! (bohr, rad), p ± 0.5 (ħ/bohr, ħ), J ± 2 ħ per component, uniform orientation, drawn from
 //! trajectory i's own stream. The report says which was used.
 //!

@@ -14,6 +14,7 @@ pub mod bench;
 pub mod bench_ensemble;
 pub mod ensemble;
 mod eval;
+pub mod freq;
 mod list;
 pub mod run;
 
@@ -41,6 +42,16 @@ pub enum Command {
         /// with euler = [0, pi/2, 0].
         #[arg(long)]
         state: Option<PathBuf>,
+    },
+    /// Harmonic normal modes and rotational constants at the stationary point near the
+    /// reference geometry (cm-1, MHz; says whether it is a minimum).
+    Freq {
+        /// The molecule's name, as in `rovib list`.
+        #[arg(long)]
+        molecule: String,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
     },
     /// Integrate a scene: write trajectory.csv, lab.xyz and summary.json.
     Run {
@@ -140,6 +151,7 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
         Command::Run { scene, out, quiet } if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) => {
             run_ensemble(&scene, out.as_deref(), None, quiet)
         }
+        Command::Freq { molecule, json } => say(&freq::freq(&molecule, json)?),
         Command::Ensemble { scene, out, threads, quiet } => run_ensemble(&scene, out.as_deref(), threads, quiet),
         Command::Run { scene, out, quiet } => {
             let report = run::run(&scene, out.as_deref(), quiet)?;
