@@ -20,6 +20,7 @@ pub mod quantity;
 pub mod runner;
 pub mod scene;
 mod states_file;
+pub mod states_xyz;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -634,7 +634,7 @@ impl EnsembleScene {
                     Err(message) => src.error(
                         span.clone(),
                         message,
-                        "give a readable CSV file of states (see the README's \"Ensembles\")",
+                        "give a readable CSV or extended XYZ file of states (see the README's \"Ensembles\")",
                     ),
                 })?;
                 if (states.len() as u64) < self.trajectories {

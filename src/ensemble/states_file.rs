@@ -1,4 +1,5 @@
-//! Initial states from a CSV file (`method = "file"`): one state per row, in atomic units.
+//! Initial states from a CSV file (`method = "file"`): one state per row, in atomic units
+//! (a `.xyz`/`.extxyz` path is read as extended XYZ by [`super::states_xyz`]).
 //!
 //! Header: every internal coordinate by name (bohr, rad), optionally `p_NAME` (ħ/bohr, ħ;
 //! missing ones are 0), optionally the Euler angles `phi, theta, psi` (rad, z-x-z; default
@@ -25,6 +26,9 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let text = std::fs::read_to_string(path)
         .map_err(|e| Err(format!("cannot read the states file {}: {e}", path.display())))?;
     let name = path.display().to_string();
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xyz") || e.eq_ignore_ascii_case("extxyz")) {
+        return super::states_xyz::read_xyz(m, &name, &text).map_err(Ok);
+    }
     let src = Source { path: &name, text: &text };
     let mut lines = text.lines().scan(0usize, |offset, line| {
         let start = *offset;
