@@ -42,7 +42,7 @@ fn layout(properties: Option<&str>) -> Result<Layout, String> {
         return Ok(Layout { species: 0, pos: 1, velocity: None, width: 4 });
     };
     let fields: Vec<&str> = p.split(':').collect();
-    if fields.len() % 3 != 0 {
+    if !fields.len().is_multiple_of(3) {
         return Err(format!("`Properties={p}` is not a list of name:type:count triples"));
     }
     let (mut species, mut pos, mut velocity, mut column) = (None, None, None, 0usize);
