@@ -115,6 +115,17 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                 let k = index(name, "q")?;
                 qv[k] = scene.units.coordinate_to_au(coords[k].unit, *value);
                 given[k] = true;
+                // Outside its range a coordinate describes a mirror image or no geometry at all
+                // (a negative bond length); only the start is checked, a run may leave it.
+                if !coords[k].contains(qv[k]) {
+                    let per_au = 1.0 / scene.units.coordinate_to_au(coords[k].unit, 1.0);
+                    let (low, high) = (coords[k].range.0 * per_au, coords[k].range.1 * per_au);
+                    return Err(src.error(
+                        name.span(),
+                        format!("{} = {value} is outside its valid range [{low}, {high}]", coords[k].name),
+                        format!("give {} a value in [{low}, {high}] (the scene's units)", coords[k].name),
+                    ));
+                }
             }
             if let Some(k) = (0..N).find(|&k| !given[k]) {
                 let reference = m.reference_geometry().ok_or_else(|| {

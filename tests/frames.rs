@@ -7,7 +7,7 @@ mod common;
 use common::for_each_molecule;
 
 use common::{Rng, random_state};
-use rovib::molecules::{H2o, H2oRigid};
+use rovib::molecules::{Ch4, H2o, H2oRigid, Nh3};
 use rovib::runtime::frames::{CentreOfMass, FitOptions, FrameError, LabState, from_lab, lab_angular_momentum, to_lab};
 use rovib::runtime::hamiltonian::{PhaseState, body_angular_momentum, hamiltonian, rotation_matrix};
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
@@ -217,4 +217,89 @@ fn non_finite_input_is_rejected() {
     let mut state = random_state(&m, &mut rng);
     state.pe[0] = f64::NAN;
     assert!(matches!(to_lab(&m, &state, &CentreOfMass::AT_REST), Err(FrameError::NonFinite { .. })));
+}
+
+/// Every permutation of `0..n` (Heap's algorithm), for the labellings of equivalent atoms.
+fn permutations(n: usize) -> Vec<Vec<usize>> {
+    fn heap(k: usize, a: &mut Vec<usize>, out: &mut Vec<Vec<usize>>) {
+        if k <= 1 {
+            out.push(a.clone());
+            return;
+        }
+        for i in 0..k {
+            heap(k - 1, a, out);
+            let j = if k.is_multiple_of(2) { i } else { 0 };
+            a.swap(j, k - 1);
+        }
+    }
+    let mut out = Vec::new();
+    heap(n, &mut (0..n).collect(), &mut out);
+    out
+}
+
+/// CH4 at its tetrahedral equilibrium, at rest, under all 24 labellings of its hydrogens: half
+/// are proper rotations of the definition's labelled geometry and must fit with every coordinate
+/// in its range and H(0) = U(tetrahedral); the other half are mirror images, which a proper fit
+/// could reproduce only with negative bond lengths, and must be refused as such. Nothing else.
+#[test]
+fn ch4_labellings_fit_or_are_mirror_images() {
+    let m = Ch4;
+    // The reference has the bonds at r_e and every angle but a12 tetrahedral.
+    let mut q_tet = m.reference_geometry().unwrap();
+    q_tet[4] = (-1.0f64 / 3.0).acos();
+    let u_min = m.potential(&q_tet);
+    let state = PhaseState { q: q_tet, p: SVector::zeros(), euler: Vector3::new(0.3, 1.1, -0.5), pe: Vector3::zeros() };
+    let com = CentreOfMass { position: Vector3::new(1.0, -2.0, 0.5), velocity: Vector3::zeros() };
+    let lab: LabState<5> = to_lab(&m, &state, &com).unwrap();
+    let (mut fitted, mut mirrored) = (0, 0);
+    for perm in permutations(4) {
+        let mut relabelled = lab;
+        for (k, &j) in perm.iter().enumerate() {
+            relabelled.positions.set_column(1 + k, &lab.positions.column(1 + j));
+        }
+        match from_lab(&m, &relabelled, &FitOptions::default()) {
+            Ok((fit, _, _)) => {
+                assert!(m.in_range(&fit.q).is_ok(), "{perm:?}: q = {:?} outside its ranges", fit.q.as_slice());
+                let h = hamiltonian(&m, &fit).unwrap();
+                assert!((h - u_min).abs() < 1e-9, "{perm:?}: H(0) = {h}, U(tetrahedral) = {u_min}");
+                let back = to_lab(&m, &fit, &com).unwrap();
+                assert!((back.positions - relabelled.positions).amax() < 1e-9, "{perm:?}: positions not reproduced");
+                fitted += 1;
+            }
+            Err(FrameError::MirrorImage { .. }) => mirrored += 1,
+            Err(e) => panic!("{perm:?}: {e}"),
+        }
+    }
+    assert_eq!((fitted, mirrored), (12, 12));
+}
+
+/// NH3 of the wrong handedness (the definition's positions inverted through the centre of mass)
+/// is a mirror image, said as such (it used to say "a is singular").
+#[test]
+fn nh3_of_the_wrong_handedness_is_a_mirror_image() {
+    let m = Nh3;
+    let q = m.reference_geometry().unwrap();
+    let state = PhaseState { q, p: SVector::zeros(), euler: Vector3::new(0.3, 1.1, -0.5), pe: Vector3::zeros() };
+    let lab: LabState<4> = to_lab(&m, &state, &CentreOfMass::AT_REST).unwrap();
+    assert!(from_lab(&m, &lab, &FitOptions::default()).is_ok());
+    let inverted = LabState { positions: -lab.positions, velocities: lab.velocities };
+    let err = from_lab(&m, &inverted, &FitOptions::default()).unwrap_err();
+    assert!(matches!(err, FrameError::MirrorImage { .. }), "{err}");
+    assert!(err.to_string().contains("mirror image"), "{err}");
+}
+
+/// Far from the origin (10⁵ Å and beyond) subtracting the centre of mass leaves rounding of ε·|x| ≈ 4e-11
+/// bohr; the fit's step tolerance is relative, so it converges there.
+#[test]
+fn lab_fit_converges_far_from_the_origin() {
+    let m = H2o;
+    let q = m.reference_geometry().unwrap();
+    let state = PhaseState { q, p: SVector::zeros(), euler: Vector3::new(0.3, 1.1, -0.5), pe: Vector3::zeros() };
+    for x in [1.9e5, 1e6, 1e7] {
+        let com = CentreOfMass { position: Vector3::new(x, -x, 0.7 * x), velocity: Vector3::zeros() };
+        let lab: LabState<3> = to_lab(&m, &state, &com).unwrap();
+        let (fit, _, report) = from_lab(&m, &lab, &FitOptions::default()).unwrap();
+        assert!((fit.q - q).amax() < 1e-6, "{x}: {:?}", fit.q.as_slice());
+        assert!(report.position_residual < 1e3 * f64::EPSILON * x, "{x}: {}", report.position_residual);
+    }
 }

@@ -302,3 +302,17 @@ fn frozen_coordinates_and_zero_angular_momentum_reduce_what_is_integrated() {
     assert!(err.contains("--> ") && err.contains(":19:11"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// An initial q outside a coordinate's valid range (a negative bond length, a bond angle above
+/// 180°) is refused at its place, with the range in the scene's units.
+#[test]
+fn initial_q_outside_its_range_is_a_located_error() {
+    for (q, name) in [("r1 = -0.96, r2 = 0.97, alpha = 104.0", "r1"), ("r1 = 0.96, r2 = 0.97, alpha = 250.0", "alpha")]
+    {
+        let s = parse_scene("s.toml", &scene(&format!("q = {{ {q} }}\np = {{}}\neuler = [0, 70, 0]\nj = [0, 0, 0]")))
+            .unwrap();
+        let e = initial_state(&H2o, &s).map(|_| ()).unwrap_err().to_string();
+        assert!(e.contains(&format!("{name} = ")) && e.contains("outside its valid range"), "{e}");
+        assert!(e.contains("s.toml:"), "{e}");
+    }
+}

@@ -287,6 +287,35 @@ pub enum FrameError {
         /// The fitted internal coordinates, atomic units.
         q: Vec<f64>,
     },
+    /// The positions fit only with an improper rotation (a reflection): the labels' handedness is
+    /// opposite to the definition's, so that, e.g. for CH4 or NH3, any proper fit needs negative
+    /// bond lengths or angles outside [0, π]. Swap the labels of two equivalent atoms.
+    #[error(
+        "the positions are not representable with this labelling: mirror image (the labels' \
+         handedness is opposite to the definition's of {molecule}); swap two equivalent labels"
+    )]
+    MirrorImage {
+        /// The molecule's name.
+        molecule: &'static str,
+    },
+    /// The best fit reproduces the positions only with a coordinate outside its valid range
+    /// ([`crate::molecule::Coordinate::range`]).
+    #[error(
+        "the positions of {molecule} fit only with {coordinate} = {value} outside its valid range \
+         [{low}, {high}] (atomic units); check the atom labels and the geometry"
+    )]
+    OutOfRange {
+        /// The molecule's name.
+        molecule: &'static str,
+        /// The coordinate out of its range.
+        coordinate: &'static str,
+        /// Its fitted value, atomic units.
+        value: f64,
+        /// The range's lower end, atomic units.
+        low: f64,
+        /// The range's upper end, atomic units.
+        high: f64,
+    },
     /// The orientation is at the gimbal lock of the z-x-z Euler angles: `|sin θ| <`
     /// [`MIN_SIN_THETA`]. Rotate the input (positions and velocities) as a whole, e.g. by 90°
     /// about the lab x axis, to move away from it.
@@ -512,7 +541,7 @@ where
     if !(options.step_tolerance > 0.0 && options.step_tolerance.is_finite()) {
         return Err(FrameError::InvalidOptions { reason: "step_tolerance must be positive and finite" });
     }
-    let mut q = match options.initial_q {
+    let q = match options.initial_q {
         Some(q) => q,
         None => molecule.reference_geometry().ok_or(FrameError::NoInitialGeometry { molecule: molecule.name() })?,
     };
@@ -529,7 +558,127 @@ where
     for i in 0..NA {
         y.set_column(i, &(lab.positions.column(i) - com.position));
     }
+    // Far from the origin, subtracting the centre of mass leaves rounding of about ε·|x| in
+    // every position, and no step can be smaller than that: the step tolerance is relative to
+    // the size of the input as well as absolute.
+    let scale = lab.positions.amax();
+    let step_tolerance = options.step_tolerance.max(64.0 * f64::EPSILON * scale);
+    let rms = |s: f64| (s.max(0.0) / total_mass).sqrt();
 
+    let fit = fit_positions(molecule, &masses, &y, q, step_tolerance, options.max_iterations);
+    let good = |f: &PositionFit<N, NA>| rms(f.s) <= options.residual_tolerance && molecule.in_range(&f.q).is_ok();
+    let fit = match fit {
+        Ok(f) if good(&f) => f,
+        other => {
+            // The labels may describe the mirror image of what the definition can represent (a
+            // chiral parametrization, e.g. CH4's or NH3's, with two equivalent atoms swapped):
+            // then the best proper rotation either leaves a residual, meets a singular metric on
+            // the way (the molecule flattening), or fits only with coordinates outside their
+            // ranges (negative bond lengths), while the inverted input fits. Inversion is
+            // improper, so fitting −y tests every improper superposition at once.
+            let mirrored = fit_positions(molecule, &masses, &(-y), q, step_tolerance, options.max_iterations);
+            if mirrored.as_ref().is_ok_and(good) {
+                return Err(FrameError::MirrorImage { molecule: molecule.name() });
+            }
+            let f = other?;
+            if let Err(k) = molecule.in_range(&f.q) {
+                let c = &molecule.coordinates()[k];
+                return Err(FrameError::OutOfRange {
+                    molecule: molecule.name(),
+                    coordinate: c.name,
+                    value: f.q[k],
+                    low: c.range.0,
+                    high: c.range.1,
+                });
+            }
+            f
+        }
+    };
+    let PositionFit { rotation, q, s, e, iterations, r } = fit;
+
+    // 4. Representable?
+    let residual = rms(s);
+    if residual > options.residual_tolerance {
+        let (worst_atom, worst_atom_residual) = (0..NA)
+            .map(|i| (i, e.column(i).norm()))
+            .fold((0, 0.0), |best, cur| if cur.1 > best.1 { cur } else { best });
+        return Err(FrameError::NotRepresentable {
+            molecule: molecule.name(),
+            residual,
+            tolerance: options.residual_tolerance,
+            worst_atom,
+            worst_atom_residual,
+            q: q.iter().copied().collect(),
+        });
+    }
+
+    let euler = euler_angles(&rotation);
+    if euler[1].sin().abs() < MIN_SIN_THETA {
+        return Err(FrameError::EulerSingular { theta: euler[1] });
+    }
+
+    // Velocities: body frame, centre-of-mass motion removed, then projected onto (J, p).
+    let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
+    molecule.positions_jacobian(&q, &mut dr);
+    let mut u = lab.velocities;
+    for i in 0..NA {
+        u.set_column(i, &(rotation.transpose() * (lab.velocities.column(i) - com.velocity)));
+    }
+    let (j, p) = projections(&masses, &r, &dr, &u);
+    let pe = euler_momenta_from_angular_momentum(&euler, &j);
+    let state = PhaseState { q, p, euler, pe };
+
+    // What the projection discarded: u_i minus the velocity field of (ω, q̇) = M⁻¹ (J, p).
+    let mut kinetic = KineticMatrices::<N>::default();
+    molecule.kinetic(&q, &mut kinetic);
+    let g = InverseMetric::new(&kinetic, &q)?.g;
+    let omega = g.g11 * j + g.g12 * p;
+    let qdot = g.g12.transpose() * j + g.g22 * p;
+    let mut discarded = 0.0;
+    for i in 0..NA {
+        let ri: Vector3<f64> = r.column(i).into();
+        let mut fitted = omega.cross(&ri);
+        for (k, drk) in dr.iter().enumerate() {
+            fitted += drk.column(i) * qdot[k];
+        }
+        discarded += masses[i] * (u.column(i) - fitted).norm_squared();
+    }
+    let report = FitReport {
+        iterations,
+        position_residual: residual,
+        velocity_residual: rms(discarded),
+        discarded_kinetic_energy: 0.5 * discarded,
+    };
+    if state.check_finite().is_err() || !report.velocity_residual.is_finite() {
+        return Err(FrameError::NonFinite { quantity: "fitted phase state" });
+    }
+    Ok((state, com, report))
+}
+
+/// The result of the Gauss–Newton position fit: the rotation, `q`, `S`, the body-frame residuals
+/// `e_i`, the steps taken and `R_i(q)`.
+struct PositionFit<const N: usize, const NA: usize> {
+    rotation: Matrix3<f64>,
+    q: SVector<f64, N>,
+    s: f64,
+    e: SMatrix<f64, 3, NA>,
+    iterations: usize,
+    r: SMatrix<f64, 3, NA>,
+}
+
+/// Steps 1–3 of the fit (module documentation) of the centre-of-mass positions `y`, from `q`.
+fn fit_positions<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    masses: &[f64; NA],
+    y: &SMatrix<f64, 3, NA>,
+    mut q: SVector<f64, N>,
+    step_tolerance: f64,
+    max_iterations: usize,
+) -> Result<PositionFit<N, NA>, FrameError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    let total_mass: f64 = masses.iter().sum();
     // 1. Kabsch start: the best rotation for the starting geometry.
     let mut r = SMatrix::<f64, 3, NA>::zeros();
     molecule.positions(&q, &mut r);
@@ -545,7 +694,7 @@ where
     // 2. Gauss–Newton on (δθ, δq) with the kinetic metric as the normal matrix.
     let mut kinetic = KineticMatrices::<N>::default();
     let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
-    let (mut s, mut e) = residuals(molecule, &masses, &y, &rotation, &q, &mut r);
+    let (mut s, mut e) = residuals(molecule, masses, y, &rotation, &q, &mut r);
     let rms = |s: f64| (s.max(0.0) / total_mass).sqrt();
     let mut iterations = 0;
     loop {
@@ -555,7 +704,7 @@ where
         molecule.kinetic(&q, &mut kinetic);
         molecule.positions_jacobian(&q, &mut dr);
         let metric = InverseMetric::new(&kinetic, &q)?;
-        let (b_rot, b_vib) = projections(&masses, &r, &dr, &e);
+        let (b_rot, b_vib) = projections(masses, &r, &dr, &e);
         let g = &metric.g;
         let d_theta = g.g11 * b_rot + g.g12 * b_vib;
         let d_q = g.g12.transpose() * b_rot + g.g22 * b_vib;
@@ -566,8 +715,8 @@ where
         }
         // A step this small means convergence; it is still applied (if it does not increase S),
         // so that the residual ends at rounding level rather than at the size of this step.
-        let converged = last_step <= options.step_tolerance;
-        if !converged && iterations == options.max_iterations {
+        let converged = last_step <= step_tolerance;
+        if !converged && iterations == max_iterations {
             return Err(FrameError::NotConverged { iterations, residual: rms(s), step: last_step });
         }
         // Backtracking: the full step is right near the solution; far from it, or when the
@@ -579,7 +728,7 @@ where
             let trial_rotation = nearest_rotation(&(rotation * step_rotation))
                 .ok_or(FrameError::NonFinite { quantity: "rotation of the fit" })?;
             let trial_q = q + d_q * factor;
-            let (trial_s, trial_e) = residuals(molecule, &masses, &y, &trial_rotation, &trial_q, &mut r);
+            let (trial_s, trial_e) = residuals(molecule, masses, y, &trial_rotation, &trial_q, &mut r);
             if trial_s <= s {
                 (rotation, q, s, e) = (trial_rotation, trial_q, trial_s, trial_e);
                 accepted = true;
@@ -604,61 +753,7 @@ where
         }
     }
 
-    // 4. Representable?
-    let residual = rms(s);
-    if residual > options.residual_tolerance {
-        let (worst_atom, worst_atom_residual) = (0..NA)
-            .map(|i| (i, e.column(i).norm()))
-            .fold((0, 0.0), |best, cur| if cur.1 > best.1 { cur } else { best });
-        return Err(FrameError::NotRepresentable {
-            molecule: molecule.name(),
-            residual,
-            tolerance: options.residual_tolerance,
-            worst_atom,
-            worst_atom_residual,
-            q: q.iter().copied().collect(),
-        });
-    }
-
-    let euler = euler_angles(&rotation);
-    if euler[1].sin().abs() < MIN_SIN_THETA {
-        return Err(FrameError::EulerSingular { theta: euler[1] });
-    }
-
-    // Velocities: body frame, centre-of-mass motion removed, then projected onto (J, p).
-    molecule.positions_jacobian(&q, &mut dr);
-    let mut u = lab.velocities;
-    for i in 0..NA {
-        u.set_column(i, &(rotation.transpose() * (lab.velocities.column(i) - com.velocity)));
-    }
-    let (j, p) = projections(&masses, &r, &dr, &u);
-    let pe = euler_momenta_from_angular_momentum(&euler, &j);
-    let state = PhaseState { q, p, euler, pe };
-
-    // What the projection discarded: u_i minus the velocity field of (ω, q̇) = M⁻¹ (J, p).
-    molecule.kinetic(&q, &mut kinetic);
-    let g = InverseMetric::new(&kinetic, &q)?.g;
-    let omega = g.g11 * j + g.g12 * p;
-    let qdot = g.g12.transpose() * j + g.g22 * p;
-    let mut discarded = 0.0;
-    for i in 0..NA {
-        let ri: Vector3<f64> = r.column(i).into();
-        let mut fitted = omega.cross(&ri);
-        for (k, drk) in dr.iter().enumerate() {
-            fitted += drk.column(i) * qdot[k];
-        }
-        discarded += masses[i] * (u.column(i) - fitted).norm_squared();
-    }
-    let report = FitReport {
-        iterations,
-        position_residual: residual,
-        velocity_residual: rms(discarded),
-        discarded_kinetic_energy: 0.5 * discarded,
-    };
-    if state.check_finite().is_err() || !report.velocity_residual.is_finite() {
-        return Err(FrameError::NonFinite { quantity: "fitted phase state" });
-    }
-    Ok((state, com, report))
+    Ok(PositionFit { rotation, q, s, e, iterations, r })
 }
 
 /// `(Σ m_i R_i × w_i, Σ m_i ∂R_i/∂q_j · w_i)` of a body-frame field `w_i`: the projections of
