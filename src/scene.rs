@@ -348,6 +348,27 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         Some(i) => integrator(&src, i, t)?,
     };
 
+    // A frozen coordinate has zero velocity; a velocity or momentum given for it would leak
+    // into the others through the metric (issue 11): refuse it where it is written.
+    if let Initial::Internal { momenta, .. } = &initial {
+        let (given, what) = match momenta {
+            Momenta::P(p) => (p, "p"),
+            Momenta::Qdot(qd) => (qd, "qdot"),
+        };
+        for (name, value) in given {
+            if *value != 0.0 && run.frozen.iter().any(|f| f.get_ref() == name.get_ref()) {
+                return Err(src.error(
+                    name.span(),
+                    format!("`{}` is frozen (run.frozen) but {what} gives it {value}", name.get_ref()),
+                    format!(
+                        "a frozen coordinate has zero velocity: remove `{}` from {what}, or unfreeze it",
+                        name.get_ref()
+                    ),
+                ));
+            }
+        }
+    }
+
     Ok(Scene {
         path: path.to_owned(),
         text: text.to_owned(),

@@ -316,3 +316,21 @@ fn initial_q_outside_its_range_is_a_located_error() {
         assert!(e.contains("s.toml:"), "{e}");
     }
 }
+
+#[test]
+fn a_velocity_for_a_frozen_coordinate_is_a_located_error() {
+    // Before this check the velocity leaked into the other coordinates through the metric
+    // (p_r2 = 1.3, p_alpha = 4.3 for qdot r1 = 1 with r1 frozen) and raised H(0).
+    for (given, what) in [("qdot = { r2 = 0.1, r1 = 1.0 }", "qdot"), ("p = { r1 = 0.5 }", "p")] {
+        let text = scene(&format!("q = {{ r1 = 1.0 }}\n{given}")).replace("[run]\n", "[run]\nfrozen = [\"r1\"]\n");
+        let e = scene_error(&text);
+        assert_eq!(e.message.split(" but").next(), Some("`r1` is frozen (run.frozen)"), "{}", e.message);
+        assert!(e.message.contains(what), "{}", e.message);
+        assert_eq!(e.line, 10);
+        assert!(e.help.contains("zero velocity"), "{}", e.help);
+    }
+    // A zero velocity for a frozen coordinate is harmless and accepted.
+    let text =
+        scene("q = { r1 = 1.0 }\nqdot = { r1 = 0.0, r2 = 0.1 }").replace("[run]\n", "[run]\nfrozen = [\"r1\"]\n");
+    assert!(parse_scene("ok.toml", &text).is_ok());
+}
