@@ -51,6 +51,8 @@ pub enum TimeUnit {
     Au,
     /// Femtoseconds.
     Fs,
+    /// Picoseconds.
+    Ps,
 }
 
 impl TimeUnit {
@@ -59,6 +61,7 @@ impl TimeUnit {
         match self {
             TimeUnit::Au => 1.0,
             TimeUnit::Fs => 1.0 / AU_TIME_IN_FS,
+            TimeUnit::Ps => 1000.0 / AU_TIME_IN_FS,
         }
     }
 
@@ -67,6 +70,7 @@ impl TimeUnit {
         match self {
             TimeUnit::Au => "au",
             TimeUnit::Fs => "fs",
+            TimeUnit::Ps => "ps",
         }
     }
 }
@@ -283,10 +287,11 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         |s| match s {
             "au" => Some(TimeUnit::Au),
             "fs" => Some(TimeUnit::Fs),
+            "ps" => Some(TimeUnit::Ps),
             _ => None,
         },
         "time",
-        "\"au\", \"fs\"",
+        "\"au\", \"fs\", \"ps\"",
     )?;
     let (l, a, t) = (length.in_bohr(), angle.in_rad(), time.in_au());
 

@@ -105,8 +105,8 @@ fn scene_errors_name_the_place_and_the_fix() {
     assert_eq!(e.message, "`run.end` must be a positive finite number, got -1");
     assert_eq!((e.line, e.column), (17, 7));
 
-    let e = scene_error(&BASE.replace("INITIAL", "").replace("time = \"fs\"", "time = \"ps\""));
-    assert_eq!(e.message, "unknown time unit `ps`");
+    let e = scene_error(&BASE.replace("INITIAL", "").replace("time = \"fs\"", "time = \"ns\""));
+    assert_eq!(e.message, "unknown time unit `ns`");
 
     let e = scene_error(&BASE.replace("INITIAL", "").replace("output_interval", "output_intervall"));
     assert!(e.message.starts_with("unknown field `output_intervall`"), "{}", e.message);
@@ -333,4 +333,18 @@ fn a_velocity_for_a_frozen_coordinate_is_a_located_error() {
     let text =
         scene("q = { r1 = 1.0 }\nqdot = { r1 = 0.0, r2 = 0.1 }").replace("[run]\n", "[run]\nfrozen = [\"r1\"]\n");
     assert!(parse_scene("ok.toml", &text).is_ok());
+}
+
+#[test]
+fn picoseconds_are_a_thousand_femtoseconds() {
+    let fs = parse_scene("fs.toml", &scene("").replace("end = 20.0", "end = 1500.0")).unwrap();
+    let ps =
+        parse_scene("ps.toml", &scene("").replace("time = \"fs\"", "time = \"ps\"").replace("end = 20.0", "end = 1.5"))
+            .unwrap();
+    assert_eq!(fs.time_unit.name(), "fs");
+    assert_eq!(ps.time_unit.name(), "ps");
+    // 1.5 ps = 1500 fs = 1500 / 0.024 188 843 265 857 a.u. (CODATA 2018), independently of TimeUnit.
+    let expected = 1500.0 / 2.418_884_326_585_7e-2;
+    assert!((ps.t_end - expected).abs() < 1e-9 * expected, "{} vs {expected}", ps.t_end);
+    assert!((ps.t_end - fs.t_end).abs() < 1e-9 * expected);
 }
