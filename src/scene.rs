@@ -249,7 +249,12 @@ struct RawRun {
     frozen: Vec<Spanned<String>>,
     min_metric_pivot: Option<Spanned<f64>>,
     max_energy_error: Option<Spanned<f64>>,
+    max_outputs: Option<Spanned<u64>>,
 }
+
+/// The largest number of output times a scene may ask for unless `run.max_outputs` raises it:
+/// a million rows of trajectory.csv for water is about 0.5 GB.
+pub const DEFAULT_MAX_OUTPUTS: u64 = 1_000_000;
 
 /// The default integrator: DOP853 at rtol = atol = 1e-10.
 pub const DEFAULT_TOLERANCE: f64 = 1e-10;
@@ -324,6 +329,29 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         Some(dt) => positive(&src, dt, "run.output_interval")? * t,
         None => t_end / 100.0,
     };
+    for (x, what, span) in [
+        (t_end, "run.end", run.end.span()),
+        (output_interval, "run.output_interval", run.output_interval.as_ref().map_or(run.end.span(), |d| d.span())),
+    ] {
+        if !x.is_finite() || x == 0.0 {
+            return Err(src.error(
+                span,
+                format!("`{what}` is {x:e} in atomic units of time"),
+                "give a time that is finite and non-zero in atomic units (1 a.u. = 0.0242 fs)",
+            ));
+        }
+    }
+    let max_outputs = run.max_outputs.as_ref().map_or(DEFAULT_MAX_OUTPUTS, |m| *m.get_ref());
+    let outputs_asked = (t_end / output_interval).ceil() + 1.0;
+    if outputs_asked > max_outputs as f64 {
+        return Err(src.error(
+            run.output_interval.as_ref().map_or(run.end.span(), |d| d.span()),
+            format!(
+                "the run asks for {outputs_asked:.3e} output times (end / output_interval + 1), more than {max_outputs}"
+            ),
+            "lengthen run.output_interval, shorten run.end, or raise run.max_outputs if you mean it",
+        ));
+    }
     let outputs = match &run.outputs {
         None => Outputs { trajectory: true, lab: true, summary: true },
         Some(list) => {

@@ -348,3 +348,22 @@ fn picoseconds_are_a_thousand_femtoseconds() {
     assert!((ps.t_end - expected).abs() < 1e-9 * expected, "{} vs {expected}", ps.t_end);
     assert!((ps.t_end - fs.t_end).abs() < 1e-9 * expected);
 }
+
+#[test]
+fn unbounded_output_counts_and_overflowing_times_are_refused_where_written() {
+    // 5e-324 fs wrote 900 MB in 30 s before this check.
+    let e = scene_error(&scene("").replace("output_interval = 1.0", "output_interval = 5e-324"));
+    assert!(e.message.contains("output times"), "{}", e.message);
+    assert!(e.message.contains("1000000"), "{}", e.message);
+    assert_eq!(e.line, 18);
+    let e = scene_error(&scene("").replace("end = 20.0", "end = 1e307"));
+    assert!(e.message.contains("`run.end` is inf"), "{}", e.message);
+    assert_eq!(e.line, 17);
+    // The limit can be raised on purpose.
+    let text = scene("")
+        .replace("output_interval = 1.0", "output_interval = 1e-5")
+        .replace("[run]\n", "[run]\nmax_outputs = 3000000\n");
+    assert!(parse_scene("ok.toml", &text).is_ok());
+    let text = scene("").replace("output_interval = 1.0", "output_interval = 1e-5");
+    assert!(scene_error(&text).message.contains("more than 1000000"));
+}
