@@ -14,6 +14,7 @@
 //! `histograms.csv`, `correlations.csv` and the plots) are therefore bit-identical whatever the
 //! number of threads; only the wall time, throughput and thread count in `summary.json` differ.
 
+pub mod checkpoint;
 pub mod output;
 mod plot;
 pub mod quantity;
