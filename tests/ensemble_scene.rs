@@ -175,7 +175,14 @@ fn histogram_with_too_many_bins() {
 fn too_many_output_times() {
     let text = "molecule = \"h2o\"\n[ensemble]\ntrajectories = 1\nmethod = \"thermal\"\ntemperature = 1\n\
                 [run]\nend = 1e9\noutput_interval = 1\n";
-    let e = parse_ensemble(&parse_scene("bad.toml", text).unwrap()).unwrap_err();
+    // Refused by the scene parser already (run.max_outputs, default 10^6), where it is written.
+    let e = parse_scene("bad.toml", text).unwrap_err();
+    assert!(e.message.contains("output times"), "{e}");
+    assert!(e.message.contains("more than 1000000"), "{e}");
+    assert_eq!(e.line, 8);
+    // Raising run.max_outputs does not lift the ensemble's own limit.
+    let raised = text.replace("[run]\n", "[run]\nmax_outputs = 2000000000\n");
+    let e = parse_ensemble(&parse_scene("bad.toml", &raised).unwrap()).unwrap_err();
     assert!(e.message.contains("output times, more than the 1000000 an ensemble allows"), "{e}");
     assert!(e.help.contains("raise run.output_interval"), "{e}");
 }
@@ -204,7 +211,7 @@ fn negative_quantum_number() {
 #[test]
 fn states_file_that_does_not_exist() {
     let e = error("[ensemble]\ntrajectories = 10\nmethod = \"file\"\nfile = \"no-such-states.csv\"");
-    check(&e, 5, "cannot read the states file", "readable CSV file");
+    check(&e, 5, "cannot read the states file", "readable CSV or extended XYZ file");
 }
 
 #[test]
