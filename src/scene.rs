@@ -297,7 +297,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             q: Vec::new(),
             momenta: Momenta::P(Vec::new()),
             euler: [0.0, std::f64::consts::FRAC_PI_2, 0.0],
-            rotation: Rotation::J([0.0; 3]),
+            rotation: InitialAngularMomentum::J([0.0; 3]),
         },
         (None, None) => {
             return Err(src.whole_file(
