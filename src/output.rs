@@ -1,7 +1,12 @@
 //! What a run writes: `trajectory.csv`, `lab.xyz` (extended XYZ) and `summary.json`.
 //!
 //! Files are written as the run goes, through buffers that are flushed when the run ends, also
-//! when it ends with an error, so that everything up to the failure is kept.
+//! when it ends with an error or an interrupt, so that everything up to that point is kept.
+//!
+//! Stale files: before a run writes anything it removes every file of [`RUN_FILES`] that it will
+//! not write itself, and `summary.json` always (see [`remove_stale_outputs`]); the files it does
+//! write are truncated when created. `summary.json` is written last, under a temporary name that
+//! is renamed over the final one, so it is either absent or complete and always this run's.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -121,6 +126,17 @@ impl LabXyz {
     }
 }
 
+/// The smallest energy that relative energy errors are measured against, hartree: about kT at
+/// 300 K (9.5e-4 hartree), a thermal energy scale below which H(0) (which can be 0 at a minimum
+/// at rest) is no meaningful yardstick for a change. With the default `run.max_energy_error` =
+/// 1e-2 a run starting at H(0) = 0 stops when |ΔH| exceeds 1e-5 hartree (2 cm⁻¹).
+pub const ENERGY_SCALE_FLOOR: f64 = 1e-3;
+
+/// What an energy change is relative to: max(|H(0)|, [`ENERGY_SCALE_FLOOR`]), hartree.
+pub fn energy_scale(h0: f64) -> f64 {
+    h0.abs().max(ENERGY_SCALE_FLOOR)
+}
+
 /// Conservation diagnostics accumulated over the output times.
 #[derive(Clone, Debug, Default)]
 pub struct Conservation {
@@ -165,12 +181,10 @@ impl Conservation {
         self.samples += 1;
     }
 
-    /// max |H(t) − H(0)| / |H(0)|, or the absolute error where H(0) = 0.
+    /// max |H(t) − H(0)| / [`energy_scale`]`(H(0))`: the quantity the run's energy guard
+    /// (`run.max_energy_error`) compares.
     pub fn max_relative_energy_error(&self) -> f64 {
-        match self.initial_energy {
-            Some(h0) if h0 != 0.0 => self.max_energy_error / h0.abs(),
-            _ => self.max_energy_error,
-        }
+        self.max_energy_error / energy_scale(self.initial_energy.unwrap_or(0.0))
     }
 
     /// As JSON, for `summary.json`.
@@ -181,6 +195,7 @@ impl Conservation {
             "initial_energy_hartree": self.initial_energy,
             "max_abs_energy_error_hartree": self.max_energy_error,
             "max_relative_energy_error": self.max_relative_energy_error(),
+            "relative_to_hartree": energy_scale(self.initial_energy.unwrap_or(0.0)),
             "initial_abs_j_hbar": self.initial_j,
             "max_abs_j_change_hbar": self.max_j_change,
             "initial_p_phi_hbar": self.initial_p_phi,
@@ -191,12 +206,40 @@ impl Conservation {
     }
 }
 
-/// Writes `summary.json` (pretty-printed).
+/// Every file `rovib run` may write into its output directory.
+pub const RUN_FILES: [&str; 3] = ["trajectory.csv", "lab.xyz", "summary.json"];
+
+/// Removes the files of [`RUN_FILES`] in `dir` that this run will not write (not in `keep`),
+/// and `summary.json` in any case (it is written at the end, atomically), so that no file of an
+/// earlier run remains looking like this run's. Missing files are fine.
+pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), String> {
+    for name in RUN_FILES {
+        if name != "summary.json" && keep.contains(&name) {
+            continue;
+        }
+        let path = dir.join(name);
+        match std::fs::remove_file(&path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(format!("cannot remove {} left by an earlier run: {e}", path.display())),
+        }
+    }
+    Ok(())
+}
+
+/// Writes `summary.json` (pretty-printed) atomically: to `summary.json.tmp`, flushed and synced,
+/// then renamed over `summary.json`, so a reader never sees a half-written summary.
 pub fn write_summary(dir: &Path, summary: &Value) -> Result<PathBuf, String> {
-    let mut file = OutputFile::create(dir, "summary.json")?;
-    file.line(&serde_json::to_string_pretty(summary).expect("a JSON value serialises"))?;
-    file.flush()?;
-    Ok(file.path().to_owned())
+    let tmp = dir.join("summary.json.tmp");
+    let path = dir.join("summary.json");
+    let write = || -> std::io::Result<()> {
+        let mut file = File::create(&tmp)?;
+        writeln!(file, "{}", serde_json::to_string_pretty(summary).expect("a JSON value serialises"))?;
+        file.sync_all()
+    };
+    write().map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, &path).map_err(|e| format!("cannot rename {} to {}: {e}", tmp.display(), path.display()))?;
+    Ok(path)
 }
 
 /// Everything `summary.json` reports about one run; [`RunSummary::to_json`] is the file's schema.
@@ -205,8 +248,12 @@ pub struct RunSummary<'a> {
     pub scene: &'a Scene,
     /// The molecule's name.
     pub molecule: &'a str,
-    /// Why the run stopped, if it did.
+    /// Why the run stopped, if it failed.
     pub failure: Option<&'a str>,
+    /// Whether SIGINT or SIGTERM stopped the run (status "interrupted" unless it also failed).
+    pub interrupted: bool,
+    /// The last output time written, in the scene's time unit (`None` if none was).
+    pub t_reached: Option<f64>,
     /// The flat layout of the integrated state, e.g. `[r1, p_r1, quaternion w, x, y, z, J_x, J_y, J_z]`.
     pub state_layout: &'a str,
     /// Whether the run integrated the `J = 0` system.
@@ -233,8 +280,13 @@ impl RunSummary<'_> {
         json!({
             "scene": scene.path,
             "molecule": self.molecule,
-            "status": if self.failure.is_some() { "failed" } else { "completed" },
+            "status": match (self.failure, self.interrupted) {
+                (Some(_), _) => "failed",
+                (None, true) => "interrupted",
+                (None, false) => "completed",
+            },
             "error": self.failure,
+            "t_reached": self.t_reached,
             "method": method_json(&scene.method),
             "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
             "state_layout": self.state_layout,

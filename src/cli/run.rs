@@ -8,14 +8,20 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{CliError, unknown_molecule};
+use crate::dir_lock::DirLock;
 use crate::molecules;
-use crate::output::{Conservation, LabXyz, RunSummary, TrajectoryCsv, write_summary};
+use crate::output::{
+    Conservation, ENERGY_SCALE_FLOOR, LabXyz, RunSummary, TrajectoryCsv, energy_scale, remove_stale_outputs,
+    write_summary,
+};
 use crate::runtime::hamiltonian::hamiltonian;
 use crate::runtime::hamiltonian::{ReducedSystem, Reduction, RotationPart};
 use crate::runtime::integrate::{Observer, OdeSystem, SolveError, Stats, solve};
 use crate::runtime::nalgebra::{SMatrix, Vector3};
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::Scene;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 // The initial state and the production system live in `crate::start`; re-exported here for
 // callers that used these paths.
 pub use crate::start::{Start, initial_state, load_scene, production_system};
@@ -62,6 +68,17 @@ impl MoleculeVisitor for Run<'_> {
         let (system, y0) = production_system(&m, scene, &start.state)?;
         let layout = layout(system.reduction(), &m);
 
+        // One run per directory, then no file of an earlier run may remain looking like this one's.
+        let _lock = DirLock::acquire(self.out_dir)?;
+        let mut keep = Vec::new();
+        if scene.outputs.trajectory {
+            keep.push("trajectory.csv");
+        }
+        if scene.outputs.lab {
+            keep.push("lab.xyz");
+        }
+        remove_stale_outputs(self.out_dir, &keep)?;
+
         let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
         let mut recorder = Recorder::<M, N, NA> {
             system,
@@ -88,6 +105,9 @@ impl MoleculeVisitor for Run<'_> {
             time_unit: scene.time_unit.name(),
             com: (start.com_position, start.com_velocity),
             progress: self.progress.then(|| progress_bar(scene)),
+            stop: crate::interrupt::flag(),
+            interrupted: false,
+            t_reached: None,
             error: None,
         };
         let mut counted = Counted { inner: system, evaluations: 0 };
@@ -100,10 +120,15 @@ impl MoleculeVisitor for Run<'_> {
         // Keep everything written so far, whatever happened.
         let flushed = recorder.flush();
 
+        // The first error is the one reported: a failed record (which stops the solver) comes
+        // before the solver's own error, and both before a failure to flush at the end.
         let (stats, failure) = match result {
             Ok(stats) => (Some(stats), recorder.error.take().map(|e| format!("the run stopped: {e}"))),
             Err(e) => (None, Some(format!("the run stopped: {}", describe_failure(&e, scene, &layout)))),
         };
+        let failure = failure.or_else(|| flushed.err().map(|e| format!("the run stopped: {e}")));
+        let interrupted = recorder.interrupted && failure.is_none();
+        let t_reached = recorder.t_reached.map(|t| t / scene.time_unit.in_au());
         let mut files: Vec<PathBuf> = Vec::new();
         if scene.outputs.trajectory {
             files.push(self.out_dir.join("trajectory.csv"));
@@ -111,11 +136,14 @@ impl MoleculeVisitor for Run<'_> {
         if scene.outputs.lab {
             files.push(self.out_dir.join("lab.xyz"));
         }
+        let mut summary_error = None;
         if scene.outputs.summary {
             let summary = RunSummary {
                 scene,
                 molecule: m.name(),
                 failure: failure.as_deref(),
+                interrupted,
+                t_reached,
                 state_layout: &layout,
                 zero_angular_momentum: system.reduction().rotation != RotationPart::Free,
                 stats,
@@ -125,11 +153,26 @@ impl MoleculeVisitor for Run<'_> {
                 com_position: start.com_position,
                 com_velocity: start.com_velocity,
             };
-            files.push(write_summary(self.out_dir, &summary.to_json())?);
+            match write_summary(self.out_dir, &summary.to_json()) {
+                Ok(path) => files.push(path),
+                Err(e) => summary_error = Some(e),
+            }
         }
-        flushed?;
-        if let Some(message) = failure {
-            return Err(CliError::Message(format!("{message}; output so far is in {}", self.out_dir.display())));
+        let where_ = format!("output so far is in {}", self.out_dir.display());
+        let message = match (failure, interrupted, summary_error) {
+            (Some(f), _, Some(s)) => Some(format!("{f}; also {s} (no summary.json); {where_}")),
+            (Some(f), _, None) => Some(format!("{f}; {where_}")),
+            (None, true, s) => Some(format!(
+                "interrupted at t = {} {}{}; {where_}",
+                t_reached.unwrap_or(0.0),
+                scene.time_unit.name(),
+                s.map(|s| format!("; {s} (no summary.json)")).unwrap_or_default()
+            )),
+            (None, false, Some(s)) => Some(s),
+            (None, false, None) => None,
+        };
+        if let Some(message) = message {
+            return Err(CliError::Message(message));
         }
         let stats = stats.unwrap_or_default();
         Ok(RunReport { out_dir: self.out_dir.to_owned(), files, stats, conservation: recorder.conservation, wall_time })
@@ -231,6 +274,12 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     time_unit: &'static str,
     com: (Vector3<f64>, Vector3<f64>),
     progress: Option<ProgressBar>,
+    /// Set by SIGINT/SIGTERM; polled after each output record, so the run stops between records.
+    stop: Arc<AtomicBool>,
+    /// Whether the run stopped on `stop`.
+    interrupted: bool,
+    /// The last output time recorded, a.u.
+    t_reached: Option<f64>,
     error: Option<String>,
 }
 
@@ -244,20 +293,24 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         // gone unstable (a too large fixed step) and would otherwise "complete" with garbage.
         let (body, energy) = self.system.expand_body_and_energy(y).map_err(|e| at(&e, y, &self.layout))?;
         let h0 = *self.initial_energy.get_or_insert(energy);
-        let drift = if h0 == 0.0 { (energy - h0).abs() } else { ((energy - h0) / h0).abs() };
+        let rotation = body.rotation();
+        let phase = body.to_phase();
+        // Recorded before the guard, so that the summary includes the output that tripped it.
+        if self.diagnostics {
+            self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
+        }
+        let change = (energy - h0).abs();
+        let scale = energy_scale(h0);
+        let drift = change / scale;
         // NaN fails too: a non-finite energy is a runaway as well.
         if drift.is_nan() || drift > self.max_energy_error {
             let e = format!(
-                "the energy changed by {drift:.1e} relative to H(0) = {h0} hartree, more than run.max_energy_error = \
+                "the energy changed by {change:.3e} hartree from H(0) = {h0} hartree, {drift:.1e} relative to \
+                 max(|H(0)|, {ENERGY_SCALE_FLOOR:e} hartree) = {scale:e} hartree, more than run.max_energy_error = \
                  {:e} (the step is too large or the tolerances too loose for this motion; reduce them)",
                 self.max_energy_error
             );
             return Err(at(&e, y, &self.layout));
-        }
-        let rotation = body.rotation();
-        let phase = body.to_phase();
-        if self.diagnostics {
-            self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
         }
         if let Some(csv) = &mut self.trajectory {
             let values = phase.q.iter().chain(phase.p.iter()).chain(phase.euler.iter()).chain(phase.pe.iter());
@@ -290,7 +343,15 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Recorder<'_, M, N, NA> {
     fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
         match self.record(t, y) {
-            Ok(()) => ControlFlow::Continue(()),
+            Ok(()) => {
+                self.t_reached = Some(t);
+                // After a complete record: the files end on a whole row and a whole frame.
+                if self.stop.load(Ordering::SeqCst) {
+                    self.interrupted = true;
+                    return ControlFlow::Break(());
+                }
+                ControlFlow::Continue(())
+            }
             Err(e) => {
                 self.error = Some(e);
                 ControlFlow::Break(())

@@ -1,0 +1,190 @@
+//! `rovib run` as a careless or hostile user drives it: stale files of an earlier run, two runs
+//! into one directory, SIGINT/SIGTERM, a full disk, an energy guard at H(0) ≈ 0.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("rovib-run-safety-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A vibrating, rotating water scene with the given end time (fs) and outputs.
+fn scene(d: &Path, name: &str, end: f64, outputs: &str) -> PathBuf {
+    let text = format!(
+        "molecule = \"h2o\"\n[units]\nlength = \"angstrom\"\nangle = \"deg\"\ntime = \"fs\"\n\
+         [initial]\nq = {{ r1 = 1.0078, r2 = 0.95785, alpha = 104.5 }}\neuler = [0.0, 90.0, 0.0]\nj = [3.0, 8.0, 2.0]\n\
+         [run]\nend = {end}\noutput_interval = 0.5\noutputs = [{outputs}]\n"
+    );
+    let path = d.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn rovib(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rovib")).args(args).output().unwrap()
+}
+
+fn summary(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn a_run_leaves_no_file_of_an_earlier_run() {
+    let d = dir("stale");
+    let out = d.join("out");
+    let first = scene(&d, "first.toml", 5.0, "\"trajectory\", \"lab\", \"summary\"");
+    let o = rovib(&["run", first.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("trajectory.csv").exists() && out.join("lab.xyz").exists());
+    let second = scene(&d, "second.toml", 5.0, "\"summary\"");
+    let o = rovib(&["run", second.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!out.join("trajectory.csv").exists(), "a trajectory.csv of the earlier run remains");
+    assert!(!out.join("lab.xyz").exists(), "a lab.xyz of the earlier run remains");
+    assert_eq!(summary(&out)["scene"], second.display().to_string());
+    // No temporary or lock file is left behind.
+    let mut names: Vec<String> =
+        std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    names.sort();
+    assert_eq!(names, ["summary.json"]);
+}
+
+/// Waits until `path` has more than `lines` lines (or 60 s).
+fn wait_for_lines(path: &Path, lines: usize) {
+    let begin = Instant::now();
+    while std::fs::read_to_string(path).map_or(0, |t| t.lines().count()) <= lines {
+        assert!(begin.elapsed() < Duration::from_secs(60), "{} never grew", path.display());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Spawns a long run, checks that a second run into the same directory fails at once, sends
+/// `signal`, and checks the outputs: whole rows and frames, summary "interrupted" at the last row.
+fn interrupt_with(signal: &str) {
+    let d = dir(signal);
+    let out = d.join("out");
+    let path = scene(&d, "long.toml", 1e7, "\"trajectory\", \"lab\", \"summary\"");
+    let child = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // More than one 8 KB buffer of rows: the run is well under way.
+    wait_for_lines(&out.join("trajectory.csv"), 100);
+
+    let second = rovib(&["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let err = String::from_utf8(second.stderr).unwrap();
+    assert!(!second.status.success());
+    assert!(err.contains("in use by another run") && err.contains(&format!("process {}", child.id())), "{err}");
+
+    let killed = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(!o.status.success(), "an interrupted run exits non-zero");
+    assert!(err.contains("interrupted at t = "), "{err}");
+
+    let s = summary(&out);
+    assert_eq!(s["status"], "interrupted", "{s}");
+    assert!(s["error"].is_null(), "{s}");
+    let csv = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    assert!(csv.ends_with('\n'), "trajectory.csv ends inside a row");
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    let columns = csv.lines().next().unwrap().split(',').count();
+    assert!(rows.iter().all(|r| r.split(',').count() == columns));
+    let last_t: f64 = rows.last().unwrap().split(',').next().unwrap().parse().unwrap();
+    assert_eq!(s["t_reached"].as_f64().unwrap(), last_t, "{s}");
+    assert_eq!(s["conservation"]["samples"].as_u64().unwrap(), rows.len() as u64);
+    // lab.xyz: whole frames of 3 atoms (2 header lines + 3), as many as rows.
+    let xyz = std::fs::read_to_string(out.join("lab.xyz")).unwrap();
+    assert!(xyz.ends_with('\n'));
+    assert_eq!(xyz.lines().count(), 5 * rows.len(), "lab.xyz has a partial frame or lost frames");
+    assert!(!out.join(".rovib.lock").exists(), "the lock outlived the run");
+}
+
+#[test]
+fn sigint_finishes_the_record_and_writes_an_interrupted_summary() {
+    interrupt_with("INT");
+}
+
+#[test]
+fn sigterm_finishes_the_record_and_writes_an_interrupted_summary() {
+    interrupt_with("TERM");
+}
+
+#[test]
+fn a_full_disk_is_the_error_reported_and_the_summary_says_failed() {
+    if !Path::new("/dev/full").exists() {
+        return;
+    }
+    let d = dir("full");
+    let out = d.join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::os::unix::fs::symlink("/dev/full", out.join("trajectory.csv")).unwrap();
+    let path = scene(&d, "scene.toml", 200.0, "\"trajectory\", \"summary\"");
+    let o = rovib(&["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(!o.status.success());
+    assert!(err.contains("cannot write") && err.contains("trajectory.csv"), "{err}");
+    let s = summary(&out);
+    assert_eq!(s["status"], "failed", "{s}");
+    let e = s["error"].as_str().unwrap();
+    assert!(e.contains("trajectory.csv") && e.contains(&err_of_enospc()), "{s}");
+
+    // summary.json cannot be written either: stderr has the first error and says so.
+    std::fs::remove_file(out.join("summary.json")).unwrap();
+    std::fs::create_dir(out.join("summary.json.tmp")).unwrap();
+    let o = rovib(&["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(!o.status.success());
+    assert!(err.contains("trajectory.csv") && err.contains(&err_of_enospc()), "{err}");
+    assert!(err.contains("summary.json.tmp") && err.contains("no summary.json"), "{err}");
+    assert!(!out.join("summary.json").exists());
+}
+
+/// How the OS words ENOSPC.
+fn err_of_enospc() -> String {
+    std::io::Error::from_raw_os_error(28).to_string()
+}
+
+#[test]
+fn the_energy_guard_near_zero_energy_uses_the_absolute_floor_and_agrees_with_the_summary() {
+    let d = dir("energy");
+    let out = d.join("out");
+    // Water at its minimum, almost at rest: H(0) ≈ 3e-22 hartree, round-off ≈ 5e-22 hartree.
+    let path = d.join("near0.toml");
+    std::fs::write(
+        &path,
+        "molecule = \"h2o\"\n[units]\ntime = \"fs\"\n[initial]\np = { r1 = 1e-9 }\n\
+         [run]\nend = 50.0\noutput_interval = 1.0\noutputs = [\"summary\"]\n",
+    )
+    .unwrap();
+    let o = rovib(&["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let c = &summary(&out)["conservation"];
+    let abs = c["max_abs_energy_error_hartree"].as_f64().unwrap();
+    assert_eq!(c["relative_to_hartree"].as_f64().unwrap(), 1e-3);
+    assert_eq!(c["max_relative_energy_error"].as_f64().unwrap(), abs / 1e-3);
+
+    // A guard that trips: the message's change is the summary's absolute error.
+    let path = d.join("loose.toml");
+    std::fs::write(
+        &path,
+        "molecule = \"h2o\"\n[units]\ntime = \"fs\"\n[initial]\np = { r1 = 1.0 }\n[integrator]\nmethod = \"rk4\"\nstep = 2.0\n\
+         [run]\nend = 500.0\noutput_interval = 2.0\noutputs = [\"summary\"]\nmax_energy_error = 1e-6\n",
+    )
+    .unwrap();
+    let o = rovib(&["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(!o.status.success(), "{err}");
+    let s = summary(&out);
+    assert_eq!(s["status"], "failed");
+    let abs = s["conservation"]["max_abs_energy_error_hartree"].as_f64().unwrap();
+    assert!(abs > 0.0, "{s}");
+    assert!(err.contains(&format!("the energy changed by {abs:.3e} hartree")), "{abs:.3e} not in {err}");
+}
