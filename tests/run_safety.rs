@@ -67,7 +67,7 @@ fn wait_for_lines(path: &Path, lines: usize) {
 fn interrupt_with(signal: &str) {
     let d = dir(signal);
     let out = d.join("out");
-    let path = scene(&d, "long.toml", 1e7, "\"trajectory\", \"lab\", \"summary\"");
+    let path = scene(&d, "long.toml", 4e5, "\"trajectory\", \"lab\", \"summary\"");
     let child = Command::new(env!("CARGO_BIN_EXE_rovib"))
         .args(["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"])
         .stdout(Stdio::piped())
