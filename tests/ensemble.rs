@@ -1,7 +1,9 @@
 //! Ensembles through the library API: statistics against direct computation, reproducibility
 //! across thread counts, energy conservation, failures, interrupts and states files.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::ensemble::{column, csv};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -84,22 +86,7 @@ fn out_dir(name: &str) -> PathBuf {
 }
 
 fn options(name: &str, threads: usize) -> EnsembleOptions {
-    let mut o = EnsembleOptions::new(out_dir(name));
-    o.threads = Some(threads);
-    o
-}
-
-/// A CSV file as its header and rows of numbers.
-fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header = lines.next().unwrap().split(',').map(str::to_owned).collect();
-    let rows = lines.map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect()).collect();
-    (header, rows)
-}
-
-fn column(header: &[String], name: &str) -> usize {
-    header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name} in {header:?}"))
+    common::ensemble::options(out_dir(name), threads)
 }
 
 #[test]

@@ -2,7 +2,9 @@
 //! runner's statistics must show for the right distribution (equipartition, Liouville
 //! stationarity, the energy shell) and byte-identical outputs on 1 and 2 threads.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::ensemble::{column, csv};
+use std::path::PathBuf;
 
 use rovib::ensemble::{EnsembleOptions, run_ensemble};
 use rovib::molecules::H2o;
@@ -18,26 +20,11 @@ fn out_dir(name: &str) -> PathBuf {
 }
 
 fn options(name: &str, threads: usize) -> EnsembleOptions {
-    let mut o = EnsembleOptions::new(out_dir(name));
-    o.threads = Some(threads);
-    o
+    common::ensemble::options(out_dir(name), threads)
 }
 
 fn scene(body: &str) -> Scene {
     parse_scene("test.toml", &format!("molecule = \"h2o\"\n{body}")).unwrap()
-}
-
-/// A CSV file as its header and rows of numbers.
-fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header = lines.next().unwrap().split(',').map(str::to_owned).collect();
-    let rows = lines.map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect()).collect();
-    (header, rows)
-}
-
-fn column(header: &[String], name: &str) -> usize {
-    header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name} in {header:?}"))
 }
 
 /// Mean and standard error of the mean.

@@ -2,6 +2,8 @@
 //! reference geometry, finite differences, and matrix comparisons.
 #![allow(dead_code)]
 
+pub mod ensemble;
+
 use rovib::runtime::nalgebra::{SMatrix, SVector};
 use rovib::runtime::units::CoordinateUnit;
 use rovib::runtime::{Molecule, MoleculeVisitor};
