@@ -71,7 +71,8 @@ fn marker(shape: &str, x: f64, y: f64, colour: &str) -> String {
     }
 }
 
-fn escape(s: &str) -> String {
+/// `s` with the characters XML gives a meaning to escaped, for SVG text.
+pub(crate) fn escape(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 

@@ -2,6 +2,7 @@
 //! histograms as bars. (`crate::plot` draws log-log work-precision diagrams; ensemble means
 //! can be negative or zero, so they need linear axes.)
 
+use crate::plot::escape;
 use std::fmt::Write as _;
 
 /// What one panel shows.
@@ -31,10 +32,6 @@ const RIGHT: f64 = 15.0;
 const TOP: f64 = 35.0;
 const BOTTOM: f64 = 50.0;
 const COLUMNS: usize = 3;
-
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
-}
 
 /// A tick label for `v` on an axis whose ticks are `step` apart: as many digits as tell
 /// neighbouring ticks apart (a mean that barely moves needs many).
