@@ -244,6 +244,24 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     }
 }
 
+/// The coordinates the scene's `run.frozen` names, frozen (rotation free); an unknown name is
+/// an error at its place in the scene.
+pub fn frozen_reduction<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+) -> Result<Reduction<N>, FileError> {
+    let names: Vec<&str> = scene.frozen.iter().map(|s| s.get_ref().as_str()).collect();
+    Reduction::freezing(m, &names).map_err(|e| {
+        let at = match &e {
+            ReductionError::UnknownCoordinate { name, .. } => {
+                scene.frozen.iter().find(|s| s.get_ref() == name).map_or(0..0, |s| s.span())
+            }
+            _ => 0..0,
+        };
+        scene.source().error(at, e.to_string(), "name coordinates from `rovib list` in run.frozen")
+    })
+}
+
 /// The system every command integrates, chosen from the scene: the body formulation (no
 /// gimbal lock) on the fast path, reduced to what the scene needs: frozen coordinates as it
 /// names them, `J = 0` when the initial angular momentum is exactly zero (then `J` stays
@@ -254,16 +272,7 @@ pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize
     scene: &Scene,
     start: &PhaseState<N>,
 ) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
-    let names: Vec<&str> = scene.frozen.iter().map(|s| s.get_ref().as_str()).collect();
-    let mut reduction = Reduction::freezing(m, &names).map_err(|e| {
-        let at = match &e {
-            ReductionError::UnknownCoordinate { name, .. } => {
-                scene.frozen.iter().find(|s| s.get_ref() == name).map_or(0..0, |s| s.span())
-            }
-            _ => 0..0,
-        };
-        scene.source().error(at, e.to_string(), "name coordinates from `rovib list` in run.frozen")
-    })?;
+    let mut reduction = frozen_reduction(m, scene)?;
     if start.pe == Vector3::zeros() {
         reduction.rotation =
             RotationPart::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };

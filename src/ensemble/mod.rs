@@ -35,7 +35,6 @@ use self::runner::{Accumulators, BLOCK, Outcome, Plan, Progress, run_block};
 use self::scene::{Bound, EnsembleScene, parse_ensemble};
 use crate::cli::{CliError, unknown_molecule};
 use crate::molecules;
-use crate::runtime::hamiltonian::fast::{Reduction, ReductionError};
 use crate::runtime::sample::{self, Sampler};
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::{Scene, parse_scene};
@@ -221,16 +220,7 @@ fn execute<M, const N: usize, const NA: usize>(
 where
     M: Molecule<N, NA> + Sync,
 {
-    let names: Vec<&str> = scene.frozen.iter().map(|s| s.get_ref().as_str()).collect();
-    let reduction = Reduction::freezing(m, &names).map_err(|e| {
-        let at = match &e {
-            ReductionError::UnknownCoordinate { name, .. } => {
-                scene.frozen.iter().find(|s| s.get_ref() == name).map_or(0..0, |s| s.span())
-            }
-            _ => 0..0,
-        };
-        scene.source().error(at, e.to_string(), "name coordinates from `rovib list` in run.frozen")
-    })?;
+    let reduction = crate::start::frozen_reduction(m, scene)?;
     std::fs::create_dir_all(&options.out_dir)
         .map_err(|e| CliError::context(format!("cannot create {}", options.out_dir.display()), e))?;
     let plan = Plan {
