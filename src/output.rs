@@ -137,6 +137,24 @@ pub fn energy_scale(h0: f64) -> f64 {
     h0.abs().max(ENERGY_SCALE_FLOOR)
 }
 
+/// The energy guard of `rovib run` and `rovib ensemble`: `Err` with the message when
+/// `|H − H(0)| / max(|H(0)|, ENERGY_SCALE_FLOOR)` exceeds `max_energy_error` or is NaN (a
+/// non-finite energy is a runaway too). The message gives the absolute change, which is what
+/// `summary.json` reports as `max_abs_energy_error_hartree`, and the scale it was divided by.
+pub fn energy_guard(h0: f64, h: f64, max_energy_error: f64) -> Result<(), String> {
+    let change = (h - h0).abs();
+    let scale = energy_scale(h0);
+    let drift = change / scale;
+    if drift.is_nan() || drift > max_energy_error {
+        return Err(format!(
+            "the energy changed by {change:.3e} hartree from H(0) = {h0} hartree, {drift:.1e} relative to \
+             max(|H(0)|, {ENERGY_SCALE_FLOOR:e} hartree) = {scale:e} hartree, more than run.max_energy_error = \
+             {max_energy_error:e} (the step is too large or the tolerances too loose for this motion; reduce them)"
+        ));
+    }
+    Ok(())
+}
+
 /// Conservation diagnostics accumulated over the output times.
 #[derive(Clone, Debug, Default)]
 pub struct Conservation {

@@ -189,6 +189,18 @@ impl ExpressionPlace for Source<'_> {
     }
 }
 
+/// The punctuation an atom label may contain besides letters and digits.
+const LABEL_PUNCTUATION: &str = "_-+'.*()";
+
+/// The longest atom label, in characters.
+const MAX_LABEL_CHARS: usize = 32;
+
+/// Whether `c` may appear in an atom label: a letter, a digit or [`LABEL_PUNCTUATION`] (no
+/// whitespace, control characters, commas or quotes, which break lists and files).
+fn label_char(c: char) -> bool {
+    c.is_alphanumeric() || LABEL_PUNCTUATION.contains(c)
+}
+
 fn is_identifier(name: &str) -> bool {
     let mut chars = name.chars();
     matches!(chars.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
@@ -407,6 +419,25 @@ impl Validator<'_> {
             let label = a.label.get_ref();
             if label.trim().is_empty() {
                 return Err(src.error(a.label.span(), "empty atom label", "give every atom a label such as \"H1\""));
+            }
+            // Labels are printed in lists (`rovib list`, messages) and are keys of scenes and
+            // states files: one short word.
+            if let Some(c) = label.chars().find(|&c| !label_char(c)) {
+                return Err(src.error(
+                    a.label.span(),
+                    format!("atom label {label:?} contains {c:?}"),
+                    format!("labels are one word of letters, digits and {LABEL_PUNCTUATION}, e.g. \"H1\""),
+                ));
+            }
+            if label.chars().count() > MAX_LABEL_CHARS {
+                return Err(src.error(
+                    a.label.span(),
+                    format!(
+                        "atom label `{label}` has {} characters, more than {MAX_LABEL_CHARS}",
+                        label.chars().count()
+                    ),
+                    "use a short label such as \"H1\"",
+                ));
             }
             if let Some(first) = labels.get(label) {
                 let (line, _) = src.place(first.start);

@@ -180,10 +180,17 @@ pub fn generate(molecules_dir: &Path, display_dir: &str, out_dir: &Path) -> Resu
     for input in &inputs {
         let file_name = input.file_name().and_then(|s| s.to_str()).unwrap_or_default();
         let display = format!("{display_dir}/{file_name}");
-        let text = match std::fs::read_to_string(input) {
+        let text = match rovib_base::input::read_text_capped(input, rovib_base::input::MAX_INPUT_BYTES) {
             Ok(t) => t,
-            Err(e) => {
-                errors.push(io_error(display, e, "check that the file is readable UTF-8 text"));
+            Err(message) => {
+                errors.push(DefinitionError {
+                    path: display,
+                    line: 0,
+                    column: 0,
+                    message,
+                    help: "a definition is readable UTF-8 text of at most 16 MiB".into(),
+                    source_line: None,
+                });
                 continue;
             }
         };

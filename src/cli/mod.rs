@@ -232,8 +232,20 @@ fn say(text: &str) -> Result<(), CliError> {
 
 /// The error for a molecule name that is not compiled in.
 pub(crate) fn unknown_molecule(name: &str) -> CliError {
+    // Only a name a definition could have (a lowercase identifier) gets "add molecules/NAME.toml":
+    // an empty name would say "molecules/.toml".
+    let definable = name.chars().next().is_some_and(|c| c.is_ascii_lowercase())
+        && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+    let add = if definable {
+        format!("add molecules/{name}.toml and rebuild to add it")
+    } else {
+        "a new molecule needs a name of lowercase letters, digits and `_`, starting with a letter, and its \
+         molecules/NAME.toml"
+            .to_owned()
+    };
     CliError::Message(format!(
-        "unknown molecule `{name}`; the compiled-in molecules are {} (add molecules/{name}.toml and rebuild to add it)",
+        "unknown molecule `{}`; the compiled-in molecules are {} ({add})",
+        name.escape_debug(),
         crate::molecules::NAMES.join(", ")
     ))
 }

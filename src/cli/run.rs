@@ -11,10 +11,8 @@ use super::{CliError, unknown_molecule};
 use crate::dir_lock::DirLock;
 use crate::molecules;
 use crate::output::{
-    Conservation, ENERGY_SCALE_FLOOR, LabXyz, RunSummary, TrajectoryCsv, energy_scale, remove_stale_outputs,
-    write_summary,
+    Conservation, LabXyz, RunSummary, TrajectoryCsv, energy_guard, remove_stale_outputs, write_summary,
 };
-use crate::runtime::hamiltonian::hamiltonian;
 use crate::runtime::hamiltonian::{ReducedSystem, Reduction, RotationPart};
 use crate::runtime::integrate::{Observer, OdeSystem, SolveError, Stats, solve};
 use crate::runtime::nalgebra::{SMatrix, Vector3};
@@ -63,9 +61,8 @@ impl MoleculeVisitor for Run<'_> {
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         let scene = self.scene;
         let start = initial_state(&m, scene)?;
-        // Fail before writing anything if the initial state is not valid.
-        hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
-        let (system, y0) = production_system(&m, scene, &start.state)?;
+        // Fails before anything is written if the initial state is not valid.
+        let (system, y0) = production_system(&m, scene, &start.body)?;
         let layout = layout(system.reduction(), &m);
 
         // One run per directory, then no file of an earlier run may remain looking like this one's.
@@ -299,19 +296,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         if self.diagnostics {
             self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
         }
-        let change = (energy - h0).abs();
-        let scale = energy_scale(h0);
-        let drift = change / scale;
-        // NaN fails too: a non-finite energy is a runaway as well.
-        if drift.is_nan() || drift > self.max_energy_error {
-            let e = format!(
-                "the energy changed by {change:.3e} hartree from H(0) = {h0} hartree, {drift:.1e} relative to \
-                 max(|H(0)|, {ENERGY_SCALE_FLOOR:e} hartree) = {scale:e} hartree, more than run.max_energy_error = \
-                 {:e} (the step is too large or the tolerances too loose for this motion; reduce them)",
-                self.max_energy_error
-            );
-            return Err(at(&e, y, &self.layout));
-        }
+        energy_guard(h0, energy, self.max_energy_error).map_err(|e| at(&e, y, &self.layout))?;
         if let Some(csv) = &mut self.trajectory {
             let values = phase.q.iter().chain(phase.p.iter()).chain(phase.euler.iter()).chain(phase.pe.iter());
             csv.row(t_out, values.copied().chain([energy]))?;

@@ -130,8 +130,8 @@ impl EnsembleReport {
 
 /// Reads and parses a scene file (which may have `[ensemble]`).
 pub fn load_scene(path: &Path) -> Result<Scene, CliError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
+    let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)
+        .map_err(CliError::Message)?;
     Ok(parse_scene(&path.display().to_string(), &text)?)
 }
 

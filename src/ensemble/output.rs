@@ -167,6 +167,10 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         "time_unit": tu,
         "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
         "max_energy_error": scene.max_energy_error,
+        "max_energy_error_relative_to": format!(
+            "max(|H(0)|, {:e} hartree) of each trajectory",
+            crate::output::ENERGY_SCALE_FLOOR
+        ),
         "kept_trajectories_every": ensemble.keep_trajectories,
         "means": report.quantities.iter().zip(&report.units).map(|(q, u)| json!({"quantity": q, "unit": u})).collect::<Vec<_>>(),
         "histograms_outside_range": plan.histograms.iter().enumerate().map(|(i, (qi, _, _, _))| {

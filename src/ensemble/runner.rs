@@ -54,7 +54,8 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     pub histograms: Vec<(usize, usize, [f64; 2], Vec<usize>)>,
     /// Correlated quantities (indices into `quantities`).
     pub correlations: Vec<usize>,
-    /// The largest relative energy change at an output time before a trajectory fails.
+    /// The largest energy change at an output time, relative to max(|H(0)|,
+    /// `output::ENERGY_SCALE_FLOOR`), before a trajectory fails.
     pub max_energy_error: f64,
     /// The smallest relative pivot of the metric.
     pub min_pivot: f64,
@@ -306,16 +307,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
             self.initial_energy = h;
         }
         let h0 = self.initial_energy;
-        let drift = if h0 == 0.0 { (h - h0).abs() } else { ((h - h0) / h0).abs() };
-        if drift.is_nan() || drift > self.plan.max_energy_error {
-            self.failure = Some((
-                "energy guard",
-                t,
-                format!(
-                    "the energy changed by {drift:.1e} relative to H(0) = {h0} hartree, more than run.max_energy_error = {:e}",
-                    self.plan.max_energy_error
-                ),
-            ));
+        // The same guard as `rovib run`'s, with the same absolute floor (`output::energy_guard`).
+        if let Err(e) = crate::output::energy_guard(h0, h, self.plan.max_energy_error) {
+            self.failure = Some(("energy guard", t, e));
             return ControlFlow::Break(());
         }
         let u = if self.needs_potential { self.plan.molecule.potential(&body.q) } else { f64::NAN };

@@ -16,6 +16,10 @@ use crate::runtime::hamiltonian::fast::{BodyState, quaternion_of_euler};
 use crate::runtime::nalgebra::{SVector, Vector3};
 use crate::scene::Scene;
 
+/// The largest states file read: 1 GiB (a million water states in extended XYZ are about
+/// 0.3 GB), so that `/dev/zero` or a wrong path is an error rather than memory without bound.
+pub const MAX_STATES_FILE_BYTES: u64 = 1 << 30;
+
 /// Reads the states in `path`. `Err(Ok(e))` is an error located in the file, `Err(Err(m))` a
 /// file that cannot be read at all.
 pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
@@ -23,8 +27,8 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     path: &Path,
     _scene: &Scene,
 ) -> Result<Vec<BodyState<N>>, Result<FileError, String>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Err(format!("cannot read the states file {}: {e}", path.display())))?;
+    let text = crate::runtime::diagnostic::read_text_capped(path, MAX_STATES_FILE_BYTES)
+        .map_err(|e| Err(e.replacen("cannot read ", "cannot read the states file ", 1)))?;
     let name = path.display().to_string();
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xyz") || e.eq_ignore_ascii_case("extxyz")) {
         return super::states_xyz::read_xyz(m, &name, &text).map_err(Ok);

@@ -9,6 +9,7 @@
 //! Stiffness detection is not implemented.
 
 use super::{InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_run};
+use crate::diagnostic::Compact;
 
 /// Number of stages including the FSAL stage and the three extra dense-output stages.
 const STAGES: usize = 16;
@@ -278,7 +279,7 @@ pub struct Dop853Options {
     /// whatever this is. The final step, shortened to land on `t_end`, is exempt.
     pub min_step: f64,
     /// Most steps (accepted and rejected) before [`SolveError::TooManySteps`].
-    /// Default 100 000 000 (`dop853.f` defaults to 100 000, too few for long molecular runs).
+    /// Default [`super::DEFAULT_MAX_STEPS`].
     pub max_steps: u64,
     /// Lund stabilization exponent β of the step-size controller, in `[0, 0.2]`. Default 0
     /// (plain controller; `dop853.f` uses 0 as well).
@@ -293,7 +294,7 @@ impl Default for Dop853Options {
             initial_step: None,
             max_step: f64::INFINITY,
             min_step: 0.0,
-            max_steps: 100_000_000,
+            max_steps: super::DEFAULT_MAX_STEPS,
             beta: 0.0,
         }
     }
@@ -303,26 +304,33 @@ impl Dop853Options {
     /// Checks that the options can be run with.
     pub fn validate(&self) -> Result<(), InvalidInput> {
         if !(self.rtol > 10.0 * f64::EPSILON && self.rtol.is_finite()) {
-            return Err(InvalidInput(format!("rtol must be finite and larger than 10·ε ≈ 2.2e-15, not {}", self.rtol)));
+            return Err(InvalidInput(format!(
+                "rtol must be finite and larger than 10·ε ≈ 2.2e-15, not {}",
+                Compact(self.rtol)
+            )));
         }
         if !(self.atol > 0.0 && self.atol.is_finite()) {
-            return Err(InvalidInput(format!("atol must be positive and finite, not {}", self.atol)));
+            return Err(InvalidInput(format!("atol must be positive and finite, not {}", Compact(self.atol))));
         }
         if let Some(h) = self.initial_step
             && !(h > 0.0 && h.is_finite())
         {
-            return Err(InvalidInput(format!("the initial step must be positive and finite, not {h}")));
+            return Err(InvalidInput(format!("the initial step must be positive and finite, not {}", Compact(h))));
         }
         if self.max_step.is_nan() || self.max_step <= 0.0 {
-            return Err(InvalidInput(format!("max_step must be positive, not {}", self.max_step)));
+            return Err(InvalidInput(format!("max_step must be positive, not {}", Compact(self.max_step))));
         }
         if !(self.min_step >= 0.0 && self.min_step.is_finite()) {
-            return Err(InvalidInput(format!("min_step must be zero or positive and finite, not {}", self.min_step)));
+            return Err(InvalidInput(format!(
+                "min_step must be zero or positive and finite, not {}",
+                Compact(self.min_step)
+            )));
         }
         if self.min_step > self.max_step {
             return Err(InvalidInput(format!(
                 "min_step ({}) is larger than max_step ({})",
-                self.min_step, self.max_step
+                Compact(self.min_step),
+                Compact(self.max_step)
             )));
         }
         if self.max_steps == 0 {
