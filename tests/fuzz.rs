@@ -413,7 +413,7 @@ const SCENE_NUMBERS: &[&str] = &[
 /// hostile names in its tables, and either form of `[initial]`.
 fn hostile_scene(seed: u64) -> String {
     let mut p = Pick(seed);
-    let mut n = |p: &mut Pick| p.of(SCENE_NUMBERS).to_owned();
+    let n = |p: &mut Pick| p.of(SCENE_NUMBERS).to_owned();
     let mut text = format!("molecule = \"{}\"\n[units]\n", p.of(&["h2o", "h2o", "h2o", "", "fn", "h2o\\n", "H2O"]));
     text += &format!("time = \"{}\"\nlength = \"{}\"\n", p.of(&["au", "fs", "ps"]), p.of(&["bohr", "angstrom"]));
     text += "[initial]\n";
