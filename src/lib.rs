@@ -12,6 +12,7 @@ pub mod interrupt;
 pub mod molecules;
 pub mod output;
 pub mod plot;
+pub mod restart;
 pub mod scene;
 pub mod start;
 

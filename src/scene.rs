@@ -65,6 +65,11 @@ impl TimeUnit {
         }
     }
 
+    /// The unit whose [`TimeUnit::in_au`] is exactly `scale`, if any.
+    pub fn of_scale(scale: f64) -> Option<TimeUnit> {
+        [TimeUnit::Au, TimeUnit::Fs, TimeUnit::Ps].into_iter().find(|u| u.in_au() == scale)
+    }
+
     /// The spelling used in files and column names.
     pub fn name(self) -> &'static str {
         match self {
@@ -84,6 +89,8 @@ pub struct Outputs {
     pub lab: bool,
     /// `summary.json`: work counters and conservation diagnostics.
     pub summary: bool,
+    /// `restart.json`: the final state, to continue the run (`rovib run --resume`).
+    pub restart: bool,
 }
 
 /// A name in the file with its place.
@@ -177,6 +184,8 @@ pub struct Scene {
     /// The largest relative energy error `|H(t) − H(0)| / |H(0)|` a run accepts at an output
     /// time before it stops as unstable or too loosely integrated.
     pub max_energy_error: f64,
+    /// Whether trajectory.csv also gets continuous (unwrapped) φ and ψ columns.
+    pub euler_unwrapped: bool,
 }
 
 impl Scene {
@@ -250,6 +259,8 @@ struct RawRun {
     min_metric_pivot: Option<Spanned<f64>>,
     max_energy_error: Option<Spanned<f64>>,
     max_outputs: Option<Spanned<u64>>,
+    #[serde(default)]
+    euler_unwrapped: bool,
 }
 
 /// The largest number of output times a scene may ask for unless `run.max_outputs` raises it:
@@ -353,19 +364,21 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         ));
     }
     let outputs = match &run.outputs {
-        None => Outputs { trajectory: true, lab: true, summary: true },
+        None => Outputs { trajectory: true, lab: true, summary: true, restart: true },
         Some(list) => {
-            let mut o = Outputs { trajectory: false, lab: false, summary: false };
+            let mut o = Outputs { trajectory: false, lab: false, summary: false, restart: false };
             for name in list.get_ref() {
                 match name.get_ref().as_str() {
                     "trajectory" => o.trajectory = true,
                     "lab" => o.lab = true,
                     "summary" => o.summary = true,
+                    "restart" => o.restart = true,
                     other => {
                         return Err(src.error(
                             name.span(),
                             format!("unknown output `{other}`"),
-                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz) and \"summary\" (summary.json)",
+                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz), \"summary\" (summary.json) \
+                             and \"restart\" (restart.json)",
                         ));
                     }
                 }
@@ -424,6 +437,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             Some(x) => positive(&src, x, "run.max_energy_error")?,
             None => DEFAULT_MAX_ENERGY_ERROR,
         },
+        euler_unwrapped: run.euler_unwrapped,
     })
 }
 
