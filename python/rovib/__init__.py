@@ -83,10 +83,12 @@ def _rows(x) -> Optional[List[List[float]]]:
 class Trajectory:
     """A finished run: the columns of ``trajectory.csv`` as NumPy arrays, and ``summary.json``.
 
-    ``columns`` maps each CSV header name to its array (``t`` in the scene's time unit,
-    ``summary["time_unit"]``; q in bohr or rad, p in ħ/bohr or ħ, Euler angles in rad, H in
-    hartree). ``units`` maps names to units when the run wrote ``trajectory.units.json``, else it
-    is empty. ``out_dir`` holds every file written (lab.xyz, plots ...).
+    ``columns`` maps each CSV header name to its array: ``t`` (the scene's time unit), ``q_NAME``
+    (bohr or rad), ``p_NAME`` (ħ/bohr or ħ), ``euler_phi``, ``euler_theta``, ``euler_psi`` (rad),
+    ``pe_phi``, ``pe_theta``, ``pe_psi`` (ħ), ``H`` (hartree), and with ``run.euler_unwrapped``
+    ``euler_phi_unwrapped``, ``euler_psi_unwrapped``. ``units`` maps every column to its unit, in
+    file order (from ``trajectory.units.json``). ``out_dir`` holds every file written (lab.xyz,
+    restart.json ...).
     """
 
     out_dir: str
@@ -162,7 +164,9 @@ def read_trajectory(out_dir: PathLike) -> Trajectory:
     summary = _read_json(os.path.join(out_dir, "summary.json")) or {}
     units = _read_json(os.path.join(out_dir, "trajectory.units.json")) or {}
     if "columns" in units and isinstance(units["columns"], dict):
-        units = units["columns"]
+        # JSON objects are unordered: "order" lists the columns in file order.
+        order = units.get("order") or list(units["columns"])
+        units = {name: units["columns"][name] for name in order if name in units["columns"]}
     return Trajectory(out_dir=out_dir, columns=columns, summary=summary, units=units)
 
 
