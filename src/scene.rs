@@ -1,16 +1,16 @@
 //! Scene files: what `rovib run` integrates and what it writes.
 //!
 //! A scene names a molecule, an initial condition, an integrator, the end time, the output
-//! interval and the outputs. Every key is documented in the README ("Scene files"); a short
+//! interval and the outputs. Every key is documented in the README ("Scenes and `rovib run`"); a short
 //! example:
 //!
 //! ```toml
 //! molecule = "h2o"
 //!
 //! [units]                 # of the numbers in this file (not of the output, which is atomic)
-//! length = "angstrom"     # bohr | angstrom
-//! angle = "deg"           # rad | deg
-//! time = "fs"             # au | fs
+//! length = "angstrom"     # bohr | angstrom (default: q in each coordinate's declared unit,
+//! angle = "deg"           # rad | deg        positions in bohr, Euler angles in rad)
+//! time = "fs"             # au | fs | ps
 //!
 //! [initial]               # internal form: q, p or qdot, euler, pe or j
 //! q = { r1 = 1.0, r2 = 0.95, alpha = 100.0 }
@@ -283,7 +283,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     let raw: RawScene = toml::from_str(text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
         let help = if message.starts_with("unknown field") || message.starts_with("missing field") {
-            "the README's \"Scene files\" section lists every key"
+            "the README's section \"Scenes and `rovib run`\" lists every key"
         } else {
             "see the TOML syntax at https://toml.io and the shipped scenes/ for examples"
         };
@@ -293,9 +293,25 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         }
     })?;
 
-    let length =
-        unit(&src, raw.units.length.as_ref(), LengthUnit::Bohr, LengthUnit::parse, "length", "\"bohr\", \"angstrom\"")?;
-    let angle = unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?;
+    // Without [units], lengths and angles of coordinates are in each coordinate's declared unit
+    // (`None`); Cartesian positions and velocities in bohr, Euler angles in rad.
+    let length = match &raw.units.length {
+        None => None,
+        Some(_) => Some(unit(
+            &src,
+            raw.units.length.as_ref(),
+            LengthUnit::Bohr,
+            LengthUnit::parse,
+            "length",
+            "\"bohr\", \"angstrom\"",
+        )?),
+    };
+    let angle = match &raw.units.angle {
+        None => None,
+        Some(_) => {
+            Some(unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?)
+        }
+    };
     let time = unit(
         &src,
         raw.units.time.as_ref(),
@@ -309,7 +325,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         "time",
         "\"au\", \"fs\", \"ps\"",
     )?;
-    let (l, a, t) = (length.in_bohr(), angle.in_rad(), time.in_au());
+    let (l, a, t) = (length.map_or(1.0, LengthUnit::in_bohr), angle.map_or(1.0, AngleUnit::in_rad), time.in_au());
 
     let initial = match (&raw.initial, &raw.ensemble) {
         (Some(i), _) => initial(&src, i, l, a, t)?,
@@ -426,7 +442,11 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         t_end,
         output_interval,
         time_unit: time,
-        units: CoordinateScale { length: l, angle: a, time: t },
+        units: CoordinateScale {
+            length: length.map(LengthUnit::in_bohr),
+            angle: angle.map(AngleUnit::in_rad),
+            time: t,
+        },
         outputs,
         frozen: run.frozen.clone(),
         min_metric_pivot: match &run.min_metric_pivot {
@@ -515,34 +535,35 @@ fn named_triples(
 
 /// The scene's units as factors to atomic units. Numbers given per coordinate (q, qdot) are
 /// kept in the scene's units until the molecule tells which coordinates are lengths and which
-/// are angles.
+/// are angles, and in which unit each is declared.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct CoordinateScale {
-    /// Bohr per scene length unit.
-    pub length: f64,
-    /// Radians per scene angle unit.
-    pub angle: f64,
+    /// Bohr per scene length unit; `None` when the scene gives no `units.length`: then each
+    /// coordinate's value is in the unit its definition declares (e.g. Å for water's r1).
+    pub length: Option<f64>,
+    /// Radians per scene angle unit; `None`: each coordinate's declared unit (e.g. degrees).
+    pub angle: Option<f64>,
     /// Atomic units of time per scene time unit.
     pub time: f64,
 }
 
 impl CoordinateScale {
-    /// A value of a coordinate declared with `unit`, given in the scene's length or angle unit,
-    /// in atomic units (bohr or rad).
+    /// A value of a coordinate declared with `unit`, given in the scene's length or angle unit
+    /// (without one, in `unit`), in atomic units (bohr or rad).
     pub fn coordinate_to_au(&self, unit: CoordinateUnit, value: f64) -> f64 {
         value * self.factor(unit)
     }
 
     /// A velocity of a coordinate declared with `unit`, given in the scene's length or angle
-    /// unit per its time unit, in atomic units (bohr or rad per ħ/E_h).
+    /// unit (without one, in `unit`) per its time unit, in atomic units (bohr or rad per ħ/E_h).
     pub fn velocity_to_au(&self, unit: CoordinateUnit, value: f64) -> f64 {
         value * self.factor(unit) / self.time
     }
 
     fn factor(&self, unit: CoordinateUnit) -> f64 {
         match unit {
-            CoordinateUnit::Length(_) => self.length,
-            CoordinateUnit::Angle(_) => self.angle,
+            CoordinateUnit::Length(_) => self.length.unwrap_or(unit.in_atomic_units()),
+            CoordinateUnit::Angle(_) => self.angle.unwrap_or(unit.in_atomic_units()),
         }
     }
 }

@@ -123,9 +123,10 @@ struct Run<'a> {
 }
 
 /// H(0) − U(reference) above which a run warns that it starts far above the reference energy,
-/// hartree (0.2 hartree = 5.4 eV, above the dissociation energy of most single bonds; a scene
-/// that gives a length in the wrong unit typically lands tens of eV up).
-pub const HIGH_START_ENERGY: f64 = 0.2;
+/// hartree (0.1 hartree = 2.7 eV, about half the dissociation energy of a single bond and 100
+/// times kT at 300 K; a length given in the wrong unit typically lands at or above it: water's
+/// r1 = 1.81 meant in bohr but read in Å starts 0.14 hartree up).
+pub const HIGH_START_ENERGY: f64 = 0.1;
 
 /// The warning for a start at `h0` when the potential at the reference geometry is `u_ref`
 /// (hartree), if it is far above.

@@ -16,7 +16,7 @@ use crate::runtime::Molecule;
 use crate::runtime::diagnostic::{FileError, Source};
 use crate::runtime::nalgebra::Vector3;
 use crate::runtime::sample::{ModeEnergies, Region, RotationSampling, Spec};
-use crate::runtime::units::{CoordinateUnit, EnergyUnit};
+use crate::runtime::units::EnergyUnit;
 use crate::scene::Scene;
 
 /// The seed of an ensemble whose scene gives none.
@@ -581,10 +581,7 @@ impl EnsembleScene {
                 let k = coords.iter().position(|c| c.name == name.get_ref()).ok_or_else(|| {
                     unknown_name(&src, name, &format!("{} has no coordinate", m.name()), coords.iter().map(|c| c.name))
                 })?;
-                let s = match coords[k].unit {
-                    CoordinateUnit::Length(_) => scene.units.length,
-                    CoordinateUnit::Angle(_) => scene.units.angle,
-                };
+                let s = scene.units.coordinate_to_au(coords[k].unit, 1.0);
                 limits[k] = Some((lo * s, hi * s));
             }
             Ok(Region { energy_cap: r.energy_cap.as_ref().map(|c| c.0), limits })
