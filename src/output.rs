@@ -478,6 +478,8 @@ pub struct RunSummary<'a> {
     pub failure: Option<&'a str>,
     /// Whether SIGINT or SIGTERM stopped the run (status "interrupted" unless it also failed).
     pub interrupted: bool,
+    /// The stop condition (`run.stop_outside`) that ended the run, if one did (status "stopped").
+    pub stopped: Option<&'a Value>,
     /// The last output time written, in the scene's time unit (`None` if none was).
     pub t_reached: Option<f64>,
     /// The flat layout of the integrated state, e.g. `[r1, p_r1, quaternion w, x, y, z, J_x, J_y, J_z]`.
@@ -510,11 +512,13 @@ impl RunSummary<'_> {
         json!({
             "scene": scene.path,
             "molecule": self.molecule,
-            "status": match (self.failure, self.interrupted) {
-                (Some(_), _) => "failed",
-                (None, true) => "interrupted",
-                (None, false) => "completed",
+            "status": match (self.failure, self.interrupted, self.stopped) {
+                (Some(_), _, _) => "failed",
+                (None, true, _) => "interrupted",
+                (None, false, Some(_)) => "stopped",
+                (None, false, None) => "completed",
             },
+            "stop": self.stopped,
             "error": self.failure,
             "t_reached": self.t_reached,
             "resumed_from": self.resumed_from,

@@ -186,6 +186,10 @@ pub struct Scene {
     pub max_energy_error: f64,
     /// Whether trajectory.csv also gets continuous (unwrapped) φ and ψ columns.
     pub euler_unwrapped: bool,
+    /// Stop conditions: the run stops (status "stopped") at the first output time at which a
+    /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
+    /// molecule when the run starts).
+    pub stop_outside: Vec<Named<[f64; 2]>>,
 }
 
 impl Scene {
@@ -261,6 +265,7 @@ struct RawRun {
     max_outputs: Option<Spanned<u64>>,
     #[serde(default)]
     euler_unwrapped: bool,
+    stop_outside: Option<RawTable<Vec<f64>>>,
 }
 
 /// The largest number of output times a scene may ask for unless `run.max_outputs` raises it:
@@ -458,6 +463,26 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             None => DEFAULT_MAX_ENERGY_ERROR,
         },
         euler_unwrapped: run.euler_unwrapped,
+        stop_outside: match &run.stop_outside {
+            None => Vec::new(),
+            Some(table) => table
+                .get_ref()
+                .iter()
+                .map(|(name, v)| {
+                    let what = format!("run.stop_outside.{}", name.get_ref());
+                    match v.get_ref().as_slice() {
+                        &[low, high] if !low.is_nan() && !high.is_nan() && low < high => {
+                            Ok((name.clone(), [low, high]))
+                        }
+                        _ => Err(src.error(
+                            v.span(),
+                            format!("`{what}` must be [low, high] with low < high"),
+                            "write the interval the coordinate may stay in, e.g. [0.5, 3.0] (inf allowed)",
+                        )),
+                    }
+                })
+                .collect::<Result<_, _>>()?,
+        },
     })
 }
 

@@ -79,3 +79,38 @@ fn a_start_far_above_the_reference_energy_is_warned_about_with_its_figure() {
     assert_eq!(summary["warnings"], serde_json::json!([]));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_stop_condition_ends_the_run_at_the_first_output_outside_and_the_summary_says_so() {
+    let dir = temp_dir("stop");
+    // Stretched to 1.25 Å at rest, the bond swings in below 0.9 Å within half a period.
+    let text = "molecule = \"h2o\"\n[units]\ntime = \"fs\"\n[initial]\nq = { r1 = 1.25 }\n\
+                [run]\nend = 100.0\noutput_interval = 0.1\nstop_outside = { r1 = [0.9, 2.0] }\n";
+    let (ok, stderr, summary) = run(&dir, text);
+    assert!(ok, "{stderr}");
+    assert_eq!(summary["status"], "stopped");
+    assert_eq!(summary["stop"]["coordinate"], "r1");
+    let csv = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = csv.lines().skip(1).map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect();
+    let low = 0.9 / BOHR_IN_ANGSTROM;
+    let (last, before) = (&rows[rows.len() - 1], &rows[rows.len() - 2]);
+    assert!(last[1] < low && before[1] >= low, "stopped at the first row below: {} then {}", before[1], last[1]);
+    assert!(rows.iter().rev().skip(1).all(|r| r[1] >= low), "no earlier row outside");
+    assert_eq!(summary["stop"]["t"].as_f64(), Some(last[0]));
+    assert_eq!(summary["stop"]["value_au"].as_f64(), Some(last[1]));
+    assert!(last[0] < 20.0, "well before the end: t = {}", last[0]);
+
+    // An unknown coordinate is an error at its place.
+    let (ok, stderr, _) = {
+        let path = dir.join("bad.toml");
+        std::fs::write(&path, text.replace("{ r1 = [0.9", "{ r3 = [0.9")).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_rovib"))
+            .args(["run", path.to_str().unwrap(), "--out", dir.join("bad").to_str().unwrap(), "--quiet"])
+            .output()
+            .unwrap();
+        (out.status.success(), String::from_utf8(out.stderr).unwrap(), ())
+    };
+    assert!(!ok && stderr.contains("h2o has no coordinate `r3` (in run.stop_outside)"), "{stderr}");
+    assert!(stderr.contains("bad.toml:"), "{stderr}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

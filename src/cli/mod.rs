@@ -178,6 +178,12 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
                     c.max_relative_energy_error(),
                     c.max_j_change
                 );
+                if let Some(stop) = &report.stopped {
+                    text.push_str(&format!(
+                        "stopped at t = {}: {} = {} (atomic units) left run.stop_outside {}\n",
+                        stop["t"], stop["coordinate"], stop["value_au"], stop["bounds_au"]
+                    ));
+                }
                 for f in &report.files {
                     text.push_str(&format!("wrote {}\n", f.display()));
                 }

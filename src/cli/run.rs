@@ -45,6 +45,8 @@ pub struct RunReport {
     /// Warnings about the scene (also in summary.json), e.g. a start far above the reference
     /// energy.
     pub warnings: Vec<String>,
+    /// The stop condition that ended the run (`run.stop_outside`), as in summary.json.
+    pub stopped: Option<serde_json::Value>,
 }
 
 /// Runs the scene at `path`, writing into `out_dir` (default `out/SCENE_NAME`).
@@ -172,6 +174,7 @@ impl MoleculeVisitor for Run<'_> {
             eprintln!("warning: {w}");
         }
         let layout = layout(system.reduction(), &m);
+        let stops = stop_conditions(&m, scene)?;
 
         // One run per directory, then no file of an earlier run may remain looking like this one's.
         let _lock = DirLock::acquire(self.out_dir)?;
@@ -235,6 +238,8 @@ impl MoleculeVisitor for Run<'_> {
             skip_first: self.resume.is_some() && !dop853_continues(scene, self.resume),
             records,
             last_y: y0.clone(),
+            stops,
+            stopped: None,
         };
         let mut counted = Counted { inner: system, evaluations: 0 };
         let begin = Instant::now();
@@ -254,6 +259,7 @@ impl MoleculeVisitor for Run<'_> {
         };
         let failure = failure.or_else(|| flushed.err().map(|e| format!("the run stopped: {e}")));
         let interrupted = recorder.interrupted && failure.is_none();
+        let stopped = recorder.stopped.take().filter(|_| failure.is_none());
         let t_reached = recorder.t_reached.map(|t| t / scene.time_unit.in_au());
         let mut files: Vec<PathBuf> = Vec::new();
         if scene.outputs.trajectory {
@@ -280,6 +286,7 @@ impl MoleculeVisitor for Run<'_> {
                 molecule: m.name(),
                 failure: failure.as_deref(),
                 interrupted,
+                stopped: stopped.as_ref(),
                 t_reached,
                 state_layout: &layout,
                 zero_angular_momentum: system.reduction().rotation != RotationPart::Free,
@@ -326,8 +333,34 @@ impl MoleculeVisitor for Run<'_> {
             conservation: recorder.conservation,
             wall_time,
             warnings,
+            stopped,
         })
     }
+}
+
+/// `run.stop_outside` bound to the molecule: coordinate index, name and bounds in atomic units;
+/// an unknown name is an error at its place.
+fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+) -> Result<Vec<(usize, &'static str, [f64; 2])>, CliError> {
+    let coords = m.coordinates();
+    let names: Vec<&str> = coords.iter().map(|c| c.name).collect();
+    scene
+        .stop_outside
+        .iter()
+        .map(|(name, [low, high])| {
+            let k = crate::start::find_name(
+                &scene.source(),
+                &names,
+                name,
+                || format!("{} has no coordinate `{}` (in run.stop_outside)", m.name(), name.get_ref()),
+                |known| format!("the coordinates of {} are {}", m.name(), known.join(", ")),
+            )?;
+            let to_au = |x: f64| scene.units.coordinate_to_au(coords[k].unit, x);
+            Ok((k, coords[k].name, [to_au(*low), to_au(*high)]))
+        })
+        .collect()
 }
 
 /// Whether a resumed run continues DOP853 from its own continuation point (else it restarts the
@@ -509,6 +542,10 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     records: u64,
     /// The flat state at the last output recorded.
     last_y: Vec<f64>,
+    /// `run.stop_outside`: coordinate index, name, bounds in atomic units.
+    stops: Vec<(usize, &'static str, [f64; 2])>,
+    /// The stop condition met, for summary.json.
+    stopped: Option<serde_json::Value>,
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
@@ -554,6 +591,17 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         }
         self.last_y.copy_from_slice(y);
         self.records += 1;
+        if let Some(&(k, name, [low, high])) =
+            self.stops.iter().find(|(k, _, [lo, hi])| !(*lo..=*hi).contains(&body.q[*k]))
+        {
+            self.stopped = Some(serde_json::json!({
+                "coordinate": name,
+                "value_au": body.q[k],
+                "bounds_au": [low, high],
+                "t": t_out,
+                "checked": "at output times",
+            }));
+        }
         if let Some(bar) = &self.progress {
             bar.inc(1);
         }
@@ -614,6 +662,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Recorder<
         match self.record(t, y) {
             Ok(()) => {
                 self.t_reached = Some(t);
+                if self.stopped.is_some() {
+                    return ControlFlow::Break(());
+                }
                 // After a complete record: the files end on a whole row and a whole frame.
                 if self.stop.load(Ordering::SeqCst) {
                     self.interrupted = true;
