@@ -18,7 +18,7 @@
 //! Ensembles (`rovib ensemble`) do not write this file. Their random state needs no saving:
 //! trajectory `i` draws from its own stream of `(seed, i)` (`runtime::sample::stream`), so an
 //! ensemble resumes from a record of which trajectories (blocks) finished, its checkpoint
-//! (`src/ensemble/checkpoint.rs`, `rovib ensemble --resume`), not from a stream position.
+//! (`src/ensemble/checkpoint.rs`), not from a stream position.
 
 use std::path::Path;
 
