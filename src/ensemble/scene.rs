@@ -190,24 +190,13 @@ struct RawHistogram {
     times: Option<Spanned<Vec<f64>>>,
 }
 
-/// The closest of `candidates` to `word` by edit distance, if it is close enough to be a typo.
+/// The closest of `candidates` to `word` by edit distance (Levenshtein, `strsim`, ignoring
+/// case), if it is close enough to be a typo.
 pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
-    fn distance(a: &str, b: &str) -> usize {
-        let b: Vec<char> = b.chars().collect();
-        let mut row: Vec<usize> = (0..=b.len()).collect();
-        for (i, ca) in a.chars().enumerate() {
-            let mut prev = row[0];
-            row[0] = i + 1;
-            for j in 0..b.len() {
-                let cur = row[j + 1];
-                row[j + 1] = (prev + usize::from(ca != b[j])).min(row[j] + 1).min(cur + 1);
-                prev = cur;
-            }
-        }
-        row[b.len()]
-    }
-    let (best, d) =
-        candidates.into_iter().map(|c| (c, distance(&word.to_lowercase(), &c.to_lowercase()))).min_by_key(|x| x.1)?;
+    let (best, d) = candidates
+        .into_iter()
+        .map(|c| (c, strsim::levenshtein(&word.to_lowercase(), &c.to_lowercase())))
+        .min_by_key(|x| x.1)?;
     (d <= 2.max(word.len() / 3)).then_some(best)
 }
 
