@@ -173,3 +173,45 @@ fn gauss_legendre_continued_from_half_time_follows_the_uninterrupted_run() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Interrupted with SIGINT in the middle of a long run, then continued to a nearby end: every
+/// row of the two parts is bit for bit the row of one uninterrupted run to that end (the
+/// continuation redoes the step in which the run stopped).
+#[test]
+fn an_interrupted_run_continues_bit_for_bit() {
+    let dir = temp_dir("sigint");
+    let long = dir.join("long.toml");
+    std::fs::write(&long, scene(DOP853, 4e5)).unwrap();
+    let out = dir.join("out");
+    let child = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["run", long.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let begin = std::time::Instant::now();
+    while std::fs::read_to_string(out.join("trajectory.csv")).map_or(0, |t| t.lines().count()) < 300 {
+        assert!(begin.elapsed().as_secs() < 60, "the run never got going");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(!o.status.success() && err.contains("rovib run --resume"), "{err}");
+
+    let restart: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("restart.json")).unwrap()).unwrap();
+    let t = restart["t"].as_f64().unwrap();
+    let end = t.ceil() + 20.0;
+    let near = dir.join("near.toml");
+    std::fs::write(&near, scene(DOP853, end)).unwrap();
+    run_ok(&["run", "--resume", out.to_str().unwrap(), near.to_str().unwrap(), "--quiet"]);
+    let once = dir.join("once");
+    run_ok(&["run", near.to_str().unwrap(), "--out", once.to_str().unwrap(), "--quiet"]);
+
+    let (split, whole) = (lines(&out.join("trajectory.csv")), lines(&once.join("trajectory.csv")));
+    assert_eq!(split.len(), whole.len(), "interrupted at t = {t} fs, continued to {end} fs");
+    assert_eq!(split, whole, "interrupted at t = {t} fs");
+    assert_eq!(lines(&out.join("lab.xyz")), lines(&once.join("lab.xyz")));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
