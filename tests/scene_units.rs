@@ -45,7 +45,7 @@ fn q_without_units_is_in_each_coordinates_declared_unit() {
     assert!((ratio - 1.0 / BOHR_IN_ANGSTROM).abs() < 1e-12, "qdot scaled by the declared unit: {ratio}");
 }
 
-fn run(dir: &PathBuf, text: &str) -> (bool, String, serde_json::Value) {
+fn run(dir: &std::path::Path, text: &str) -> (bool, String, serde_json::Value) {
     let path = dir.join("s.toml");
     std::fs::write(&path, text).unwrap();
     let out_dir = dir.join("out");

@@ -338,12 +338,14 @@ impl MoleculeVisitor for Run<'_> {
     }
 }
 
-/// `run.stop_outside` bound to the molecule: coordinate index, name and bounds in atomic units;
-/// an unknown name is an error at its place.
+/// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
+type StopCondition = (usize, &'static str, [f64; 2]);
+
+/// `run.stop_outside` bound to the molecule; an unknown name is an error at its place.
 fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
-) -> Result<Vec<(usize, &'static str, [f64; 2])>, CliError> {
+) -> Result<Vec<StopCondition>, CliError> {
     let coords = m.coordinates();
     let names: Vec<&str> = coords.iter().map(|c| c.name).collect();
     scene
@@ -543,7 +545,7 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     /// The flat state at the last output recorded.
     last_y: Vec<f64>,
     /// `run.stop_outside`: coordinate index, name, bounds in atomic units.
-    stops: Vec<(usize, &'static str, [f64; 2])>,
+    stops: Vec<StopCondition>,
     /// The stop condition met, for summary.json.
     stopped: Option<serde_json::Value>,
 }
