@@ -138,3 +138,51 @@ euler_unwrapped = true
     assert_eq!(units["order"].as_array().unwrap().len(), header.len());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A trajectory.csv written by `rovib run` (prefixed columns, Euler momenta) is a states file:
+/// ensemble trajectory i starts from its row i.
+#[test]
+fn a_trajectory_csv_is_read_back_as_a_states_file() {
+    let dir = temp_dir("states");
+    let run_scene = dir.join("run.toml");
+    std::fs::write(
+        &run_scene,
+        "molecule = \"h2o\"\n[units]\ntime = \"fs\"\n[initial]\nq = { r1 = 1.0 }\neuler = [0.3, 1.1, -0.4]\n\
+         j = [3.0, 8.0, 2.0]\n[run]\nend = 3.0\noutput_interval = 1.0\neuler_unwrapped = true\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["run", run_scene.to_str().unwrap(), "--out", dir.join("run").to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let ensemble = dir.join("ensemble.toml");
+    std::fs::write(
+        &ensemble,
+        "molecule = \"h2o\"\n[ensemble]\ntrajectories = 4\nmethod = \"file\"\nfile = \"run/trajectory.csv\"\n\
+         keep_trajectories = 1\n[statistics]\nmeans = [\"H\"]\n[run]\nend = 1.0\noutput_interval = 1.0\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["ensemble", ensemble.to_str().unwrap(), "--out", dir.join("ens").to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = |path: PathBuf| -> Vec<Vec<f64>> {
+        let text = std::fs::read_to_string(path).unwrap();
+        text.lines().skip(1).map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect()
+    };
+    let source = rows(dir.join("run/trajectory.csv"));
+    for i in 0..4 {
+        let first = &rows(dir.join(format!("ens/trajectories/{i}/trajectory.csv")))[0];
+        // q and p exactly; Euler angles, their momenta and H through the quaternion to round-off.
+        assert_eq!(first[1..7], source[i][1..7], "trajectory {i}");
+        for c in 7..14 {
+            assert!(
+                (first[c] - source[i][c]).abs() < 1e-12 * source[i][c].abs().max(1.0),
+                "trajectory {i}, column {c}"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
