@@ -30,6 +30,7 @@ __all__ = [
     "evaluate",
     "run",
     "run_ensemble",
+    "resume",
     "from_lab",
     "to_lab",
     "BOHR_IN_ANGSTROM",
@@ -190,6 +191,29 @@ def run(scene: Union[PathLike, Dict[str, Any]], out_dir: Optional[PathLike] = No
     files = [os.fspath(f) for f in _rovib.run_scene(path, out)]
     if not os.path.exists(os.path.join(out, "trajectory.csv")):
         raise RovibError(f"error: the run wrote no trajectory.csv into {out} (add \"trajectory\" to the scene's outputs)")
+    trajectory = read_trajectory(out)
+    trajectory.files = files
+    return trajectory
+
+
+def resume(out_dir: PathLike, scene: Union[None, PathLike, Dict[str, Any]] = None) -> Trajectory:
+    """Continues the run in ``out_dir`` from its ``restart.json`` as ``rovib run --resume OUT_DIR
+    [SCENE]`` does, and reads the whole trajectory (both parts).
+
+    Without ``scene`` the run continues to its own scene's end (after an interrupt); a scene (a
+    path, or a dict written to ``OUT_DIR/scene.resume.toml``) may change only ``run.end`` (and
+    ``max_energy_error``, ``max_outputs``). With DOP853 every row after the first run's last one
+    is bit for bit the row of one uninterrupted run (README, "Restarts").
+    """
+    out = os.fspath(out_dir)
+    path = None
+    if isinstance(scene, dict):
+        path = os.path.join(out, "scene.resume.toml")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(_rovib.scene_toml(scene))
+    elif scene is not None:
+        path = os.fspath(scene)
+    files = [os.fspath(f) for f in _rovib.resume_scene(out, path)]
     trajectory = read_trajectory(out)
     trajectory.files = files
     return trajectory

@@ -270,3 +270,27 @@ def test_lab_xyz_reads_in_ase_with_masses_velocities_and_energies(tmp_path):
         # no centre-of-mass motion): T + U = H, in ASE's own eV (CODATA 2014), to 1e-8.
         total_ev = atoms.get_kinetic_energy() + atoms.get_potential_energy()
         assert total_ev / units.Hartree == pytest.approx(t["H"][k], rel=1e-7), k
+
+
+@pytest.mark.skipif(tomllib is None, reason="tomllib needs Python 3.11")
+def test_resume_continues_a_run_bit_for_bit(tmp_path):
+    with open(H2O_SCENE, "rb") as f:
+        scene = tomllib.load(f)
+    scene["run"]["end"] = 100.0
+    whole = rovib.run(scene, tmp_path / "whole")
+    scene["run"]["end"] = 50.0
+    first = rovib.run(scene, tmp_path / "split")
+    assert len(first) == 51 and os.path.exists(os.path.join(first.out_dir, "restart.json"))
+    scene["run"]["end"] = 100.0
+    split = rovib.resume(first.out_dir, scene)
+    assert len(split) == len(whole) == 101
+    assert split.summary["resumed_from"] == pytest.approx(50.0)
+    for name in whole.names:
+        # After t = 50 fs the continuation is the uninterrupted run, bit for bit.
+        assert np.array_equal(split[name][51:], whole[name][51:]), name
+        assert np.allclose(split[name][:51], whole[name][:51], rtol=1e-8, atol=1e-10), name
+    # A scene that changes the integrator is another run.
+    scene["integrator"]["rtol"] = 1e-9
+    scene["run"]["end"] = 150.0
+    with pytest.raises(rovib.RovibError, match=r"differs from the run being continued.*\[integrator\]"):
+        rovib.resume(first.out_dir, scene)
