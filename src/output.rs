@@ -527,6 +527,11 @@ impl RunSummary<'_> {
             "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
             "state_layout": self.state_layout,
             "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
+            "potential_parameters": scene
+                .parameters
+                .iter()
+                .map(|(n, v)| (n.get_ref().clone(), Value::from(*v)))
+                .collect::<serde_json::Map<_, _>>(),
             "zero_angular_momentum": self.zero_angular_momentum,
             "min_metric_pivot": scene.min_metric_pivot,
             "max_energy_error": scene.max_energy_error,

@@ -186,6 +186,9 @@ pub struct Scene {
     pub max_energy_error: f64,
     /// Whether trajectory.csv also gets continuous (unwrapped) φ and ψ columns.
     pub euler_unwrapped: bool,
+    /// `[potential.parameters]`: values that replace the definition's compiled-in parameters
+    /// for this run (names checked against the molecule when the run starts).
+    pub parameters: Vec<Named<f64>>,
     /// Stop conditions: the run stops (status "stopped") at the first output time at which a
     /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
     /// molecule when the run starts).
@@ -214,6 +217,13 @@ struct RawScene {
     #[serde(default)]
     integrator: Option<Spanned<RawIntegrator>>,
     run: Spanned<RawRun>,
+    potential: Option<RawScenePotential>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenePotential {
+    parameters: RawTable<f64>,
 }
 
 #[derive(Deserialize, Default)]
@@ -463,6 +473,10 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             None => DEFAULT_MAX_ENERGY_ERROR,
         },
         euler_unwrapped: run.euler_unwrapped,
+        parameters: match &raw.potential {
+            Some(p) => named_numbers(&src, &p.parameters, "potential.parameters")?,
+            None => Vec::new(),
+        },
         stop_outside: match &run.stop_outside {
             None => Vec::new(),
             Some(table) => table

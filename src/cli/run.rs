@@ -14,6 +14,7 @@ use crate::output::{
     Conservation, ENERGY_SCALE_FLOOR, LabXyz, RunSummary, TRAJECTORY_UNITS_FILE, TrajectoryCsv, energy_scale,
     remove_stale_outputs, write_summary,
 };
+use crate::parameters::{WithParameters, scene_parameters};
 use crate::restart::{Dop853Point, FinalState, Restart};
 use crate::runtime::frames::{CentreOfMass, LabState, to_lab_body};
 use crate::runtime::hamiltonian::fast::BodyState;
@@ -74,6 +75,8 @@ pub fn resume(dir: &Path, scene: Option<&Path>, quiet: bool) -> Result<RunReport
 /// molecule, integrator, output times, units, outputs and frozen coordinates, and a later end.
 fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), CliError> {
     let frozen = |s: &Scene| s.frozen.iter().map(|f| f.get_ref().clone()).collect::<Vec<_>>();
+    let parameters =
+        |s: &Scene| s.parameters.iter().map(|(n, v)| (n.get_ref().clone(), v.to_bits())).collect::<Vec<_>>();
     let differences: Vec<&str> = [
         (scene.molecule.get_ref() != stored.molecule.get_ref(), "molecule"),
         (scene.method != stored.method, "[integrator]"),
@@ -83,6 +86,7 @@ fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), Cl
         (frozen(scene) != frozen(stored), "run.frozen"),
         (scene.euler_unwrapped != stored.euler_unwrapped, "run.euler_unwrapped"),
         (scene.min_metric_pivot != stored.min_metric_pivot, "run.min_metric_pivot"),
+        (parameters(scene) != parameters(stored), "potential.parameters"),
     ]
     .into_iter()
     .filter_map(|(differs, what)| differs.then_some(what))
@@ -150,7 +154,18 @@ pub fn start_energy_warning(name: &str, h0: f64, u_ref: f64) -> Option<String> {
 impl MoleculeVisitor for Run<'_> {
     type Output = Result<RunReport, CliError>;
 
+    /// With the scene's `[potential.parameters]` the molecule runs with them (the run-time
+    /// path), else with its compiled-in constants.
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        match scene_parameters(&m, self.scene)? {
+            Some(values) => self.go(WithParameters { molecule: m, values }),
+            None => self.go(m),
+        }
+    }
+}
+
+impl Run<'_> {
+    fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, CliError> {
         let scene = self.scene;
         let mut warnings = Vec::new();
         // Where the run starts: the scene's initial state, or the restart file's state.
