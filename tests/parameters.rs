@@ -25,10 +25,8 @@ fn water(q: &SVector<f64, 3>, p: &dyn Fn(&str) -> f64) -> f64 {
 
 fn with(overrides: &[(&str, f64)]) -> (WithParameters<H2o>, impl Fn(&str) -> f64) {
     let names = H2o.parameters();
-    let values: Vec<f64> = names
-        .iter()
-        .map(|(n, v)| overrides.iter().find(|(o, _)| o == n).map_or(*v, |(_, x)| *x))
-        .collect();
+    let values: Vec<f64> =
+        names.iter().map(|(n, v)| overrides.iter().find(|(o, _)| o == n).map_or(*v, |(_, x)| *x)).collect();
     let lookup = values.clone();
     let get = move |name: &str| lookup[names.iter().position(|(n, _)| *n == name).unwrap()];
     (WithParameters { molecule: H2o, values }, get)
