@@ -1,16 +1,16 @@
 //! Scene files: what `rovib run` integrates and what it writes.
 //!
 //! A scene names a molecule, an initial condition, an integrator, the end time, the output
-//! interval and the outputs. Every key is documented in the README ("Scene files"); a short
+//! interval and the outputs. Every key is documented in the README ("Scenes and `rovib run`"); a short
 //! example:
 //!
 //! ```toml
 //! molecule = "h2o"
 //!
 //! [units]                 # of the numbers in this file (not of the output, which is atomic)
-//! length = "angstrom"     # bohr | angstrom
-//! angle = "deg"           # rad | deg
-//! time = "fs"             # au | fs
+//! length = "angstrom"     # bohr | angstrom (default: q in each coordinate's declared unit,
+//! angle = "deg"           # rad | deg        positions in bohr, Euler angles in rad)
+//! time = "fs"             # au | fs | ps
 //!
 //! [initial]               # internal form: q, p or qdot, euler, pe or j
 //! q = { r1 = 1.0, r2 = 0.95, alpha = 100.0 }
@@ -68,6 +68,11 @@ impl TimeUnit {
         }
     }
 
+    /// The unit whose [`TimeUnit::in_au`] is exactly `scale`, if any.
+    pub fn of_scale(scale: f64) -> Option<TimeUnit> {
+        [TimeUnit::Au, TimeUnit::Fs, TimeUnit::Ps].into_iter().find(|u| u.in_au() == scale)
+    }
+
     /// The spelling used in files and column names.
     pub fn name(self) -> &'static str {
         match self {
@@ -87,6 +92,8 @@ pub struct Outputs {
     pub lab: bool,
     /// `summary.json`: work counters and conservation diagnostics.
     pub summary: bool,
+    /// `restart.json`: the final state, to continue the run (`rovib run --resume`).
+    pub restart: bool,
 }
 
 /// A name in the file with its place.
@@ -180,6 +187,15 @@ pub struct Scene {
     /// The largest relative energy error `|H(t) − H(0)| / |H(0)|` a run accepts at an output
     /// time before it stops as unstable or too loosely integrated.
     pub max_energy_error: f64,
+    /// Whether trajectory.csv also gets continuous (unwrapped) φ and ψ columns.
+    pub euler_unwrapped: bool,
+    /// `[potential.parameters]`: values that replace the definition's compiled-in parameters
+    /// for this run (names checked against the molecule when the run starts).
+    pub parameters: Vec<Named<f64>>,
+    /// Stop conditions: the run stops (status "stopped") at the first output time at which a
+    /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
+    /// molecule when the run starts).
+    pub stop_outside: Vec<Named<[f64; 2]>>,
 }
 
 impl Scene {
@@ -204,6 +220,13 @@ struct RawScene {
     #[serde(default)]
     integrator: Option<Spanned<RawIntegrator>>,
     run: Spanned<RawRun>,
+    potential: Option<RawScenePotential>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenePotential {
+    parameters: RawTable<f64>,
 }
 
 #[derive(Deserialize, Default)]
@@ -253,6 +276,9 @@ struct RawRun {
     min_metric_pivot: Option<Spanned<f64>>,
     max_energy_error: Option<Spanned<f64>>,
     max_outputs: Option<Spanned<u64>>,
+    #[serde(default)]
+    euler_unwrapped: bool,
+    stop_outside: Option<RawTable<Vec<f64>>>,
 }
 
 /// The largest number of output times a scene may ask for unless `run.max_outputs` raises it:
@@ -276,7 +302,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     let raw: RawScene = toml::from_str(text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
         let help = if message.starts_with("unknown field") || message.starts_with("missing field") {
-            "the README's \"Scene files\" section lists every key"
+            "the README's section \"Scenes and `rovib run`\" lists every key"
         } else {
             "see the TOML syntax at https://toml.io and the shipped scenes/ for examples"
         };
@@ -286,9 +312,25 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         }
     })?;
 
-    let length =
-        unit(&src, raw.units.length.as_ref(), LengthUnit::Bohr, LengthUnit::parse, "length", "\"bohr\", \"angstrom\"")?;
-    let angle = unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?;
+    // Without [units], lengths and angles of coordinates are in each coordinate's declared unit
+    // (`None`); Cartesian positions and velocities in bohr, Euler angles in rad.
+    let length = match &raw.units.length {
+        None => None,
+        Some(_) => Some(unit(
+            &src,
+            raw.units.length.as_ref(),
+            LengthUnit::Bohr,
+            LengthUnit::parse,
+            "length",
+            "\"bohr\", \"angstrom\"",
+        )?),
+    };
+    let angle = match &raw.units.angle {
+        None => None,
+        Some(_) => {
+            Some(unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?)
+        }
+    };
     let time = unit(
         &src,
         raw.units.time.as_ref(),
@@ -302,7 +344,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         "time",
         "\"au\", \"fs\", \"ps\"",
     )?;
-    let (l, a, t) = (length.in_bohr(), angle.in_rad(), time.in_au());
+    let (l, a, t) = (length.map_or(1.0, LengthUnit::in_bohr), angle.map_or(1.0, AngleUnit::in_rad), time.in_au());
 
     let initial = match (&raw.initial, &raw.ensemble) {
         (Some(i), _) => initial(&src, i, l, a, t)?,
@@ -357,19 +399,21 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         ));
     }
     let outputs = match &run.outputs {
-        None => Outputs { trajectory: true, lab: true, summary: true },
+        None => Outputs { trajectory: true, lab: true, summary: true, restart: true },
         Some(list) => {
-            let mut o = Outputs { trajectory: false, lab: false, summary: false };
+            let mut o = Outputs { trajectory: false, lab: false, summary: false, restart: false };
             for name in list.get_ref() {
                 match name.get_ref().as_str() {
                     "trajectory" => o.trajectory = true,
                     "lab" => o.lab = true,
                     "summary" => o.summary = true,
+                    "restart" => o.restart = true,
                     other => {
                         return Err(src.error(
                             name.span(),
                             format!("unknown output `{other}`"),
-                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz) and \"summary\" (summary.json)",
+                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz), \"summary\" (summary.json) \
+                             and \"restart\" (restart.json)",
                         ));
                     }
                 }
@@ -415,7 +459,11 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         t_end,
         output_interval,
         time_unit: time,
-        units: CoordinateScale { length: l, angle: a, time: t },
+        units: CoordinateScale {
+            length: length.map(LengthUnit::in_bohr),
+            angle: angle.map(AngleUnit::in_rad),
+            time: t,
+        },
         outputs,
         frozen: run.frozen.clone(),
         min_metric_pivot: match &run.min_metric_pivot {
@@ -446,6 +494,31 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         max_energy_error: match &run.max_energy_error {
             Some(x) => positive(&src, x, "run.max_energy_error")?,
             None => DEFAULT_MAX_ENERGY_ERROR,
+        },
+        euler_unwrapped: run.euler_unwrapped,
+        parameters: match &raw.potential {
+            Some(p) => named_numbers(&src, &p.parameters, "potential.parameters")?,
+            None => Vec::new(),
+        },
+        stop_outside: match &run.stop_outside {
+            None => Vec::new(),
+            Some(table) => table
+                .get_ref()
+                .iter()
+                .map(|(name, v)| {
+                    let what = format!("run.stop_outside.{}", name.get_ref());
+                    match v.get_ref().as_slice() {
+                        &[low, high] if !low.is_nan() && !high.is_nan() && low < high => {
+                            Ok((name.clone(), [low, high]))
+                        }
+                        _ => Err(src.error(
+                            v.span(),
+                            format!("`{what}` must be [low, high] with low < high"),
+                            "write the interval the coordinate may stay in, e.g. [0.5, 3.0] (inf allowed)",
+                        )),
+                    }
+                })
+                .collect::<Result<_, _>>()?,
         },
     })
 }
@@ -532,34 +605,35 @@ fn named_triples(
 
 /// The scene's units as factors to atomic units. Numbers given per coordinate (q, qdot) are
 /// kept in the scene's units until the molecule tells which coordinates are lengths and which
-/// are angles.
+/// are angles, and in which unit each is declared.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct CoordinateScale {
-    /// Bohr per scene length unit.
-    pub length: f64,
-    /// Radians per scene angle unit.
-    pub angle: f64,
+    /// Bohr per scene length unit; `None` when the scene gives no `units.length`: then each
+    /// coordinate's value is in the unit its definition declares (e.g. Å for water's r1).
+    pub length: Option<f64>,
+    /// Radians per scene angle unit; `None`: each coordinate's declared unit (e.g. degrees).
+    pub angle: Option<f64>,
     /// Atomic units of time per scene time unit.
     pub time: f64,
 }
 
 impl CoordinateScale {
-    /// A value of a coordinate declared with `unit`, given in the scene's length or angle unit,
-    /// in atomic units (bohr or rad).
+    /// A value of a coordinate declared with `unit`, given in the scene's length or angle unit
+    /// (without one, in `unit`), in atomic units (bohr or rad).
     pub fn coordinate_to_au(&self, unit: CoordinateUnit, value: f64) -> f64 {
         value * self.factor(unit)
     }
 
     /// A velocity of a coordinate declared with `unit`, given in the scene's length or angle
-    /// unit per its time unit, in atomic units (bohr or rad per ħ/E_h).
+    /// unit (without one, in `unit`) per its time unit, in atomic units (bohr or rad per ħ/E_h).
     pub fn velocity_to_au(&self, unit: CoordinateUnit, value: f64) -> f64 {
         value * self.factor(unit) / self.time
     }
 
     fn factor(&self, unit: CoordinateUnit) -> f64 {
         match unit {
-            CoordinateUnit::Length(_) => self.length,
-            CoordinateUnit::Angle(_) => self.angle,
+            CoordinateUnit::Length(_) => self.length.unwrap_or(unit.in_atomic_units()),
+            CoordinateUnit::Angle(_) => self.angle.unwrap_or(unit.in_atomic_units()),
         }
     }
 }

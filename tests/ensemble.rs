@@ -357,7 +357,7 @@ fn a_states_file_starts_trajectory_i_from_row_i_and_kept_trajectories_are_writte
     for i in [0, 4] {
         let (header, rows) = csv(&dir.join(format!("out/trajectories/{i}/trajectory.csv")));
         assert_eq!(rows.len(), 11);
-        assert_eq!(rows[0][column(&header, "r1")], states[i].q[0]);
+        assert_eq!(rows[0][column(&header, "q_r1")], states[i].q[0]);
     }
     assert!(!dir.join("out/trajectories/1").exists());
 }

@@ -103,6 +103,14 @@ pub struct Definition {
     pub potential: ExprId,
     /// The energy unit the file used for the potential.
     pub energy_unit: EnergyUnit,
+    /// The potential's parameters, sorted by name, with their values as written (in the units
+    /// the potential expression uses them in).
+    pub parameters: Vec<(String, f64)>,
+    /// The names the potential expression sees (parameters bound to their values) and its text,
+    /// to build it again with the parameters as variables (`crate::parametric`).
+    pub potential_scope: HashMap<String, ExprId>,
+    /// See `potential_scope`.
+    pub potential_text: String,
 }
 
 #[derive(Deserialize)]
@@ -519,6 +527,7 @@ impl Validator<'_> {
             let c = self.graph.constant(*v.get_ref());
             self.names.insert(k.get_ref().clone(), c);
         }
+        let potential_scope = self.names.clone();
         let u = self.expression(&pot.expression, "the potential")?;
         let scale = self.graph.constant(energy_unit.in_hartree());
         let potential = self.graph.mul(scale, u);
@@ -565,6 +574,9 @@ impl Validator<'_> {
             positions,
             potential,
             energy_unit,
+            parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
+            potential_scope,
+            potential_text: pot.expression.get_ref().clone(),
         })
     }
 

@@ -14,6 +14,7 @@ use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_l
 use crate::expr;
 use crate::kinetic::{KineticExprs, KineticSet, OMEGA_NAMES};
 use crate::names::{self, type_name};
+use crate::parametric::ParametricExprs;
 use crate::units::{AngleUnit, CoordinateUnit, DALTON_IN_ELECTRON_MASSES, LengthUnit};
 
 /// Local variable names for the graph's variables, in variable order: the coordinates, ω, then
@@ -97,12 +98,24 @@ fn kinetic_groups(target: &TokenStream, set: &KineticSet) -> Vec<OutputGroup> {
 }
 
 /// The items of one generated molecule file, and the statistics of its functions.
-pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<FunctionStats>) {
+pub(crate) fn molecule_items(
+    def: &Definition,
+    e: &KineticExprs,
+    parametric: Option<&ParametricExprs>,
+) -> (TokenStream, Vec<FunctionStats>) {
     let (n, na) = (index(e.n), index(def.atoms.len()));
     let ty = Ident::new(&type_name(&def.name), Span::call_site());
-    let idents = var_idents(def);
+    let mut idents = var_idents(def);
+    if let Some(p) = parametric {
+        // Parameter i is graph variable `first_var + i`, bound to `param{i}`.
+        while idents.len() < p.first_var as usize {
+            idents.push(Ident::new(&format!("unused{}", idents.len()), Span::call_site()));
+        }
+        idents.extend((0..def.parameters.len()).map(|i| Ident::new(&format!("param{i}"), Span::call_site())));
+    }
     let nc = e.n;
     let q_inputs: Vec<(u32, TokenStream)> = (0..nc).map(|k| (k as u32, ix(quote!(q), k))).collect();
+    let q_inputs_for_parameters = q_inputs.clone();
     let mut velocity_inputs = q_inputs.clone();
     velocity_inputs.extend((0..3).map(|a| ((nc + a) as u32, ix(quote!(omega), a))));
     velocity_inputs.extend((0..nc).map(|k| ((nc + 3 + k) as u32, ix(quote!(qdot), k))));
@@ -240,6 +253,48 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             barrier: None,
         },
     ];
+    let mut specs = specs;
+    let mut parameter_items = quote!();
+    if let Some(p) = parametric {
+        let mut inputs = q_inputs_for_parameters.clone();
+        inputs.extend((0..def.parameters.len()).map(|i| (p.first_var + i as u32, ix(quote!(params), i))));
+        specs.push(FunctionSpec {
+            name: "potential_with",
+            doc: "U(q) in hartree with the parameters `params` (in the order of `parameters()`) instead of the\n\
+                  compiled-in values."
+                .into(),
+            signature: quote!(fn potential_with(&self, q: #q_ty, params: &[f64]) -> f64),
+            inputs: inputs.clone(),
+            groups: vec![],
+            ret: Some(p.potential),
+            ret_wrap: None,
+            barrier: None,
+        });
+        specs.push(FunctionSpec {
+            name: "potential_gradient_with",
+            doc: "∂U/∂q with the parameters `params`; returns U.".into(),
+            signature: quote!(
+                fn potential_gradient_with(&self, q: #q_ty, params: &[f64], grad: &mut SVector<f64, #n>) -> f64
+            ),
+            inputs,
+            groups: vec![OutputGroup {
+                target: quote!(grad),
+                entries: p.gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
+            }],
+            ret: Some(p.potential),
+            ret_wrap: None,
+            barrier: None,
+        });
+        let entries = def.parameters.iter().map(|(name, value)| {
+            let value = float(*value);
+            quote!((#name, #value))
+        });
+        parameter_items = quote! {
+            fn parameters(&self) -> &'static [(&'static str, f64)] {
+                &[#(#entries),*]
+            }
+        };
+    }
     let mut functions = Vec::new();
     let mut stats = Vec::new();
     for spec in &specs {
@@ -324,6 +379,8 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             fn coordinates(&self) -> [Coordinate; #n] {
                 [#(#coordinates),*]
             }
+
+            #parameter_items
 
             #(#functions)*
         }

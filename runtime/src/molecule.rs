@@ -145,6 +145,27 @@ pub trait Molecule<const N: usize, const NA: usize> {
     /// `∂U/∂q` into `grad`; returns `U(q)` as well.
     fn potential_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64;
 
+    /// The potential's parameters (`[potential.parameters]` of the definition, sorted by name)
+    /// with their compiled-in values as written there; empty for a potential without any.
+    fn parameters(&self) -> &'static [(&'static str, f64)] {
+        &[]
+    }
+
+    /// `U(q)` in hartree with the parameters `params` (one per [`Molecule::parameters`], in
+    /// that order; a shorter slice panics) instead of the compiled-in values. Generated
+    /// molecules with parameters override this; the default ignores `params`.
+    fn potential_with(&self, q: &SVector<f64, N>, params: &[f64]) -> f64 {
+        let _ = params;
+        self.potential(q)
+    }
+
+    /// [`Molecule::potential_gradient`] with the parameters `params` (see
+    /// [`Molecule::potential_with`]).
+    fn potential_gradient_with(&self, q: &SVector<f64, N>, params: &[f64], grad: &mut SVector<f64, N>) -> f64 {
+        let _ = params;
+        self.potential_gradient(q, grad)
+    }
+
     /// The reference geometry in atomic units, or `None` if the definition gave none for some
     /// coordinate.
     fn reference_geometry(&self) -> Option<SVector<f64, N>> {

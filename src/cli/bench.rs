@@ -305,11 +305,19 @@ fn fastest(trials: &[Trial], target: f64, error: fn(&Trial) -> f64) -> Option<&T
     trials.iter().filter(|t| t.status.is_ok() && error(t) <= target).min_by(|a, b| a.wall_time.total_cmp(&b.wall_time))
 }
 
-fn parameter_text(t: &Trial) -> String {
+/// A trial's tolerance, or its step in the scene's time unit (and in a.u.).
+fn parameter_text(t: &Trial, scene: &Scene) -> String {
     if t.method == "dop853" {
         format!("rtol = atol = {:.0e}", t.parameter)
-    } else {
+    } else if scene.time_unit.name() == "au" {
         format!("step = {:.4} a.u.", t.parameter)
+    } else {
+        format!(
+            "step = {:.4e} {} ({:.4} a.u.)",
+            t.parameter / scene.time_unit.in_au(),
+            scene.time_unit.name(),
+            t.parameter
+        )
     }
 }
 
@@ -346,7 +354,7 @@ fn write_markdown(
                     s,
                     "| {} | {} | {:.3e} | {} | {:.1e} | {:.1e} |",
                     t.method,
-                    parameter_text(t),
+                    parameter_text(t, scene),
                     t.wall_time,
                     t.stats.rhs_evals,
                     t.final_error,
@@ -354,7 +362,7 @@ fn write_markdown(
                 );
             }
             Err(e) => {
-                let _ = writeln!(s, "| {} | {} | – | – | failed: {} | – |", t.method, parameter_text(t), e);
+                let _ = writeln!(s, "| {} | {} | – | – | failed: {} | – |", t.method, parameter_text(t, scene), e);
             }
         }
     }
@@ -364,7 +372,7 @@ fn write_markdown(
     let _ = writeln!(s, "| --- | --- | --- |");
     for target in [1e-3, 1e-5, 1e-7, 1e-9, 1e-11] {
         let pick = |error: fn(&Trial) -> f64| match fastest(trials, target, error) {
-            Some(t) => format!("{} ({}), {:.2e} s", t.method, parameter_text(t), t.wall_time),
+            Some(t) => format!("{} ({}), {:.2e} s", t.method, parameter_text(t, scene), t.wall_time),
             None => "none of these runs".into(),
         };
         let _ = writeln!(s, "| {target:.0e} | {} | {} |", pick(|t| t.final_error), pick(|t| t.energy_error));

@@ -53,13 +53,19 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Integrate a scene: write trajectory.csv, lab.xyz and summary.json.
+    /// Integrate a scene: write trajectory.csv (with trajectory.units.json), lab.xyz,
+    /// summary.json and restart.json.
     Run {
-        /// The scene file (see scenes/ and the README).
-        scene: PathBuf,
+        /// The scene file (see scenes/ and the README). With --resume: optional, a scene that
+        /// differs from the stored one only in run.end (to continue further).
+        #[arg(required_unless_present = "resume")]
+        scene: Option<PathBuf>,
         /// Output directory [default: out/SCENE_NAME].
-        #[arg(long)]
+        #[arg(long, conflicts_with = "resume")]
         out: Option<PathBuf>,
+        /// Continue the run in this directory from its restart.json, appending to its files.
+        #[arg(long, value_name = "DIR")]
+        resume: Option<PathBuf>,
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
@@ -148,13 +154,19 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             let json = eval::eval(&molecule, state.as_deref())?;
             say(&format!("{json}\n"))
         }
-        Command::Run { scene, out, quiet } if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) => {
+        Command::Run { scene: Some(scene), out, resume: None, quiet }
+            if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) =>
+        {
             run_ensemble(&scene, out.as_deref(), None, quiet)
         }
         Command::Freq { molecule, json } => say(&freq::freq(&molecule, json)?),
         Command::Ensemble { scene, out, threads, quiet } => run_ensemble(&scene, out.as_deref(), threads, quiet),
-        Command::Run { scene, out, quiet } => {
-            let report = run::run(&scene, out.as_deref(), quiet)?;
+        Command::Run { scene, out, resume, quiet } => {
+            let report = match (&resume, &scene) {
+                (Some(dir), scene) => run::resume(dir, scene.as_deref(), quiet)?,
+                (None, Some(scene)) => run::run(scene, out.as_deref(), quiet)?,
+                (None, None) => return Err(CliError::Message("give a scene file, or --resume DIR".into())),
+            };
             if !quiet {
                 let c = &report.conservation;
                 let mut text = format!(
@@ -166,6 +178,12 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
                     c.max_relative_energy_error(),
                     c.max_j_change
                 );
+                if let Some(stop) = &report.stopped {
+                    text.push_str(&format!(
+                        "stopped at t = {}: {} = {} (atomic units) left run.stop_outside {}\n",
+                        stop["t"], stop["coordinate"], stop["value_au"], stop["bounds_au"]
+                    ));
+                }
                 for f in &report.files {
                     text.push_str(&format!("wrote {}\n", f.display()));
                 }

@@ -320,8 +320,10 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
         }
         if let Some(csv) = &mut self.csv {
             let phase = body.to_phase();
-            let values = phase.q.iter().chain(phase.p.iter()).chain(phase.euler.iter()).chain(phase.pe.iter());
-            if let Err(e) = csv.row(t / self.plan.time_scale, values.copied().chain([h])) {
+            let (euler, pe) = (phase.euler.into(), phase.pe.into());
+            if let Err(e) =
+                csv.state_row(t / self.plan.time_scale, phase.q.as_slice(), phase.p.as_slice(), euler, pe, h)
+            {
                 self.failure = Some(("output", t, e));
                 return ControlFlow::Break(());
             }
@@ -399,10 +401,10 @@ where
         let csv = match &plan.keep {
             Some((k, dir)) if index % k == 0 => {
                 let dir = dir.join(index.to_string());
-                let names: Vec<&str> = plan.molecule.coordinates().iter().map(|c| c.name).collect();
+                let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
                 match std::fs::create_dir_all(&dir)
                     .map_err(|e| e.to_string())
-                    .and_then(|()| TrajectoryCsv::create(&dir, &names))
+                    .and_then(|()| TrajectoryCsv::create(&dir, &plan.molecule.coordinates(), unit, false))
                 {
                     Ok(c) => Some(c),
                     Err(e) => {

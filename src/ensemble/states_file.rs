@@ -1,11 +1,14 @@
 //! Initial states from a CSV file (`method = "file"`): one state per row, in atomic units
 //! (a `.xyz`/`.extxyz` path is read as extended XYZ by [`super::states_xyz`]).
 //!
-//! Header: every internal coordinate by name (bohr, rad), optionally `p_NAME` (ħ/bohr, ħ;
-//! missing ones are 0), optionally the Euler angles `phi, theta, psi` (rad, z-x-z; default
-//! `0, π/2, 0`) and either `p_phi, p_theta, p_psi` or the body-frame `Jx, Jy, Jz` (ħ; default
-//! 0). Other columns (`t`, `H`) are ignored, so a `trajectory.csv` written by `rovib run` is a
-//! valid states file. Errors name the CSV file, line and column.
+//! Header: every internal coordinate as `q_NAME` (or plain `NAME`; bohr, rad), optionally
+//! `p_NAME` (ħ/bohr, ħ; missing ones are 0), optionally the Euler angles `euler_phi,
+//! euler_theta, euler_psi` (or `phi, theta, psi`; rad, z-x-z; default `0, π/2, 0`) and either
+//! their momenta `pe_phi, pe_theta, pe_psi` (or `p_phi, p_theta, p_psi`) or the body-frame `Jx,
+//! Jy, Jz` (ħ; default 0). The prefixed names are the ones `trajectory.csv` uses (they cannot
+//! collide with a coordinate's name) and win when both are present. Other columns (`t`, `H`,
+//! the unwrapped angles) are ignored, so a `trajectory.csv` written by `rovib run` is a valid
+//! states file. Errors name the CSV file, line and column.
 
 use std::path::Path;
 
@@ -49,14 +52,14 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let coords = m.coordinates();
     let mut q_col = [0usize; N];
     for k in 0..N {
-        q_col[k] = find(coords[k].name).ok_or_else(|| {
+        q_col[k] = find(&format!("q_{}", coords[k].name)).or_else(|| find(coords[k].name)).ok_or_else(|| {
             Ok(src.error(
                 0..header.len(),
-                format!("the states file has no column `{}`", coords[k].name),
+                format!("the states file has no column `q_{}` (or `{}`)", coords[k].name, coords[k].name),
                 format!(
-                    "the header must name every coordinate of {}: {}",
+                    "the header must name every coordinate of {} as q_NAME: {}",
                     m.name(),
-                    coords.iter().map(|c| c.name).collect::<Vec<_>>().join(", ")
+                    coords.iter().map(|c| format!("q_{}", c.name)).collect::<Vec<_>>().join(", ")
                 ),
             ))
         })?;
@@ -74,13 +77,15 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             ))),
         }
     };
-    let euler_col = triple(["phi", "theta", "psi"])?;
-    let pe_col = triple(["p_phi", "p_theta", "p_psi"])?;
+    let euler_col = triple(["euler_phi", "euler_theta", "euler_psi"])?
+        .map_or_else(|| triple(["phi", "theta", "psi"]), |c| Ok(Some(c)))?;
+    let pe_col = triple(["pe_phi", "pe_theta", "pe_psi"])?
+        .map_or_else(|| triple(["p_phi", "p_theta", "p_psi"]), |c| Ok(Some(c)))?;
     let j_col = triple(["Jx", "Jy", "Jz"])?;
     if pe_col.is_some() && j_col.is_some() {
         return Err(Ok(src.error(
             0..header.len(),
-            "the states file gives both p_phi, p_theta, p_psi and Jx, Jy, Jz",
+            "the states file gives both the Euler momenta (pe_phi, pe_theta, pe_psi) and Jx, Jy, Jz",
             "keep one of them",
         )));
     }
