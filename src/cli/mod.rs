@@ -72,12 +72,16 @@ pub enum Command {
         /// Output directory [default: out/SCENE_NAME].
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Worker threads [default: the scene's `threads`, else every core].
+        /// Worker threads (per MPI rank) [default: the scene's `threads`, else every core].
         #[arg(long)]
         threads: Option<usize>,
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
+        /// Continue a run that was killed or interrupted from OUT/checkpoint.jsonl: only the
+        /// trajectories not finished there run; the outputs equal an uninterrupted run's.
+        #[arg(long)]
+        resume: bool,
     },
     /// Work-precision diagram: every integrator over a range of tolerances or steps, wall time
     /// against error; writes bench.csv, bench.md and bench.svg.
@@ -149,10 +153,12 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             say(&format!("{json}\n"))
         }
         Command::Run { scene, out, quiet } if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) => {
-            run_ensemble(&scene, out.as_deref(), None, quiet)
+            run_ensemble(&scene, out.as_deref(), None, quiet, false)
         }
         Command::Freq { molecule, json } => say(&freq::freq(&molecule, json)?),
-        Command::Ensemble { scene, out, threads, quiet } => run_ensemble(&scene, out.as_deref(), threads, quiet),
+        Command::Ensemble { scene, out, threads, quiet, resume } => {
+            run_ensemble(&scene, out.as_deref(), threads, quiet, resume)
+        }
         Command::Run { scene, out, quiet } => {
             let report = run::run(&scene, out.as_deref(), quiet)?;
             if !quiet {
@@ -202,8 +208,12 @@ fn run_ensemble(
     out: Option<&std::path::Path>,
     threads: Option<usize>,
     quiet: bool,
+    resume: bool,
 ) -> Result<(), CliError> {
-    let report = ensemble::ensemble(scene, out, threads, quiet)?;
+    // Under `mpirun` (with the `mpi` feature) only rank 0 has a report to print.
+    let Some(report) = ensemble::ensemble(scene, out, threads, quiet, resume)? else {
+        return Ok(());
+    };
     if !quiet {
         say(&ensemble::describe(&report))?;
     }
