@@ -81,7 +81,7 @@ fn a_run_killed_part_way_resumes_to_the_same_bytes() {
     assert_same_statistics(&reference, &out);
     let s = summary(&out);
     let resumed = s["resumed_trajectories"].as_u64().unwrap();
-    assert!(resumed >= 3 * 64 && resumed < N, "resumed {resumed} of {N}");
+    assert!((3 * 64..N).contains(&resumed), "resumed {resumed} of {N}");
     assert_eq!(s["trajectories"]["completed"].as_u64().unwrap(), summary(&reference)["trajectories"]["completed"]);
     assert!(!checkpoint.exists());
 }

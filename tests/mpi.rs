@@ -158,7 +158,7 @@ fn a_rank_killed_with_sigkill_ends_the_job_and_the_run_resumes_to_the_same_bytes
     assert!(!status.success(), "{err}");
     assert!(!out.join("ensemble.csv").exists(), "the job must not have completed");
     let recorded = lines(&checkpoint) - 1;
-    assert!(recorded >= 3 && recorded < (n / 64) as usize, "{recorded}");
+    assert!((3..(n / 64) as usize).contains(&recorded), "{recorded}");
     // Resumed in one process: the checkpoint does not depend on the ranks that wrote it.
     ok(&single(&scene, &out, &["--resume"]));
     assert_same_statistics(&reference, &out);

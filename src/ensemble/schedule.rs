@@ -393,7 +393,7 @@ mod tests {
         let e = caught(1, n, || panic!("boom"));
         c.add(0, 1, e);
         c.flush().unwrap();
-        assert_eq!(c.error(), Some(format!("a trajectory of block 1 (trajectories 64..128) panicked: boom").as_str()));
+        assert_eq!(c.error(), Some("a trajectory of block 1 (trajectories 64..128) panicked: boom"));
         let (total, _, _) = c.finish();
         assert_eq!(total.completed, 3);
         assert_eq!(total.interrupted, n - 64);
