@@ -78,12 +78,16 @@ pub enum Command {
         /// Output directory [default: out/SCENE_NAME].
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Worker threads [default: the scene's `threads`, else every core].
+        /// Worker threads (per MPI rank) [default: the scene's `threads`, else every core].
         #[arg(long)]
         threads: Option<usize>,
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
+        /// Continue a run that was killed or interrupted from OUT/checkpoint.jsonl: only the
+        /// trajectories not finished there run; the outputs equal an uninterrupted run's.
+        #[arg(long)]
+        resume: bool,
     },
     /// Work-precision diagram: every integrator over a range of tolerances or steps, wall time
     /// against error; writes bench.csv, bench.md and bench.svg.
@@ -157,10 +161,12 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
         Command::Run { scene: Some(scene), out, resume: None, quiet }
             if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) =>
         {
-            run_ensemble(&scene, out.as_deref(), None, quiet)
+            run_ensemble(&scene, out.as_deref(), None, quiet, false)
         }
         Command::Freq { molecule, json } => say(&freq::freq(&molecule, json)?),
-        Command::Ensemble { scene, out, threads, quiet } => run_ensemble(&scene, out.as_deref(), threads, quiet),
+        Command::Ensemble { scene, out, threads, quiet, resume } => {
+            run_ensemble(&scene, out.as_deref(), threads, quiet, resume)
+        }
         Command::Run { scene, out, resume, quiet } => {
             let report = match (&resume, &scene) {
                 (Some(dir), scene) => run::resume(dir, scene.as_deref(), quiet)?,
@@ -220,8 +226,12 @@ fn run_ensemble(
     out: Option<&std::path::Path>,
     threads: Option<usize>,
     quiet: bool,
+    resume: bool,
 ) -> Result<(), CliError> {
-    let report = ensemble::ensemble(scene, out, threads, quiet)?;
+    // Under `mpirun` (with the `mpi` feature) only rank 0 has a report to print.
+    let Some(report) = ensemble::ensemble(scene, out, threads, quiet, resume)? else {
+        return Ok(());
+    };
     if !quiet {
         say(&ensemble::describe(&report))?;
     }

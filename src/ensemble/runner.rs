@@ -216,6 +216,25 @@ impl Progress {
             b.set_message(format!("{n} failed"));
         }
     }
+
+    /// A block another process ran: its trajectories and failures.
+    pub fn remote_block(&self, o: &Outcome) {
+        let failed = o.failed_count();
+        let n = self.failures.fetch_add(failed, Ordering::Relaxed) + failed;
+        if let Some(b) = &self.bar {
+            b.inc(o.completed + failed + o.interrupted);
+            b.set_message(format!("{n} failed"));
+        }
+    }
+}
+
+/// Test hook: with `ROVIB_TEST_PANIC_AT=i` in the environment, trajectory `i` panics, so the
+/// tests can show that a panicking trajectory ends the run with a clear error, its checkpoint
+/// intact, in one process and under MPI. Never set it otherwise.
+pub const PANIC_HOOK: &str = "ROVIB_TEST_PANIC_AT";
+
+fn panic_hook() -> Option<u64> {
+    std::env::var(PANIC_HOOK).ok()?.trim().parse().ok()
 }
 
 /// One integrator, created once per block and reused for its trajectories.
@@ -367,11 +386,15 @@ where
     let mut workspace = (!plan.correlations.is_empty()).then(|| CorrelationWorkspace::new(n_times));
     let mut series = vec![0.0; n_times];
     let mut correlation = vec![0.0; n_times];
+    let panic_at = panic_hook();
 
     for index in indices {
         if stop.load(Ordering::Relaxed) {
             outcome.interrupted += 1;
             continue;
+        }
+        if panic_at == Some(index) {
+            panic!("{PANIC_HOOK}={index}: a deliberate panic (test hook)");
         }
         let failure =
             |reason: &str, time: Option<f64>, detail: String| Failure { index, reason: reason.into(), time, detail };
