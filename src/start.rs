@@ -89,7 +89,7 @@ pub fn find_name(
 
 /// Binds the scene's initial condition to molecule `m`: names to indices, the scene's units to
 /// atomic units, velocities to momenta (the Legendre map), lab-frame positions and velocities to
-/// q, p, the orientation and J (a mass-weighted fit, [`from_lab`]).
+/// q, p, the orientation and J (a mass-weighted fit, [`frames::from_lab_body`](crate::runtime::frames::from_lab_body)).
 pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
