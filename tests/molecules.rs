@@ -174,7 +174,9 @@ fn potentials_match_their_documented_models() {
     });
     assert_potential_matches(&Ethane, ic::ethane, |x, q| {
         let (rcc, rch, te) = (1.53, 1.09, (-1.0_f64 / 3.0).acos());
-        let (fcc, fch, fb) = (4.5 * AJ_IN_WAVENUMBERS, 4.8 * AJ_IN_WAVENUMBERS, 0.65 * AJ_IN_WAVENUMBERS);
+        // The definition converts with 1 aJ = 50341.166 cm-1 (rounded).
+        let aj = 50_341.166;
+        let (fcc, fch, fb) = (4.5 * aj, 4.8 * aj, 0.65 * aj);
         let (dcc, dch) = (31500.0, 35400.0);
         let mut u = morse(dcc, (fcc / (2.0 * dcc)).sqrt(), rcc, q[0]);
         // Bond angles at each carbon from the positions: H-C-C' and H-C-H'.
