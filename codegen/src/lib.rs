@@ -31,6 +31,7 @@ pub mod template;
 
 pub use definition::{Definition, DefinitionError, parse_definition};
 pub use emit::FunctionStats;
+pub use kinetic::Options;
 pub use names::type_name;
 pub use rovib_base::{diagnostic, units};
 
@@ -59,6 +60,9 @@ pub struct GeneratedMolecule {
     pub graph_nodes: usize,
     /// Wall time from reading the definition to formatted source.
     pub codegen_time: Duration,
+    /// (atom, coordinate) pairs whose raw position depends on the coordinate: the sparsity the
+    /// generated code exploits (out of `atoms · coordinates`).
+    pub nonzero_derivatives: usize,
 }
 
 impl GeneratedMolecule {
@@ -116,9 +120,15 @@ impl GeneratedMolecule {
 /// Parses, validates and generates one molecule. `path` names the file in messages and in the
 /// generated header (e.g. `molecules/h2o.toml`).
 pub fn generate_molecule(path: &str, text: &str) -> Result<GeneratedMolecule, DefinitionError> {
+    generate_molecule_with(path, text, &Options::default())
+}
+
+/// [`generate_molecule`] with [`Options`] (e.g. the symbolic `kinetic_jacobian`).
+pub fn generate_molecule_with(path: &str, text: &str, options: &Options) -> Result<GeneratedMolecule, DefinitionError> {
     let start = Instant::now();
     let mut def = parse_definition(path, text)?;
-    let exprs = kinetic::build(&mut def);
+    let exprs = kinetic::build(&mut def, options);
+    let nonzero_derivatives = exprs.nonzero_derivatives;
     let parametric = parametric::build(&mut def);
     let (items, stats) = template::molecule_items(&def, &exprs, parametric.as_ref());
     let header = format!(
@@ -142,6 +152,7 @@ pub fn generate_molecule(path: &str, text: &str) -> Result<GeneratedMolecule, De
         stats,
         graph_nodes: def.graph.len(),
         codegen_time: start.elapsed(),
+        nonzero_derivatives,
     })
 }
 
@@ -161,6 +172,16 @@ pub struct Report {
 ///
 /// Returns every definition's errors, not just the first file's.
 pub fn generate(molecules_dir: &Path, display_dir: &str, out_dir: &Path) -> Result<Report, Vec<DefinitionError>> {
+    generate_with(molecules_dir, display_dir, out_dir, &Options::default())
+}
+
+/// [`generate`] with [`Options`] for every molecule.
+pub fn generate_with(
+    molecules_dir: &Path,
+    display_dir: &str,
+    out_dir: &Path,
+    options: &Options,
+) -> Result<Report, Vec<DefinitionError>> {
     let io_error = |path: String, e: std::io::Error, help: &str| DefinitionError {
         path,
         line: 0,
@@ -196,7 +217,7 @@ pub fn generate(molecules_dir: &Path, display_dir: &str, out_dir: &Path) -> Resu
                 continue;
             }
         };
-        match generate_molecule(&display, &text) {
+        match generate_molecule_with(&display, &text, options) {
             Ok(m) => molecules.push(m),
             Err(e) => errors.push(e),
         }
@@ -269,6 +290,7 @@ mod tests {
             }],
             graph_nodes: 0,
             codegen_time: Duration::from_millis(1500),
+            nonzero_derivatives: 0,
         }
     }
 

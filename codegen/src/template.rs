@@ -131,7 +131,7 @@ pub(crate) fn molecule_items(
     };
 
     let q_ty = quote!(&SVector<f64, #n>);
-    let specs = vec![
+    let mut specs = vec![
         FunctionSpec {
             name: "positions",
             doc: "Body-frame positions R_i(q) in bohr (column i is atom i), centre of mass at the origin.".into(),
@@ -158,21 +158,6 @@ pub(crate) fn molecule_items(
             signature: quote!(fn kinetic(&self, q: #q_ty, k: &mut KineticMatrices<#n>)),
             inputs: q_inputs.clone(),
             groups: kinetic_groups(&quote!(k), &e.kinetic),
-            ret: None,
-            ret_wrap: None,
-            barrier: None,
-        },
-        FunctionSpec {
-            name: "kinetic_jacobian",
-            doc: "`dk[l]` holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
-            signature: quote!(fn kinetic_jacobian(&self, q: #q_ty, dk: &mut [KineticMatrices<#n>; #n])),
-            inputs: q_inputs.clone(),
-            groups: e
-                .kinetic_jacobian
-                .iter()
-                .enumerate()
-                .flat_map(|(l, set)| kinetic_groups(&ix(quote!(dk), l), set))
-                .collect(),
             ret: None,
             ret_wrap: None,
             barrier: None,
@@ -243,7 +228,7 @@ pub(crate) fn molecule_items(
             name: "potential_gradient",
             doc: "∂U/∂q in hartree per unit of q; returns U.".into(),
             signature: quote!(fn potential_gradient(&self, q: #q_ty, grad: &mut SVector<f64, #n>) -> f64),
-            inputs: q_inputs,
+            inputs: q_inputs.clone(),
             groups: vec![OutputGroup {
                 target: quote!(grad),
                 entries: e.potential_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
@@ -253,7 +238,6 @@ pub(crate) fn molecule_items(
             barrier: None,
         },
     ];
-    let mut specs = specs;
     let mut parameter_items = quote!();
     if let Some(p) = parametric {
         let mut inputs = q_inputs_for_parameters.clone();
@@ -294,6 +278,24 @@ pub(crate) fn molecule_items(
                 &[#(#entries),*]
             }
         };
+    }
+    // The symbolic ∂a/∂q, ∂A/∂q, ∂I/∂q only on request (kinetic::Options): by default the
+    // runtime's `Molecule::kinetic_jacobian` assembles them from `kinetic_energy_gradient`.
+    if let Some(kinetic_jacobian) = &e.kinetic_jacobian {
+        specs.push(FunctionSpec {
+            name: "kinetic_jacobian",
+            doc: "`dk[l]` holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
+            signature: quote!(fn kinetic_jacobian(&self, q: #q_ty, dk: &mut [KineticMatrices<#n>; #n])),
+            inputs: q_inputs,
+            groups: kinetic_jacobian
+                .iter()
+                .enumerate()
+                .flat_map(|(l, set)| kinetic_groups(&ix(quote!(dk), l), set))
+                .collect(),
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
     }
     let mut functions = Vec::new();
     let mut stats = Vec::new();

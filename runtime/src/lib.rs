@@ -16,6 +16,7 @@ pub mod hamiltonian;
 pub mod integrate;
 pub mod modes;
 pub mod molecule;
+pub mod polarization;
 pub mod sample;
 pub mod units;
 

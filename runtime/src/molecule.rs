@@ -103,7 +103,14 @@ pub trait Molecule<const N: usize, const NA: usize> {
     fn kinetic(&self, q: &SVector<f64, N>, k: &mut KineticMatrices<N>);
 
     /// Their q-derivatives: element `k` of `dk` holds `∂a/∂q_k`, `∂A/∂q_k`, `∂I/∂q_k`.
-    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]);
+    ///
+    /// Only the G-matrix reference path needs them. The default assembles them from
+    /// [`Molecule::kinetic_energy_gradient`] by polarization ([`crate::polarization`]: exact up
+    /// to rounding, `(N + 3)(N + 4)/2` gradient calls); the generator emits a symbolic version
+    /// only on request (`ROVIB_KINETIC_JACOBIAN=generated`), since it grows like `N³`.
+    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]) {
+        crate::polarization::kinetic_jacobian(self, q, dk);
+    }
 
     /// The gradient in q of the kinetic energy `T = ½ Σ m_i |ω × R_i + Σ_j ∂R_i/∂q_j q̇_j|²`
     /// at fixed body-frame angular velocity `omega` and fixed `qdot`; returns `T` as well.
