@@ -10,6 +10,7 @@ use quote::quote;
 
 use crate::GeneratedMolecule;
 use crate::definition::Definition;
+use crate::dipole::DipoleExprs;
 use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_lines, index};
 use crate::expr;
 use crate::kinetic::{KineticExprs, KineticSet, OMEGA_NAMES};
@@ -97,7 +98,11 @@ fn kinetic_groups(target: &TokenStream, set: &KineticSet) -> Vec<OutputGroup> {
 }
 
 /// The items of one generated molecule file, and the statistics of its functions.
-pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<FunctionStats>) {
+pub(crate) fn molecule_items(
+    def: &Definition,
+    e: &KineticExprs,
+    dipole: Option<&DipoleExprs>,
+) -> (TokenStream, Vec<FunctionStats>) {
     let (n, na) = (index(e.n), index(def.atoms.len()));
     let ty = Ident::new(&type_name(&def.name), Span::call_site());
     let idents = var_idents(def);
@@ -118,7 +123,7 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
     };
 
     let q_ty = quote!(&SVector<f64, #n>);
-    let specs = vec![
+    let mut specs = vec![
         FunctionSpec {
             name: "positions",
             doc: "Body-frame positions R_i(q) in bohr (column i is atom i), centre of mass at the origin.".into(),
@@ -230,7 +235,7 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             name: "potential_gradient",
             doc: "∂U/∂q in hartree per unit of q; returns U.".into(),
             signature: quote!(fn potential_gradient(&self, q: #q_ty, grad: &mut SVector<f64, #n>) -> f64),
-            inputs: q_inputs,
+            inputs: q_inputs.clone(),
             groups: vec![OutputGroup {
                 target: quote!(grad),
                 entries: e.potential_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
@@ -240,6 +245,44 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             barrier: None,
         },
     ];
+    // The dipole surface only where the definition has one: nothing else changes without it.
+    let mut has_dipole = quote!();
+    if let Some(d) = dipole {
+        has_dipole = quote! {
+            fn has_dipole(&self) -> bool {
+                true
+            }
+        };
+        specs.push(FunctionSpec {
+            name: "dipole",
+            doc: "The body-frame dipole moment μ(q) in e·bohr.".into(),
+            signature: quote!(fn dipole(&self, q: #q_ty, mu: &mut Vector3<f64>)),
+            inputs: q_inputs.clone(),
+            groups: vec![OutputGroup {
+                target: quote!(mu),
+                entries: d.mu.iter().enumerate().map(|(axis, &c)| (ix(quote!(), axis), c)).collect(),
+            }],
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+        let mut entries = Vec::new();
+        for (k, column) in d.jacobian.iter().enumerate() {
+            for (axis, &c) in column.iter().enumerate() {
+                entries.push((pair(axis, k), c));
+            }
+        }
+        specs.push(FunctionSpec {
+            name: "dipole_jacobian",
+            doc: "`dmu[(axis, k)]` = ∂μ_axis/∂q_k, e·bohr per unit of q_k.".into(),
+            signature: quote!(fn dipole_jacobian(&self, q: #q_ty, dmu: &mut SMatrix<f64, 3, #n>)),
+            inputs: q_inputs.clone(),
+            groups: vec![OutputGroup { target: quote!(dmu), entries }],
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+    }
     let mut functions = Vec::new();
     let mut stats = Vec::new();
     for spec in &specs {
@@ -326,6 +369,8 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             }
 
             #(#functions)*
+
+            #has_dipole
         }
     };
     (items, stats)
