@@ -91,6 +91,33 @@ impl TrajectoryCsv {
     }
 }
 
+/// `dipole.csv`: the lab-frame dipole moment μ_lab = S μ(q), one row per output time.
+///
+/// Columns: `t` (in the scene's time unit), `mu_x`, `mu_y`, `mu_z` (e·bohr, in the lab frame
+/// of `lab.xyz`; the centre of mass's motion does not change it for a neutral molecule).
+pub struct DipoleCsv {
+    csv: TrajectoryCsv,
+}
+
+impl DipoleCsv {
+    /// Creates the file and writes the header.
+    pub fn create(dir: &Path) -> Result<Self, String> {
+        let mut file = OutputFile::create(dir, "dipole.csv")?;
+        file.line("t,mu_x,mu_y,mu_z")?;
+        Ok(DipoleCsv { csv: TrajectoryCsv { file, row: String::new() } })
+    }
+
+    /// Writes one row: time and μ_lab in e·bohr.
+    pub fn row(&mut self, t: f64, mu: &Vector3<f64>) -> Result<(), String> {
+        self.csv.row(t, mu.iter().copied())
+    }
+
+    /// Flushes to disk.
+    pub fn flush(&mut self) -> Result<(), String> {
+        self.csv.flush()
+    }
+}
+
 /// `lab.xyz`: extended XYZ, one frame per output time, positions in Å, readable by ASE, VMD
 /// and OVITO. The comment line carries `Properties=species:S:1:pos:R:3`, the time and the
 /// energy.
@@ -207,7 +234,7 @@ impl Conservation {
 }
 
 /// Every file `rovib run` may write into its output directory.
-pub const RUN_FILES: [&str; 3] = ["trajectory.csv", "lab.xyz", "summary.json"];
+pub const RUN_FILES: [&str; 4] = ["trajectory.csv", "lab.xyz", "dipole.csv", "summary.json"];
 
 /// Removes the files of [`RUN_FILES`] in `dir` that this run will not write (not in `keep`),
 /// and `summary.json` in any case (it is written at the end, atomically), so that no file of an

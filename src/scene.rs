@@ -84,6 +84,8 @@ pub struct Outputs {
     pub lab: bool,
     /// `summary.json`: work counters and conservation diagnostics.
     pub summary: bool,
+    /// `dipole.csv`: the lab-frame dipole moment at every output time (only when asked for).
+    pub dipole: bool,
 }
 
 /// A name in the file with its place.
@@ -353,19 +355,20 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         ));
     }
     let outputs = match &run.outputs {
-        None => Outputs { trajectory: true, lab: true, summary: true },
+        None => Outputs { trajectory: true, lab: true, summary: true, dipole: false },
         Some(list) => {
-            let mut o = Outputs { trajectory: false, lab: false, summary: false };
+            let mut o = Outputs { trajectory: false, lab: false, summary: false, dipole: false };
             for name in list.get_ref() {
                 match name.get_ref().as_str() {
                     "trajectory" => o.trajectory = true,
                     "lab" => o.lab = true,
                     "summary" => o.summary = true,
+                    "dipole" => o.dipole = true,
                     other => {
                         return Err(src.error(
                             name.span(),
                             format!("unknown output `{other}`"),
-                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz) and \"summary\" (summary.json)",
+                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz), \"summary\" (summary.json) and \"dipole\" (dipole.csv)",
                         ));
                     }
                 }

@@ -274,8 +274,9 @@ pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize
 ) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
     let mut reduction = frozen_reduction(m, scene)?;
     if start.pe == Vector3::zeros() {
-        reduction.rotation =
-            RotationPart::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
+        reduction.rotation = RotationPart::ZeroAngularMomentum {
+            orientation: scene.outputs.lab || scene.outputs.trajectory || scene.outputs.dipole,
+        };
     }
     let system = ReducedSystem::new(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
     let mut y0 = vec![0.0; system.dim()];

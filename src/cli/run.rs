@@ -11,7 +11,7 @@ use super::{CliError, unknown_molecule};
 use crate::dir_lock::DirLock;
 use crate::molecules;
 use crate::output::{
-    Conservation, ENERGY_SCALE_FLOOR, LabXyz, RunSummary, TrajectoryCsv, energy_scale, remove_stale_outputs,
+    Conservation, DipoleCsv, ENERGY_SCALE_FLOOR, LabXyz, RunSummary, TrajectoryCsv, energy_scale, remove_stale_outputs,
     write_summary,
 };
 use crate::runtime::hamiltonian::hamiltonian;
@@ -65,6 +65,16 @@ impl MoleculeVisitor for Run<'_> {
         let start = initial_state(&m, scene)?;
         // Fail before writing anything if the initial state is not valid.
         hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
+        if scene.outputs.dipole && !m.has_dipole() {
+            return Err(CliError::File(scene.source().error(
+                scene.molecule.span(),
+                format!("the scene asks for the \"dipole\" output, but molecule `{}` has no dipole surface", m.name()),
+                format!(
+                    "add a [dipole] table to {} (see the README), or remove \"dipole\" from run.outputs",
+                    m.source()
+                ),
+            )));
+        }
         let (system, y0) = production_system(&m, scene, &start.state)?;
         let layout = layout(system.reduction(), &m);
 
@@ -76,6 +86,9 @@ impl MoleculeVisitor for Run<'_> {
         }
         if scene.outputs.lab {
             keep.push("lab.xyz");
+        }
+        if scene.outputs.dipole {
+            keep.push("dipole.csv");
         }
         remove_stale_outputs(self.out_dir, &keep)?;
 
@@ -96,6 +109,7 @@ impl MoleculeVisitor for Run<'_> {
             } else {
                 None
             },
+            dipole: if scene.outputs.dipole { Some(DipoleCsv::create(self.out_dir)?) } else { None },
             diagnostics: scene.outputs.summary,
             conservation: Conservation::default(),
             initial_energy: None,
@@ -135,6 +149,9 @@ impl MoleculeVisitor for Run<'_> {
         }
         if scene.outputs.lab {
             files.push(self.out_dir.join("lab.xyz"));
+        }
+        if scene.outputs.dipole {
+            files.push(self.out_dir.join("dipole.csv"));
         }
         let mut summary_error = None;
         if scene.outputs.summary {
@@ -262,6 +279,7 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     system: ReducedSystem<'m, M, N, NA>,
     trajectory: Option<TrajectoryCsv>,
     lab: Option<LabXyz>,
+    dipole: Option<DipoleCsv>,
     diagnostics: bool,
     conservation: Conservation,
     /// H at the first output time, for the energy guard.
@@ -323,6 +341,11 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             let lab = rotation * r;
             xyz.frame(t_out, energy, (0..NA).map(|i| (lab.column(i) + com).into()))?;
         }
+        if let Some(csv) = &mut self.dipole {
+            let mut mu = Vector3::zeros();
+            self.system.molecule().dipole(&body.q, &mut mu);
+            csv.row(t_out, &(rotation * mu))?;
+        }
         if let Some(bar) = &self.progress {
             bar.inc(1);
         }
@@ -335,6 +358,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         }
         if let Some(xyz) = &mut self.lab {
             xyz.flush()?;
+        }
+        if let Some(csv) = &mut self.dipole {
+            csv.flush()?;
         }
         Ok(())
     }
