@@ -17,6 +17,7 @@ pub mod integrate;
 pub mod modes;
 pub mod molecule;
 pub mod sample;
+pub mod spectrum;
 pub mod units;
 
 pub use frames::{CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, to_lab, to_lab_body};
