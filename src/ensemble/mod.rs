@@ -20,6 +20,7 @@ mod plot;
 pub mod quantity;
 pub mod runner;
 pub mod scene;
+pub mod spectrum;
 mod states_file;
 pub mod states_xyz;
 
