@@ -79,7 +79,7 @@ fn by_hand(q: [f64; 3]) -> [f64; 3] {
 #[test]
 fn charges_depending_on_q_give_the_dipole_and_its_derivatives() {
     let mut def = parse_definition("molecules/xy2.toml", &flux_model()).expect("valid");
-    let exprs = kinetic::build(&mut def);
+    let exprs = kinetic::build(&mut def, &rovib_codegen::Options::default());
     let d = dipole::build(&mut def, &exprs.positions).expect("the definition has a dipole");
     for q in [[1.81, 1.82, 1.82], [1.6, 2.1, 1.3], [2.4, 1.7, 2.6]] {
         let got = def.graph.eval(&d.mu, &q);
@@ -110,7 +110,7 @@ fn components_are_converted_from_their_unit() {
             &format!("unit = \"{unit}\"\ncomponents = [\"q1 * (r1 - r2)\", 0, \"2 * q1 * cos(alpha * pi / 360)\"]"),
         );
         let mut def = parse_definition("molecules/xy2.toml", &text).expect("valid");
-        let exprs = kinetic::build(&mut def);
+        let exprs = kinetic::build(&mut def, &rovib_codegen::Options::default());
         let d = dipole::build(&mut def, &exprs.positions).expect("a dipole");
         let q = [1.9, 1.7, 1.9];
         let got = def.graph.eval(&d.mu, &q);
