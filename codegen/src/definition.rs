@@ -28,6 +28,14 @@
 //! energy_unit = "cm-1"             # hartree | cm-1 | eV | kcal/mol
 //! expression = "D * pow(1 - exp(-a * (r1 - re)), 2)"
 //! parameters = { D = 44000, a = 2.2, re = 0.9578 }
+//!
+//! [dipole]                         # optional: the body-frame dipole moment μ(q), either
+//! unit = "debye"                   # debye | e*bohr | e*angstrom
+//! components = ["0", "0", "mu0 + d1 * (r1 - re)"]
+//! parameters = { mu0 = 1.85, d1 = 0.5 }
+//! # or, the short form, charges in e per atom label (numbers or expressions of q), with
+//! # μ = Σ q_i R_i about the centre of mass:
+//! # charges = { O = "-2 * qh", H1 = "qh", H2 = "qh" }
 //! ```
 //!
 //! In every expression a coordinate's name stands for its value in the coordinate's declared
@@ -49,7 +57,7 @@ use crate::diagnostic::{FileError, Source};
 use crate::elements;
 use crate::expr::{ExprId, Func, Graph, Node};
 use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
-use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, EnergyUnit, LengthUnit};
+use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, DipoleUnit, EnergyUnit, LengthUnit};
 
 /// A problem in a definition file, with its place and a suggested fix (file, line, column,
 /// message, help), displayed like a rustc error.
@@ -112,6 +120,17 @@ pub struct Definition {
     pub potential_scope: HashMap<String, ExprId>,
     /// See `potential_scope`.
     pub potential_text: String,
+    /// The dipole moment surface, if the file has a `[dipole]` table.
+    pub dipole: Option<DipoleDef>,
+}
+
+/// A validated `[dipole]` table, in atomic units.
+#[derive(Clone, Debug)]
+pub enum DipoleDef {
+    /// The body-frame components `[μx, μy, μz]` in e·bohr.
+    Components([ExprId; 3]),
+    /// One charge per atom (in atom order) in e: μ = Σ q_i R_i with the centred positions.
+    Charges(Vec<ExprId>),
 }
 
 #[derive(Deserialize)]
@@ -128,6 +147,21 @@ struct RawDefinition {
     coordinates: Vec<RawCoordinate>,
     atoms: Vec<RawAtom>,
     potential: Spanned<RawPotential>,
+    #[serde(default)]
+    dipole: Option<Spanned<RawDipole>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDipole {
+    #[serde(default)]
+    unit: Option<Spanned<String>>,
+    #[serde(default)]
+    components: Option<Spanned<Vec<Spanned<RawValue>>>>,
+    #[serde(default)]
+    charges: Option<BTreeMap<Spanned<String>, Spanned<RawValue>>>,
+    #[serde(default)]
+    parameters: BTreeMap<Spanned<String>, Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -666,6 +700,26 @@ impl Validator<'_> {
                 "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
             ));
         }
+        let dipole = match &raw.dipole {
+            None => None,
+            Some(d) => {
+                let (dipole, spans) = self.dipole(d, &atoms)?;
+                let what = match &dipole {
+                    DipoleDef::Components(c) => c.to_vec(),
+                    DipoleDef::Charges(c) => c.clone(),
+                };
+                for (e, span) in what.into_iter().zip(spans) {
+                    if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
+                        return Err(src.error(
+                            span,
+                            format!("this part of the dipole is {v} {place}"),
+                            "check for a division by zero, the logarithm or square root of a negative number, or values too large",
+                        ));
+                    }
+                }
+                Some(dipole)
+            }
+        };
 
         let (Some(positions), Some(potential), true) = (all_positions, potential, self.errors.is_empty()) else {
             let mut errors = self.errors;
@@ -686,7 +740,109 @@ impl Validator<'_> {
             parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
             potential_scope,
             potential_text: pot.expression.get_ref().clone(),
+            dipole,
         })
+    }
+
+    /// The `[dipole]` table: three components with a unit, or one charge per atom. Returns the
+    /// expressions (e·bohr, or e) and the place of each in the file.
+    fn dipole(
+        &mut self,
+        raw: &Spanned<RawDipole>,
+        atoms: &[AtomDef],
+    ) -> Result<(DipoleDef, Vec<Range<usize>>), DefinitionError> {
+        let src = self.src;
+        let d = raw.get_ref();
+        let forms = "write either components = [\"mu_x\", \"mu_y\", \"mu_z\"] with unit = \"debye\" \
+                     (or \"e*bohr\", \"e*angstrom\"), or charges = { LABEL = charge, ... } in e";
+        for (k, v) in &d.parameters {
+            self.declare(k, "dipole parameter")?;
+            if !v.get_ref().is_finite() {
+                return Err(src.error(
+                    v.span(),
+                    format!("non-finite value of dipole parameter `{}`", k.get_ref()),
+                    "write a finite number",
+                ));
+            }
+            let c = self.graph.constant(*v.get_ref());
+            self.names.insert(k.get_ref().clone(), c);
+        }
+        match (&d.components, &d.charges) {
+            (Some(_), Some(_)) => {
+                Err(src.error(raw.span(), "the [dipole] table gives both `components` and `charges`", forms))
+            }
+            (None, None) => {
+                Err(src.error(raw.span(), "the [dipole] table gives neither `components` nor `charges`", forms))
+            }
+            (Some(components), None) => {
+                let Some(unit) = &d.unit else {
+                    return Err(src.error(
+                        components.span(),
+                        "the dipole components have no unit",
+                        format!("add unit = \"debye\" to the [dipole] table ({})", unit_help(DipoleUnit::SPELLINGS)),
+                    ));
+                };
+                let unit = DipoleUnit::parse(unit.get_ref()).ok_or_else(|| {
+                    src.error(
+                        unit.span(),
+                        format!("unknown dipole unit `{}`", unit.get_ref()),
+                        unit_help(DipoleUnit::SPELLINGS),
+                    )
+                })?;
+                let values = components.get_ref();
+                if values.len() != 3 {
+                    return Err(src.error(
+                        components.span(),
+                        format!("the dipole has {} components instead of 3", values.len()),
+                        "write components = [mu_x, mu_y, mu_z] in the body frame of the positions",
+                    ));
+                }
+                let mut mu = [self.graph.zero(); 3];
+                for (axis, v) in values.iter().enumerate() {
+                    let context = format!("the dipole's {} component", ["x", "y", "z"][axis]);
+                    let e = self.value(v, &context)?;
+                    let scale = self.graph.constant(unit.in_e_bohr());
+                    mu[axis] = self.graph.mul(scale, e);
+                }
+                Ok((DipoleDef::Components(mu), values.iter().map(|v| v.span()).collect()))
+            }
+            (None, Some(charges)) => {
+                if let Some(unit) = &d.unit {
+                    return Err(src.error(
+                        unit.span(),
+                        "`unit` is not used with `charges`",
+                        "remove it: charges are in units of e, and the positions' length unit is the file's",
+                    ));
+                }
+                let labels: Vec<&str> = atoms.iter().map(|a| a.label.as_str()).collect();
+                let mut found: Vec<Option<(ExprId, Range<usize>)>> = vec![None; atoms.len()];
+                for (label, v) in charges {
+                    let Some(i) = labels.iter().position(|l| *l == label.get_ref()) else {
+                        let hint = parse::closest(label.get_ref(), &labels)
+                            .map(|s| format!("did you mean `{s}`? "))
+                            .unwrap_or_default();
+                        return Err(src.error(
+                            label.span(),
+                            format!("`{}` in the dipole's charges is not an atom", label.get_ref()),
+                            format!("{hint}the atoms are: {}", labels.join(", ")),
+                        ));
+                    };
+                    let e = self.value(v, &format!("the charge of atom {}", label.get_ref()))?;
+                    found[i] = Some((e, v.span()));
+                }
+                let missing: Vec<&str> =
+                    labels.iter().zip(&found).filter(|(_, f)| f.is_none()).map(|(l, _)| *l).collect();
+                if !missing.is_empty() {
+                    return Err(src.error(
+                        raw.span(),
+                        format!("the dipole's charges leave out atom(s) {}", missing.join(", ")),
+                        "give every atom a charge in e (0 for an atom that carries none)",
+                    ));
+                }
+                let (charges, spans) = found.into_iter().flatten().unzip();
+                Ok((DipoleDef::Charges(charges), spans))
+            }
+        }
     }
 
     /// The declared range of a coordinate in its unit, or the default; checked to be an interval
