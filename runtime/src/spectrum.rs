@@ -138,16 +138,24 @@ impl Spectrum {
             .collect()
     }
 
-    /// ∫ σ dν̃ over `[low, high]` cm⁻¹ (trapezoid), in km/mol.
-    pub fn band_intensity(&self, sigma: &[f64], low: f64, high: f64) -> f64 {
+    /// ∫ v dν̃ over `[low, high]` cm⁻¹ of `values` given on the grid, taken as piecewise linear
+    /// between grid points (the trapezoid rule, with the partial intervals at both ends).
+    pub fn integral(&self, values: &[f64], low: f64, high: f64) -> f64 {
         let mut sum = 0.0;
-        for j in 1..self.wavenumber.len() {
+        for j in 1..self.wavenumber.len().min(values.len()) {
             let (a, b) = (self.wavenumber[j - 1], self.wavenumber[j]);
-            if a >= low && b <= high {
-                sum += 0.5 * (sigma[j - 1] + sigma[j]) * (b - a);
+            let (lo, hi) = (a.max(low), b.min(high));
+            if hi > lo {
+                let at = |x: f64| values[j - 1] + (values[j] - values[j - 1]) * (x - a) / (b - a);
+                sum += 0.5 * (at(lo) + at(hi)) * (hi - lo);
             }
         }
-        sum * AVOGADRO * 1e-5
+        sum
+    }
+
+    /// ∫ σ dν̃ over `[low, high]` cm⁻¹ ([`Spectrum::integral`]), in km/mol.
+    pub fn band_intensity(&self, sigma: &[f64], low: f64, high: f64) -> f64 {
+        self.integral(sigma, low, high) * AVOGADRO * 1e-5
     }
 }
 
@@ -192,6 +200,17 @@ mod tests {
         let far = s.wavenumber.iter().zip(&s.lineshape).filter(|(w, _)| (*w - nu0).abs() > 20.0 * s.resolution());
         let worst = far.map(|(_, v)| v.abs()).fold(0.0, f64::max) / s.lineshape[peak];
         assert!(worst < 1e-6, "{worst:e} of the peak 20 resolutions away");
+    }
+
+    #[test]
+    fn the_integral_is_exact_for_a_linear_function_between_any_bounds() {
+        let s = Spectrum { wavenumber: (0..11).map(|j| 1.5 * j as f64).collect(), lineshape: Vec::new(), length: 1.0 };
+        let v: Vec<f64> = s.wavenumber.iter().map(|x| 2.0 + 3.0 * x).collect();
+        for (lo, hi) in [(0.0, 15.0), (0.7, 14.2), (2.0, 2.9), (-5.0, 30.0)] {
+            let (a, b) = (f64::max(lo, 0.0), f64::min(hi, 15.0));
+            let exact = 2.0 * (b - a) + 1.5 * (b * b - a * a);
+            assert!((s.integral(&v, lo, hi) - exact).abs() < 1e-12, "[{lo}, {hi}]");
+        }
     }
 
     #[test]
