@@ -62,13 +62,17 @@ fn wait_for_lines(path: &Path, lines: usize) {
     }
 }
 
+/// How long an interrupted run may take to finish its record and write its summary (a record
+/// takes microseconds; the margin is for a loaded machine).
+const STOP_LIMIT: Duration = Duration::from_secs(30);
+
 /// Spawns a long run, checks that a second run into the same directory fails at once, sends
 /// `signal`, and checks the outputs: whole rows and frames, summary "interrupted" at the last row.
 fn interrupt_with(signal: &str) {
     let d = dir(signal);
     let out = d.join("out");
     let path = scene(&d, "long.toml", 4e5, "\"trajectory\", \"lab\", \"summary\"");
-    let child = Command::new(env!("CARGO_BIN_EXE_rovib"))
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rovib"))
         .args(["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -84,6 +88,17 @@ fn interrupt_with(signal: &str) {
 
     let killed = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
     assert!(killed.success());
+    // The run has about 8e5 records left: without the interrupt handling it would go on for
+    // minutes, so a run that has not stopped within the limit has ignored the signal.
+    let sent = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if sent.elapsed() > STOP_LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the run did not stop within {STOP_LIMIT:?} of SIG{signal}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let o = child.wait_with_output().unwrap();
     let err = String::from_utf8(o.stderr).unwrap();
     assert!(!o.status.success(), "an interrupted run exits non-zero");
