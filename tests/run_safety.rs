@@ -1,15 +1,15 @@
 //! `rovib run` as a careless or hostile user drives it: stale files of an earlier run, two runs
 //! into one directory, SIGINT/SIGTERM, a full disk, an energy guard at H(0) ≈ 0.
 
+mod common;
+
+use common::cli::rovib;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rovib-run-safety-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    common::cli::temp_dir("run-safety", name)
 }
 
 /// A vibrating, rotating water scene with the given end time (fs) and outputs.
@@ -22,10 +22,6 @@ fn scene(d: &Path, name: &str, end: f64, outputs: &str) -> PathBuf {
     let path = d.join(name);
     std::fs::write(&path, text).unwrap();
     path
-}
-
-fn rovib(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rovib")).args(args).output().unwrap()
 }
 
 fn summary(out: &Path) -> serde_json::Value {
