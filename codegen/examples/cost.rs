@@ -25,7 +25,7 @@ const RUNS: usize = 3;
 
 fn main() -> ExitCode {
     let mut paths: Vec<String> = std::env::args().skip(1).collect();
-    let options = Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian") };
+    let options = Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian"), ..Options::default() };
     paths.retain(|p| p != "--kinetic-jacobian");
     if paths.is_empty() {
         eprintln!(
@@ -51,8 +51,10 @@ fn main() -> ExitCode {
                         best = Some((m, t));
                     }
                 }
-                Err(e) => {
-                    eprintln!("{e}");
+                Err(errors) => {
+                    for e in errors {
+                        eprintln!("{e}\n");
+                    }
                     return ExitCode::FAILURE;
                 }
             }

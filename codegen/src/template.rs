@@ -10,6 +10,7 @@ use quote::quote;
 
 use crate::GeneratedMolecule;
 use crate::definition::Definition;
+use crate::dipole::DipoleExprs;
 use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_lines, index};
 use crate::expr;
 use crate::kinetic::{KineticExprs, KineticSet, OMEGA_NAMES};
@@ -102,6 +103,7 @@ pub(crate) fn molecule_items(
     def: &Definition,
     e: &KineticExprs,
     parametric: Option<&ParametricExprs>,
+    dipole: Option<&DipoleExprs>,
 ) -> (TokenStream, Vec<FunctionStats>) {
     let (n, na) = (index(e.n), index(def.atoms.len()));
     let ty = Ident::new(&type_name(&def.name), Span::call_site());
@@ -238,6 +240,92 @@ pub(crate) fn molecule_items(
             barrier: None,
         },
     ];
+    // Large molecules: `kinetic` and `kinetic_and_gradient` emit `a` without its
+    // centre-of-mass term plus `∂c/∂q` (inherent `*_sparse` functions), and the trait methods
+    // wrap them with the runtime's rank-3 update (`kinetic::RunTimeCentreOfMass`).
+    let mut inherent_specs = Vec::new();
+    let mut wrappers = quote!();
+    if let Some(c) = &e.centre_of_mass_at_run_time {
+        let sparse = KineticSet { a: c.a.clone(), coriolis: e.kinetic.coriolis.clone(), inertia: e.kinetic.inertia };
+        let sparse_groups = || {
+            let mut groups = kinetic_groups(&quote!(k), &sparse);
+            groups.push(OutputGroup {
+                target: quote!(dc),
+                entries: (0..nc).flat_map(|k| (0..3).map(move |axis| (pair(axis, k), c.dcom[k][axis]))).collect(),
+            });
+            groups
+        };
+        let total = float(c.total);
+        let dc_ty = quote!(&mut SMatrix<f64, 3, #n>);
+        specs.retain(|s| s.name != "kinetic" && s.name != "kinetic_and_gradient");
+        inherent_specs.push(FunctionSpec {
+            name: "kinetic",
+            doc: "`a` without its centre-of-mass term, `A` and `I` into `k`, and ∂c/∂q into `dc` (the centre of\n\
+                  mass's derivatives, column k along q_k)."
+                .into(),
+            signature: quote!(fn kinetic_sparse(&self, q: #q_ty, k: &mut KineticMatrices<#n>, dc: #dc_ty)),
+            inputs: q_inputs.clone(),
+            groups: sparse_groups(),
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+        let mut groups = sparse_groups();
+        groups.push(OutputGroup {
+            target: quote!(grad),
+            entries: e.kinetic_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
+        });
+        inherent_specs.push(FunctionSpec {
+            name: "kinetic_and_gradient",
+            doc: "[`Molecule::kinetic_and_gradient`] with ∂c/∂q in `dc`: `a` is completed by the runtime's\n\
+                  centre-of-mass update before `velocities(k)` is called."
+                .into(),
+            signature: quote!(
+                fn kinetic_and_gradient_sparse<E>(
+                    &self,
+                    q: #q_ty,
+                    k: &mut KineticMatrices<#n>,
+                    dc: #dc_ty,
+                    velocities: impl FnOnce(&KineticMatrices<#n>) -> Result<(Vector3<f64>, SVector<f64, #n>), E>,
+                    grad: &mut SVector<f64, #n>,
+                ) -> Result<(Vector3<f64>, SVector<f64, #n>, f64), E>
+            ),
+            inputs: velocity_inputs.clone(),
+            groups,
+            ret: Some(e.kinetic_energy),
+            ret_wrap: Some(|t| quote!(Ok((omega, qdot, #t)))),
+            barrier: Some(Barrier {
+                groups_before: 4,
+                statement: quote! {
+                    ::rovib_runtime::assembly::remove_centre_of_mass(&mut k.a, dc, #total);
+                    let (omega, qdot) = velocities(k)?;
+                },
+                late_vars: (nc..2 * nc + 3).map(|v| v as u32).collect(),
+            }),
+        });
+        wrappers = quote! {
+            /// The kinetic matrices a, A (coriolis) and I at q; the centre-of-mass term of `a` is applied
+            /// by the runtime.
+            fn kinetic(&self, q: #q_ty, k: &mut KineticMatrices<#n>) {
+                let mut dc = SMatrix::<f64, 3, #n>::zeros();
+                self.kinetic_sparse(q, k, &mut dc);
+                ::rovib_runtime::assembly::remove_centre_of_mass(&mut k.a, &dc, #total);
+            }
+
+            /// The kinetic matrices into `k`, then (ω, q̇) from `velocities(k)`, then ∂T/∂q at those
+            /// velocities into `grad`. Returns (ω, q̇, T).
+            fn kinetic_and_gradient<E>(
+                &self,
+                q: #q_ty,
+                k: &mut KineticMatrices<#n>,
+                velocities: impl FnOnce(&KineticMatrices<#n>) -> Result<(Vector3<f64>, SVector<f64, #n>), E>,
+                grad: &mut SVector<f64, #n>,
+            ) -> Result<(Vector3<f64>, SVector<f64, #n>, f64), E> {
+                let mut dc = SMatrix::<f64, 3, #n>::zeros();
+                self.kinetic_and_gradient_sparse(q, k, &mut dc, velocities, grad)
+            }
+        };
+    }
     let mut parameter_items = quote!();
     if let Some(p) = parametric {
         let mut inputs = q_inputs_for_parameters.clone();
@@ -286,7 +374,7 @@ pub(crate) fn molecule_items(
             name: "kinetic_jacobian",
             doc: "`dk[l]` holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
             signature: quote!(fn kinetic_jacobian(&self, q: #q_ty, dk: &mut [KineticMatrices<#n>; #n])),
-            inputs: q_inputs,
+            inputs: q_inputs.clone(),
             groups: kinetic_jacobian
                 .iter()
                 .enumerate()
@@ -297,11 +385,55 @@ pub(crate) fn molecule_items(
             barrier: None,
         });
     }
+    // The dipole surface only where the definition has one: nothing else changes without it.
+    let mut has_dipole = quote!();
+    if let Some(d) = dipole {
+        has_dipole = quote! {
+            fn has_dipole(&self) -> bool {
+                true
+            }
+        };
+        specs.push(FunctionSpec {
+            name: "dipole",
+            doc: "The body-frame dipole moment μ(q) in e·bohr.".into(),
+            signature: quote!(fn dipole(&self, q: #q_ty, mu: &mut Vector3<f64>)),
+            inputs: q_inputs.clone(),
+            groups: vec![OutputGroup {
+                target: quote!(mu),
+                entries: d.mu.iter().enumerate().map(|(axis, &c)| (ix(quote!(), axis), c)).collect(),
+            }],
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+        let mut entries = Vec::new();
+        for (k, column) in d.jacobian.iter().enumerate() {
+            for (axis, &c) in column.iter().enumerate() {
+                entries.push((pair(axis, k), c));
+            }
+        }
+        specs.push(FunctionSpec {
+            name: "dipole_jacobian",
+            doc: "`dmu[(axis, k)]` = ∂μ_axis/∂q_k, e·bohr per unit of q_k.".into(),
+            signature: quote!(fn dipole_jacobian(&self, q: #q_ty, dmu: &mut SMatrix<f64, 3, #n>)),
+            inputs: q_inputs.clone(),
+            groups: vec![OutputGroup { target: quote!(dmu), entries }],
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+    }
     let mut functions = Vec::new();
     let mut stats = Vec::new();
     for spec in &specs {
         let (tokens, s) = emit::emit_function(&def.graph, spec, &idents);
         functions.push(tokens);
+        stats.push(s);
+    }
+    let mut inherent_functions = Vec::new();
+    for spec in &inherent_specs {
+        let (tokens, s) = emit::emit_function(&def.graph, spec, &idents);
+        inherent_functions.push(tokens);
         stats.push(s);
     }
 
@@ -363,6 +495,8 @@ pub(crate) fn molecule_items(
             pub const N: usize = #n;
             /// Number of atoms.
             pub const NA: usize = #na;
+
+            #(#inherent_functions)*
         }
 
         impl Molecule<#n, #na> for #ty {
@@ -385,6 +519,10 @@ pub(crate) fn molecule_items(
             #parameter_items
 
             #(#functions)*
+
+            #has_dipole
+
+            #wrappers
         }
     };
     (items, stats)

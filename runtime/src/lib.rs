@@ -9,6 +9,7 @@
 //! Atomic units throughout: lengths in bohr, angles in radians, masses in electron masses,
 //! energies in hartree, time in ħ/E_h (≈ 0.024 188 fs). See [`units`] for the conversions.
 
+pub mod assembly;
 pub mod diagnostic;
 pub mod ensemble;
 pub mod frames;
@@ -18,6 +19,7 @@ pub mod modes;
 pub mod molecule;
 pub mod polarization;
 pub mod sample;
+pub mod spectrum;
 pub mod units;
 
 pub use frames::{

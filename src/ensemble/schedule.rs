@@ -437,7 +437,8 @@ mod tests {
         assert!(text.lines().count() < 40, "the checkpoint was not compacted: {} lines", text.lines().count());
         assert!(text.lines().nth(1).unwrap().starts_with("{\"merged\":258,"), "{}", &text[..200]);
 
-        let (checkpoint, resumed) = Checkpoint::resume(&path, &header).unwrap();
+        let (checkpoint, resumed) =
+            Checkpoint::resume(&path, &header, crate::ensemble::checkpoint::size_limit(&header, &empty())).unwrap();
         let mut c = Collector::new(n, empty(), resumed, Some((checkpoint, header)), 1);
         assert_eq!(c.resumed(), 3 * cut as u64);
         let mut never_recorded = order[cut..].to_vec();
