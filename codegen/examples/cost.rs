@@ -28,7 +28,8 @@ const RUNS: usize = 3;
 
 fn main() -> ExitCode {
     let mut paths: Vec<String> = std::env::args().skip(1).collect();
-    let mut options = Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian"), ..Options::default() };
+    let mut options =
+        Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian"), ..Options::default() };
     if paths.iter().any(|p| p == "--expanded") {
         options.kinetic_gradient = rovib_codegen::GradientMethod::Direct;
         options.run_time_centre_of_mass_from = usize::MAX;
