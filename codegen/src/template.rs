@@ -9,6 +9,7 @@ use proc_macro2::{Ident, Span, TokenStream};
 use quote::quote;
 
 use crate::GeneratedMolecule;
+use crate::cartesian::CartesianExprs;
 use crate::definition::Definition;
 use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_lines, index};
 use crate::expr;
@@ -97,10 +98,19 @@ fn kinetic_groups(target: &TokenStream, set: &KineticSet) -> Vec<OutputGroup> {
 }
 
 /// The items of one generated molecule file, and the statistics of its functions.
-pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<FunctionStats>) {
+pub(crate) fn molecule_items(
+    def: &Definition,
+    e: &KineticExprs,
+    cartesian: Option<&CartesianExprs>,
+) -> (TokenStream, Vec<FunctionStats>) {
     let (n, na) = (index(e.n), index(def.atoms.len()));
     let ty = Ident::new(&type_name(&def.name), Span::call_site());
-    let idents = var_idents(def);
+    let mut idents = var_idents(def);
+    if let Some(c) = cartesian {
+        // The Cartesian position variables come after the velocities (see `crate::cartesian`).
+        assert_eq!(idents.len(), c.first_var as usize, "position variables follow the velocities");
+        idents.extend((0..c.atoms).flat_map(|i| (0..3).map(move |a| crate::cartesian::ident(i, a))));
+    }
     let nc = e.n;
     let q_inputs: Vec<(u32, TokenStream)> = (0..nc).map(|k| (k as u32, ix(quote!(q), k))).collect();
     let mut velocity_inputs = q_inputs.clone();
@@ -240,6 +250,10 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             barrier: None,
         },
     ];
+    let mut specs = specs;
+    if let Some(c) = cartesian {
+        specs.extend(crate::cartesian::specs(c, nc, &def.graph));
+    }
     let mut functions = Vec::new();
     let mut stats = Vec::new();
     for spec in &specs {

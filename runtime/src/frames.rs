@@ -68,6 +68,11 @@
 //!    order, the molecule is rigid or has frozen coordinates, or the geometry is simply another
 //!    molecule's. Setting the tolerance to `f64::INFINITY` accepts the least-squares fit.
 //!
+//! For a molecule whose coordinates are declared by kind (distances, angles, dihedrals) steps
+//! 1–3 are replaced by the closed form `q = q(x)` ([`Molecule::internal_coordinates`]) and one
+//! Kabsch rotation: no iteration and no metric, so the fit also works where the metric is
+//! singular (a linear geometry). Angles are taken on the branch nearest the starting `q`.
+//!
 //! Euler angles are read off the fitted `R` with `θ ∈ [0, π]` and `φ, ψ ∈ (−π, π]`; at
 //! `|sin θ| <` [`MIN_SIN_THETA`] the z-x-z angles are degenerate (gimbal lock) and the fit fails
 //! with [`FrameError::EulerSingular`]. That is a property of the coordinates, not of the
@@ -565,7 +570,13 @@ where
     let step_tolerance = options.step_tolerance.max(64.0 * f64::EPSILON * scale);
     let rms = |s: f64| (s.max(0.0) / total_mass).sqrt();
 
-    let fit = fit_positions(molecule, &masses, &y, q, step_tolerance, options.max_iterations);
+    // Coordinates declared by kind have closed forms q(x): no iteration (and no metric, so this
+    // works at a linear geometry too). Otherwise Gauss–Newton.
+    let fit_at = |y: &SMatrix<f64, 3, NA>| match closed_form_fit(molecule, &masses, y, &q) {
+        Some(f) => f,
+        None => fit_positions(molecule, &masses, y, q, step_tolerance, options.max_iterations),
+    };
+    let fit = fit_at(&y);
     let good = |f: &PositionFit<N, NA>| rms(f.s) <= options.residual_tolerance && molecule.in_range(&f.q).is_ok();
     let fit = match fit {
         Ok(f) if good(&f) => f,
@@ -576,7 +587,7 @@ where
             // the way (the molecule flattening), or fits only with coordinates outside their
             // ranges (negative bond lengths), while the inverted input fits. Inversion is
             // improper, so fitting −y tests every improper superposition at once.
-            let mirrored = fit_positions(molecule, &masses, &(-y), q, step_tolerance, options.max_iterations);
+            let mirrored = fit_at(&(-y));
             if mirrored.as_ref().is_ok_and(good) {
                 return Err(FrameError::MirrorImage { molecule: molecule.name() });
             }
@@ -664,6 +675,49 @@ struct PositionFit<const N: usize, const NA: usize> {
     e: SMatrix<f64, 3, NA>,
     iterations: usize,
     r: SMatrix<f64, 3, NA>,
+}
+
+/// The fit of the centre-of-mass positions `y` for a molecule whose coordinates have closed
+/// forms ([`Molecule::internal_coordinates`]): `q = q(y)`, each angle moved by a multiple of 2π
+/// to the value nearest `start` (a dihedral keeps its branch), then the Kabsch rotation of
+/// `R_i(q)` onto `y`. `None` for a molecule without closed forms.
+fn closed_form_fit<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    masses: &[f64; NA],
+    y: &SMatrix<f64, 3, NA>,
+    start: &SVector<f64, N>,
+) -> Option<Result<PositionFit<N, NA>, FrameError>>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    let mut q = SVector::<f64, N>::zeros();
+    if !molecule.internal_coordinates(y, &mut q) {
+        return None;
+    }
+    for (k, c) in molecule.coordinates().iter().enumerate() {
+        if matches!(c.unit, crate::units::CoordinateUnit::Angle(_)) {
+            let tau = std::f64::consts::TAU;
+            let shifted = q[k] + tau * ((start[k] - q[k]) / tau).round();
+            // Keep the shift only if it stays valid (a bond angle stays in [0, π]).
+            if c.contains(shifted) {
+                q[k] = shifted;
+            }
+        }
+    }
+    if !q.iter().all(|x| x.is_finite()) {
+        return Some(Err(FrameError::NonFinite { quantity: "internal coordinates of the positions" }));
+    }
+    let mut r = SMatrix::<f64, 3, NA>::zeros();
+    molecule.positions(&q, &mut r);
+    let mut c = Matrix3::zeros();
+    for i in 0..NA {
+        c += y.column(i) * r.column(i).transpose() * masses[i];
+    }
+    let Some(rotation) = nearest_rotation(&c) else {
+        return Some(Err(FrameError::NonFinite { quantity: "kabsch rotation" }));
+    };
+    let (s, e) = residuals(molecule, masses, y, &rotation, &q, &mut r);
+    Some(Ok(PositionFit { rotation, q, s, e, iterations: 0, r }))
 }
 
 /// Steps 1–3 of the fit (module documentation) of the centre-of-mass positions `y`, from `q`.

@@ -207,3 +207,9 @@ pub fn ch4<T: Real>(x: &[V3<T>]) -> Vec<T> {
         angle(x[2], c, x[4]),
     ]
 }
+
+/// Hydrogen cyanide: (r_CH, r_CN, α) = (|C − H|, |N − C|, ∠H–C–N), atoms in the order H, C, N;
+/// linear at α = π.
+pub fn hcn<T: Real>(x: &[V3<T>]) -> Vec<T> {
+    vec![distance(x[1], x[0]), distance(x[2], x[1]), angle(x[0], x[1], x[2])]
+}
