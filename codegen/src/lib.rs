@@ -165,7 +165,7 @@ pub fn singular_reference_note(def: &Definition, exprs: &kinetic::KineticExprs) 
     let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let far = atoms.iter().copied().max_by(|a, b| norm(*a).total_cmp(&norm(*b)))?;
     let size = norm(far);
-    if !(size > 0.0) {
+    if size.is_nan() || size <= 0.0 {
         return None;
     }
     let e = far.map(|c| c / size);

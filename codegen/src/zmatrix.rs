@@ -439,9 +439,11 @@ pub fn check_positions(
             }
             // Angles at exactly 0 or π and lengths at 0 are where the closed forms fold; the
             // test points stay away from them only if the reference does, so allow the fold.
-            let folded = matches!(d.kind, Kind::Angle(_)) && (got[k] + p[k]).abs() < 1e-9
-                || matches!(d.kind, Kind::Angle(_)) && (got[k] + p[k] - std::f64::consts::TAU).abs() < 1e-9;
-            if !(diff.abs() <= 1e-9 * (1.0 + p[k].abs())) && !folded {
+            let is_angle = matches!(d.kind, Kind::Angle(_));
+            let sum = got[k] + p[k];
+            let folded = is_angle && (sum.abs() < 1e-9 || (sum - std::f64::consts::TAU).abs() < 1e-9);
+            let agrees = diff.abs() <= 1e-9 * (1.0 + p[k].abs());
+            if !agrees && !folded {
                 let names: Vec<&str> = d.kind.atoms().iter().map(|&a| labels[a]).collect();
                 return Err(src.error(
                     d.span.clone(),
