@@ -7,7 +7,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::runtime::diagnostic::{Compact, FileError, MAX_INPUT_BYTES, Source, read_text_capped};
-use crate::runtime::frames::{FitOptions, LabState, from_lab_body};
+use crate::runtime::frames::{FitOptions, FrameError, LabState, body_of_lab_exact, from_lab_body};
 use crate::runtime::hamiltonian::{
     BodyState, PhaseState, ReducedSystem, Reduction, ReductionError, RotationPart, euler_momenta_from_angular_momentum,
     momenta_from_velocities, quaternion_of_euler, w_matrix,
@@ -243,7 +243,17 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             // Before the fit: a huge velocity would only make the fit's numbers overflow.
             let com = lab.centre_of_mass(&m.masses());
             check_centre_of_mass(&src, span, com.position, com.velocity, scene.t_end)?;
-            let (body, com, _) = from_lab_body(m, &lab, &FitOptions::default()).map_err(|e| {
+            // At a linear geometry the fit's velocity report needs the (singular) metric; a
+            // molecule with closed forms q(x) takes the projections instead (`rovib run` then
+            // starts in the Cartesian chart).
+            let fitted = match from_lab_body(m, &lab, &FitOptions::default()) {
+                Err(FrameError::SingularMetric { .. }) => {
+                    let near = m.reference_geometry().unwrap_or_else(SVector::zeros);
+                    body_of_lab_exact(m, &lab, &near).map(|(body, com)| (body, com, ()))
+                }
+                other => other.map(|(body, com, _)| (body, com, ())),
+            };
+            let (body, com, _) = fitted.map_err(|e| {
                 src.error(
                     span.clone(),
                     format!("the lab-frame positions cannot start a run of {}: {e}", m.name()),
@@ -330,6 +340,21 @@ pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize
     scene: &Scene,
     start: &BodyState<N>,
 ) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
+    let (system, y0) = production_system_unchecked(m, scene, start)?;
+    // H(0) before anything is written: the kinetic metric must be invertible and the energy
+    // finite at the start (the same evaluation the run makes at its first output time).
+    system.energy(&y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
+    Ok((system, y0))
+}
+
+/// [`production_system`] without its check that the kinetic metric is invertible at the start:
+/// for a run that starts at a linear geometry in the Cartesian chart (`rovib run`'s chart
+/// switch), which checks the start there instead.
+pub fn production_system_unchecked<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &'m M,
+    scene: &Scene,
+    start: &BodyState<N>,
+) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
     let mut reduction = frozen_reduction(m, scene)?;
     if start.j == Vector3::zeros() {
         let orientation = scene.outputs.lab || scene.outputs.trajectory || reduction.active_count() == 0;
@@ -338,8 +363,5 @@ pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize
     let system = ReducedSystem::from_body(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
     let mut y0 = vec![0.0; system.dim()];
     system.reduce_body(start, &mut y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
-    // H(0) before anything is written: the kinetic metric must be invertible and the energy
-    // finite at the start (the same evaluation the run makes at its first output time).
-    system.energy(&y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
     Ok((system, y0))
 }

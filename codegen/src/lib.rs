@@ -191,9 +191,9 @@ pub fn singular_reference_note(def: &Definition, exprs: &kinetic::KineticExprs) 
     (off_axis <= 1e-8 * size).then(|| {
         format!(
             "note: the reference geometry of molecule `{}` ({}) is linear: internal coordinates plus Euler angles are \
-             singular there (the rotation about the molecular axis moves no atom), so `rovib eval` and runs at the \
-             reference report a singular metric; rovib does not yet switch to a Cartesian chart near linear, so give a \
-             bent reference for runs (see the README, \"Linear molecules\")",
+             singular there (the rotation about the molecular axis moves no atom), so `rovib eval` at the reference \
+             reports a singular metric; `rovib run` (dop853) continues near linear in lab-frame Cartesian \
+             coordinates when the coordinates are declared by kind (see the README, \"Linear molecules\")",
             def.name, def.path
         )
     })

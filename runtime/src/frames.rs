@@ -378,6 +378,25 @@ pub enum FrameError {
         /// What is wrong.
         reason: &'static str,
     },
+    /// The molecule's coordinates have no closed forms q(x) (its definition gives positions
+    /// rather than coordinates by kind).
+    #[error("{molecule} has no closed-form internal coordinates q(x) (declare its coordinates by kind)")]
+    NoClosedForms {
+        /// The molecule's name.
+        molecule: &'static str,
+    },
+    /// At a singular geometry, the momenta `(J, p)` are not in the range of the kinetic metric:
+    /// angular momentum about the axis of a linear molecule, which no motion of the atoms carries.
+    #[error(
+        "the momenta (J, p) are not those of any motion of the atoms at this singular geometry (residual \
+         {residual:e} of {momentum:e}): a linear molecule carries no angular momentum about its axis"
+    )]
+    NotInRange {
+        /// `|M v − (J, p)|` of the least-squares solution.
+        residual: f64,
+        /// `|(J, p)|`.
+        momentum: f64,
+    },
     /// Any other failure to evaluate the Hamiltonian's quantities at a phase state.
     #[error(transparent)]
     Hamiltonian(HamiltonianError),
@@ -684,6 +703,100 @@ where
         return Err(FrameError::NonFinite { quantity: "fitted phase state" });
     }
     Ok((state, com, report))
+}
+
+/// The body-formulation state of a lab state for a molecule whose coordinates have closed forms,
+/// with no metric: `q = q(x)` (each angle on the branch nearest `near`), the Kabsch orientation,
+/// `J = Σ m_i R_i × u_i` and `p_j = Σ m_i ∂R_i/∂q_j · u_i` with `u_i` the body-frame velocities
+/// about the centre of mass. Unlike [`from_lab_body`] it works at a singular geometry (a linear
+/// molecule: the momenta are projections, defined everywhere); the Cartesian chart of
+/// [`crate::charts`] converts back with it. Returns the state and the centre of mass.
+///
+/// # Errors
+///
+/// [`FrameError::NoClosedForms`] for a molecule without closed forms, [`FrameError::NonFinite`],
+/// and [`FrameError::NotRepresentable`] if the positions do not fit (RMS above 1e-6 bohr).
+pub fn body_of_lab_exact<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    lab: &LabState<NA>,
+    near: &SVector<f64, N>,
+) -> Result<(BodyState<N>, CentreOfMass), FrameError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    let masses = molecule.masses();
+    let total_mass: f64 = masses.iter().sum();
+    let com = lab.centre_of_mass(&masses);
+    let mut y = lab.positions;
+    for i in 0..NA {
+        y.set_column(i, &(lab.positions.column(i) - com.position));
+    }
+    let fit = closed_form_fit(molecule, &masses, &y, near)
+        .ok_or(FrameError::NoClosedForms { molecule: molecule.name() })??;
+    let residual = (fit.s.max(0.0) / total_mass).sqrt();
+    if residual.is_nan() || residual > 1e-6 {
+        return Err(FrameError::NotRepresentable {
+            molecule: molecule.name(),
+            residual,
+            tolerance: 1e-6,
+            worst_atom: 0,
+            worst_atom_residual: residual,
+            q: fit.q.iter().copied().collect(),
+        });
+    }
+    let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
+    molecule.positions_jacobian(&fit.q, &mut dr);
+    let mut u = lab.velocities;
+    for i in 0..NA {
+        u.set_column(i, &(fit.rotation.transpose() * (lab.velocities.column(i) - com.velocity)));
+    }
+    let (j, p) = projections(&masses, &fit.r, &dr, &u);
+    let orientation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(fit.rotation));
+    let state = BodyState { q: fit.q, p, orientation, j };
+    if !state.q.iter().chain(state.p.iter()).chain(state.j.iter()).all(|x| x.is_finite()) {
+        return Err(FrameError::NonFinite { quantity: "body state of the lab state" });
+    }
+    Ok((state, com))
+}
+
+/// [`to_lab_body`], also at a singular geometry: there `(ω, q̇)` solves `M (ω, q̇) = (J, p)` by the
+/// metric's pseudo-inverse (the null direction, the spin about a linear molecule's axis, moves no
+/// atom, so the lab velocities are unique). Fails with [`FrameError::NotInRange`] if `(J, p)` is
+/// not in the metric's range (angular momentum about the axis of a linear molecule).
+pub fn lab_of_body_any<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    state: &BodyState<N>,
+    com: &CentreOfMass,
+) -> Result<LabState<NA>, FrameError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    match to_lab_body(molecule, state, com) {
+        Err(FrameError::SingularMetric { .. }) => {}
+        other => return other,
+    }
+    let mut k = KineticMatrices::<N>::default();
+    molecule.kinetic(&state.q, &mut k);
+    let d = 3 + N;
+    let metric = nalgebra::DMatrix::<f64>::from_fn(d, d, |r, c| match (r < 3, c < 3) {
+        (true, true) => k.inertia[(r, c)],
+        (true, false) => k.coriolis[(r, c - 3)],
+        (false, true) => k.coriolis[(c, r - 3)],
+        (false, false) => k.a[(r - 3, c - 3)],
+    });
+    let rhs = nalgebra::DVector::<f64>::from_iterator(d, state.j.iter().chain(state.p.iter()).copied());
+    let scale = metric.amax();
+    let svd = metric.clone().svd(true, true);
+    let v = svd
+        .solve(&rhs, 1e-10 * scale)
+        .map_err(|_| FrameError::NonFinite { quantity: "pseudo-inverse of the metric" })?;
+    let residual = (&metric * &v - &rhs).norm();
+    if residual.is_nan() || residual > 1e-9 * rhs.norm().max(f64::MIN_POSITIVE) {
+        return Err(FrameError::NotInRange { residual, momentum: rhs.norm() });
+    }
+    let omega = Vector3::new(v[0], v[1], v[2]);
+    let qdot = SVector::<f64, N>::from_iterator(v.iter().skip(3).copied());
+    lab_state(molecule, &state.q, &state.rotation(), &omega, &qdot, com)
 }
 
 /// The result of the Gauss–Newton position fit: the rotation, `q`, `S`, the body-frame residuals
