@@ -72,6 +72,12 @@ pub struct Start<const N: usize> {
     pub com_position: Vector3<f64>,
     /// Centre-of-mass velocity.
     pub com_velocity: Vector3<f64>,
+    /// For a lab-form start at a geometry where the internal chart is singular (exactly linear):
+    /// the positions and velocities about the centre of mass (flat, `LabState::write_to`), from
+    /// which `rovib run` starts in the Cartesian chart exactly. There `body` holds only the
+    /// projections (a bending velocity out of the body frame's bend plane has no image in
+    /// `(ω, q̇)` at linear, so it is not in `p` or `J`).
+    pub lab_start: Option<Vec<f64>>,
 }
 
 /// The index of `name` among `known`, or an error at the name's place in the file: `message`
@@ -204,6 +210,7 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                 state: PhaseState { q: qv, p: pv, euler, pe: euler_momenta_from_angular_momentum(&euler, &j) },
                 com_position: Vector3::zeros(),
                 com_velocity: Vector3::zeros(),
+                lab_start: None,
             })
         }
         Initial::Lab { positions, velocities, span } => {
@@ -246,10 +253,21 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             // At a linear geometry the fit's velocity report needs the (singular) metric; a
             // molecule with closed forms q(x) takes the projections instead (`rovib run` then
             // starts in the Cartesian chart).
+            let mut lab_start = None;
             let fitted = match from_lab_body(m, &lab, &FitOptions::default()) {
                 Err(FrameError::SingularMetric { .. }) => {
                     let near = m.reference_geometry().unwrap_or_else(SVector::zeros);
-                    body_of_lab_exact(m, &lab, &near).map(|(body, com)| (body, com, ()))
+                    body_of_lab_exact(m, &lab, &near).map(|(body, com)| {
+                        let mut about = lab;
+                        for i in 0..NA {
+                            about.positions.set_column(i, &(lab.positions.column(i) - com.position));
+                            about.velocities.set_column(i, &(lab.velocities.column(i) - com.velocity));
+                        }
+                        let mut y = vec![0.0; 6 * NA];
+                        about.write_to(&mut y);
+                        lab_start = Some(y);
+                        (body, com, ())
+                    })
                 }
                 other => other.map(|(body, com, _)| (body, com, ())),
             };
@@ -260,7 +278,13 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                     "check the atom positions and their units",
                 )
             })?;
-            Ok(Start { body, state: body.to_phase(), com_position: com.position, com_velocity: com.velocity })
+            Ok(Start {
+                body,
+                state: body.to_phase(),
+                com_position: com.position,
+                com_velocity: com.velocity,
+                lab_start,
+            })
         }
     }
 }

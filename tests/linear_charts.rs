@@ -14,7 +14,7 @@ mod common;
 
 use common::cartesian::CartesianSystem as Reference;
 use common::internal_coordinates;
-use rovib::molecules::Hcn;
+use rovib::molecules::{H2o, Hcn};
 use rovib::runtime::Molecule;
 use rovib::runtime::cartesian_system::CartesianSystem;
 use rovib::runtime::charts::{self, ChartObserver, ChartStart, ChartState};
@@ -31,19 +31,20 @@ const ATOL: f64 = 1e-14;
 
 /// What the switched run produced at each output time: lab positions about the centre of mass,
 /// H, the lab angular momentum and the chart.
-struct Outputs<'m> {
-    system: ReducedSystem<'m, Hcn, 3, 3>,
-    cartesian: CartesianSystem<'m, Hcn, 3, 3>,
+struct Outputs<'m, M> {
+    system: ReducedSystem<'m, M, 3, 3>,
+    cartesian: CartesianSystem<'m, M, 3, 3>,
     rows: Vec<(f64, LabState<3>, f64, Vector3<f64>, bool)>,
 }
 
-impl ChartObserver for Outputs<'_> {
+impl<M: Molecule<3, 3>> ChartObserver for Outputs<'_, M> {
     fn observe(&mut self, t: f64, state: ChartState<'_>) -> ControlFlow<()> {
-        let masses = Hcn.masses();
+        let m = self.system.molecule();
+        let masses = m.masses();
         let row = match state {
             ChartState::Internal(y) => {
                 let (body, h) = self.system.expand_body_and_energy(y).expect("internal output");
-                let lab = to_lab_body(&Hcn, &body, &CentreOfMass::default()).expect("lab state");
+                let lab = to_lab_body(m, &body, &CentreOfMass::default()).expect("lab state");
                 let l = lab.angular_momentum(&masses);
                 (t, lab, h, l, false)
             }
@@ -68,18 +69,25 @@ struct Report {
     min_bend_from_linear: f64,
 }
 
-/// Runs HCN from a bent start with bend momentum `p_alpha` and body angular momentum `j`, both
-/// ways, and compares.
+/// Runs HCN from a bent start (170°) with bend momentum `p_alpha` and body angular momentum
+/// `j`, both ways, and compares.
 fn run(p_alpha: f64, j: Vector3<f64>, t_end: f64) -> Report {
-    let m = Hcn;
-    let mut q = m.reference_geometry().unwrap();
+    let mut q = Hcn.reference_geometry().unwrap();
     q[2] = 170f64.to_radians();
-    let body = BodyState {
-        q,
-        p: SVector::<f64, 3>::new(0.5, -0.3, p_alpha),
-        orientation: UnitQuaternion::from_euler_angles(0.3, -0.2, 0.7),
-        j,
-    };
+    run_molecule(Hcn, q, SVector::<f64, 3>::new(0.5, -0.3, p_alpha), j, internal_coordinates::hcn, t_end)
+}
+
+/// Runs a triatomic `m` from `(q, p)` with body angular momentum `j` with the chart switch and
+/// as a plain Cartesian propagation (`q_of_x` its coordinates), and compares.
+fn run_molecule<M: Molecule<3, 3>>(
+    m: M,
+    q: SVector<f64, 3>,
+    p: SVector<f64, 3>,
+    j: Vector3<f64>,
+    q_of_x: common::cartesian::QOfX,
+    t_end: f64,
+) -> Report {
+    let body = BodyState { q, p, orientation: UnitQuaternion::from_euler_angles(0.3, -0.2, 0.7), j };
     let reduction = if j == Vector3::zeros() { Reduction::zero_angular_momentum(true) } else { Reduction::none() };
     let system = ReducedSystem::from_body(&m, reduction, &body);
     let options = Dop853Options { rtol: RTOL, atol: ATOL, ..Dop853Options::default() };
@@ -89,7 +97,7 @@ fn run(p_alpha: f64, j: Vector3<f64>, t_end: f64) -> Report {
 
     // The reference: Newton's equations from the same lab state.
     let lab0 = to_lab_body(&m, &body, &CentreOfMass::default()).unwrap();
-    let mut reference = Reference::new(&m, m.masses(), internal_coordinates::hcn);
+    let mut reference = Reference::new(&m, m.masses(), q_of_x);
     let mut y0 = vec![0.0; 18];
     lab0.write_to(&mut y0);
     let mut rows = Vec::new();
@@ -123,8 +131,9 @@ fn run(p_alpha: f64, j: Vector3<f64>, t_end: f64) -> Report {
         r.min_bend_from_linear = r.min_bend_from_linear.min(std::f64::consts::PI - u.angle(&v));
     }
     eprintln!(
-        "hcn p_alpha = {p_alpha}, J = {j:?}: {} switches, {:.0} of {t_end} ħ/E_h in the Cartesian chart ({} of {} outputs), \
+        "{} p = {p:?}, J = {j:?}: {} switches, {:.0} of {t_end} ħ/E_h in the Cartesian chart ({} of {} outputs), \
          closest output to linear {:.1e} rad; max |Δx| = {:.2e} bohr, |ΔH| ≤ {:.1e} Eh, |ΔL| ≤ {:.1e} ħ; {} steps, {} rhs",
+        m.name(),
         r.switches,
         r.cartesian_time,
         r.cartesian_outputs,
@@ -159,6 +168,29 @@ fn hcn_bends_through_linear_with_zero_angular_momentum() {
 fn hcn_bends_through_linear_while_rotating() {
     let r = run(6.0, Vector3::new(3.0, 4.0, 0.0), T_END);
     check(&r, 8);
+}
+
+/// Water above its barrier to linearity (about 30 500 cm⁻¹ in this model, 0.139 hartree): from
+/// 150° with p_alpha = 30 ħ the bend passes through 180° and back, each time through the
+/// Cartesian chart. The model's bend potential, harmonic in α ∈ [0, π], has a kink at linear
+/// (its force changes sign there), which both integrators resolve by shortening their steps.
+#[test]
+fn water_above_its_barrier_to_linearity_runs_through() {
+    let mut q = H2o.reference_geometry().unwrap();
+    q[2] = 150f64.to_radians();
+    let r = run_molecule(
+        H2o,
+        q,
+        SVector::<f64, 3>::new(0.0, 0.0, 30.0),
+        Vector3::zeros(),
+        internal_coordinates::h2o,
+        3000.0,
+    );
+    assert!(r.switches >= 4, "{} switches", r.switches);
+    assert!(r.cartesian_time > 0.0 && r.cartesian_outputs > 0);
+    assert!(r.max_dx < 1e-8, "the switched run is {:e} bohr from the Cartesian reference", r.max_dx);
+    assert!(r.energy_drift < 1e-9, "H drifts by {:e} hartree", r.energy_drift);
+    assert!(r.l_drift < 1e-9, "the lab angular momentum drifts by {:e} ħ", r.l_drift);
 }
 
 /// `rovib run scenes/hcn_linear.toml`: an exactly linear start (lab form), bending through

@@ -151,6 +151,9 @@ pub enum ChartStart<'s, const N: usize> {
     /// Fresh at the grid origin `t0`, from this body state (in the internal chart if it is
     /// regular there, else in the Cartesian chart).
     Fresh(&'s BodyState<N>),
+    /// Fresh at the grid origin `t0` in the Cartesian chart, from this [`CartesianSystem`] flat
+    /// state (a start at a singular geometry given by positions and velocities: taken as it is).
+    FreshCartesian(&'s [f64]),
     /// Continuing an internal-chart DOP853 run.
     Resume(&'s Dop853Resume),
 }
@@ -225,19 +228,45 @@ where
             served = Some(r.outputs_done);
             (Chart::Internal, Next::Point(r.clone()))
         }
-        ChartStart::Fresh(body) => {
-            last_q = body.q;
-            let mut y = vec![0.0; internal.dim()];
-            let mut dy = vec![0.0; internal.dim()];
-            if internal.reduce_body(body, &mut y).is_ok() && internal.rhs(t0, &y, &mut dy).is_ok() {
+        ChartStart::FreshCartesian(y) if y.len() != 6 * NA => {
+            return Err(SolveError::InvalidInput(format!(
+                "a Cartesian start of {} components, expected {}",
+                y.len(),
+                6 * NA
+            )));
+        }
+        ChartStart::Fresh(_) | ChartStart::FreshCartesian(_) => {
+            let (regular, y, cartesian_y) = match start {
+                ChartStart::Fresh(body) => {
+                    last_q = body.q;
+                    let mut y = vec![0.0; internal.dim()];
+                    let mut dy = vec![0.0; internal.dim()];
+                    let regular = internal.reduce_body(body, &mut y).is_ok() && internal.rhs(t0, &y, &mut dy).is_ok();
+                    let cartesian_y = if regular {
+                        Vec::new()
+                    } else {
+                        to_cartesian(m, body).map_err(|reason| {
+                            SolveError::InvalidInput(format!(
+                                "the start is singular for internal coordinates and cannot be put in the Cartesian \
+                                 chart: {reason}"
+                            ))
+                        })?
+                    };
+                    (regular, y, cartesian_y)
+                }
+                ChartStart::FreshCartesian(y) => {
+                    let lab = CartesianSystem::<M, N, NA>::lab(y);
+                    if let Ok((body, _)) = body_of_lab_exact(m, &lab, &last_q) {
+                        last_q = body.q;
+                    }
+                    (false, Vec::new(), y.to_vec())
+                }
+                ChartStart::Resume(_) => unreachable!("matched above"),
+            };
+            if regular {
                 (Chart::Internal, Next::Fresh(y))
             } else {
-                let y = to_cartesian(m, body).map_err(|reason| {
-                    SolveError::InvalidInput(format!(
-                        "the start is singular for internal coordinates and cannot be put in the Cartesian chart: \
-                         {reason}"
-                    ))
-                })?;
+                let y = cartesian_y;
                 report.last_chart = Some(Chart::Cartesian);
                 served = Some(0);
                 if observer.observe(t0, ChartState::Cartesian(&y)).is_break() || t_end <= t0 {

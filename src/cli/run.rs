@@ -173,11 +173,14 @@ impl Run<'_> {
         let scene = self.scene;
         let mut warnings = Vec::new();
         // Where the run starts: the scene's initial state, or the restart file's state.
+        // A lab-form start at a linear geometry: started in the Cartesian chart as given.
+        let mut lab_start: Option<Vec<f64>> = None;
         let (system, y0, com, t0, start_body) = match self.resume {
             None => {
                 let start = initial_state(&m, scene)?;
                 // Fails before anything is written if the initial state is not valid, unless the
                 // run can start in the Cartesian chart (a linear start, `crate::runtime::charts`).
+                lab_start = start.lab_start.clone();
                 let (system, y0) = match production_system(&m, scene, &start.body) {
                     Ok(s) => s,
                     Err(e) => match production_system_unchecked(&m, scene, &start.body) {
@@ -188,8 +191,9 @@ impl Run<'_> {
                 if let Some(q_ref) = m.reference_geometry() {
                     let h0 = match system.energy(&y0) {
                         Ok(h) => h,
-                        Err(_) if uses_charts(scene, &system) => charts::to_cartesian(&m, &start.body)
-                            .ok()
+                        Err(_) if uses_charts(scene, &system) => lab_start
+                            .clone()
+                            .or_else(|| charts::to_cartesian(&m, &start.body).ok())
                             .and_then(|y| CartesianSystem::new(&m).ok()?.energy(&y).ok())
                             .ok_or_else(|| CliError::Message("the initial state: no finite energy".into()))?,
                         Err(e) => return Err(CliError::context("the initial state", e)),
@@ -289,7 +293,7 @@ impl Run<'_> {
         let switching = uses_charts(scene, &system);
         let mut chart_report = None;
         let result = if switching {
-            let r = integrate_charts(&system, scene, t0, &start_body, self.resume, &mut recorder);
+            let r = integrate_charts(&system, scene, t0, &start_body, lab_start.as_deref(), self.resume, &mut recorder);
             r.map(|report| {
                 counted.evaluations = report.stats.rhs_evals;
                 let out = (report.stats, report.resume.clone());
@@ -450,6 +454,7 @@ fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const 
     scene: &Scene,
     t0: f64,
     start: &BodyState<N>,
+    lab_start: Option<&[f64]>,
     resume: Option<&Restart>,
     observer: &mut O,
 ) -> Result<ChartReport, SolveError<ChartError>> {
@@ -461,6 +466,10 @@ fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const 
         Some(r) if dop853_continues(scene, resume) => {
             let point = r.dop853.as_ref().expect("checked by dop853_continues").to_resume(r.outputs_done);
             charts::integrate(system, options, 0.0, ChartStart::Resume(&point), t_end, interval, observer)
+        }
+        None if lab_start.is_some() => {
+            let y = lab_start.expect("checked");
+            charts::integrate(system, options, t0, ChartStart::FreshCartesian(y), t_end, interval, observer)
         }
         _ => charts::integrate(system, options, t0, ChartStart::Fresh(start), t_end, interval, observer),
     }
