@@ -786,21 +786,23 @@ impl Validator<'_> {
         let dipole = match &raw.dipole {
             None => None,
             Some(d) => {
-                let (dipole, spans) = self.dipole(d, &atoms)?;
-                let what = match &dipole {
-                    DipoleDef::Components(c) => c.to_vec(),
-                    DipoleDef::Charges(c) => c.clone(),
-                };
-                for (e, span) in what.into_iter().zip(spans) {
-                    if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
-                        return Err(src.error(
-                            span,
-                            format!("this part of the dipole is {v} {place}"),
-                            "check for a division by zero, the logarithm or square root of a negative number, or values too large",
-                        ));
+                let parsed = self.dipole(d, &atoms);
+                self.check(parsed).map(|(dipole, spans)| {
+                    let what = match &dipole {
+                        DipoleDef::Components(c) => c.to_vec(),
+                        DipoleDef::Charges(c) => c.clone(),
+                    };
+                    for (e, span) in what.into_iter().zip(spans) {
+                        if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
+                            self.errors.push(src.error(
+                                span,
+                                format!("this part of the dipole is {v} {place}"),
+                                "check for a division by zero, the logarithm or square root of a negative number, or values too large",
+                            ));
+                        }
                     }
-                }
-                Some(dipole)
+                    dipole
+                })
             }
         };
 

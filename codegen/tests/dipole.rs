@@ -138,7 +138,8 @@ fn dipole_functions_are_generated_only_for_a_dipole() {
 fn error(text: &str) -> DefinitionError {
     match generate_molecule("molecules/xy2.toml", text) {
         Ok(_) => panic!("expected an error for:\n{text}"),
-        Err(e) => e,
+        Err(mut errors) if errors.len() == 1 => errors.remove(0),
+        Err(errors) => panic!("expected one error, got {}: {errors:#?}\nfor:\n{text}", errors.len()),
     }
 }
 
