@@ -74,7 +74,7 @@ struct Report {
 fn run(p_alpha: f64, j: Vector3<f64>, t_end: f64) -> Report {
     let mut q = Hcn.reference_geometry().unwrap();
     q[2] = 170f64.to_radians();
-    run_molecule(Hcn, q, SVector::<f64, 3>::new(0.5, -0.3, p_alpha), j, internal_coordinates::hcn, t_end)
+    run_molecule(Hcn, q, SVector::<f64, 3>::new(0.5, -0.3, p_alpha), j, internal_coordinates::hcn, 1, t_end)
 }
 
 /// Runs a triatomic `m` from `(q, p)` with body angular momentum `j` with the chart switch and
@@ -85,6 +85,7 @@ fn run_molecule<M: Molecule<3, 3>>(
     p: SVector<f64, 3>,
     j: Vector3<f64>,
     q_of_x: common::cartesian::QOfX,
+    centre: usize,
     t_end: f64,
 ) -> Report {
     let body = BodyState { q, p, orientation: UnitQuaternion::from_euler_angles(0.3, -0.2, 0.7), j };
@@ -92,8 +93,9 @@ fn run_molecule<M: Molecule<3, 3>>(
     let system = ReducedSystem::from_body(&m, reduction, &body);
     let options = Dop853Options { rtol: RTOL, atol: ATOL, ..Dop853Options::default() };
     let mut outputs = Outputs { system, cartesian: CartesianSystem::new(&m).unwrap(), rows: Vec::new() };
-    let report =
-        charts::integrate(&system, options, 0.0, ChartStart::Fresh(&body), t_end, INTERVAL, &mut outputs).unwrap();
+    let mut report = charts::ChartReport::default();
+    charts::integrate(&system, options, 0.0, ChartStart::Fresh(&body), t_end, INTERVAL, &mut outputs, &mut report)
+        .unwrap();
 
     // The reference: Newton's equations from the same lab state.
     let lab0 = to_lab_body(&m, &body, &CentreOfMass::default()).unwrap();
@@ -127,7 +129,12 @@ fn run_molecule<M: Molecule<3, 3>>(
         r.l_drift = r.l_drift.max((l - l0).amax());
         r.cartesian_outputs += usize::from(*cartesian);
         let q = reference.positions;
-        let (u, v) = (q.column(0) - q.column(1), q.column(2) - q.column(1));
+        let [a, b] = match centre {
+            0 => [1, 2],
+            1 => [0, 2],
+            _ => [0, 1],
+        };
+        let (u, v) = (q.column(a) - q.column(centre), q.column(b) - q.column(centre));
         r.min_bend_from_linear = r.min_bend_from_linear.min(std::f64::consts::PI - u.angle(&v));
     }
     eprintln!(
@@ -184,11 +191,12 @@ fn water_above_its_barrier_to_linearity_runs_through() {
         SVector::<f64, 3>::new(0.0, 0.0, 30.0),
         Vector3::zeros(),
         internal_coordinates::h2o,
+        0,
         3000.0,
     );
-    assert!(r.switches >= 4, "{} switches", r.switches);
+    assert!(r.switches >= 2, "{} switches", r.switches);
     assert!(r.cartesian_time > 0.0 && r.cartesian_outputs > 0);
-    assert!(r.max_dx < 1e-8, "the switched run is {:e} bohr from the Cartesian reference", r.max_dx);
+    assert!(r.max_dx < 1e-9, "the switched run is {:e} bohr from the Cartesian reference", r.max_dx);
     assert!(r.energy_drift < 1e-9, "H drifts by {:e} hartree", r.energy_drift);
     assert!(r.l_drift < 1e-9, "the lab angular momentum drifts by {:e} ħ", r.l_drift);
 }

@@ -199,7 +199,9 @@ pub fn map_error<E>(e: SolveError<E>, f: impl FnOnce(E) -> ChartError) -> SolveE
 /// Integrates from `start` to `t_end` with DOP853, outputs at `t0 + k·interval` (the grid of
 /// [`crate::integrate::solve`]), switching charts as the module documentation describes.
 /// `system` must be able to switch ([`can_switch`]); its `min_pivot` is replaced by
-/// [`SWITCH_PIVOT`]. The statistics count every segment.
+/// [`SWITCH_PIVOT`]. `report` collects the work of every segment, also when the run fails (so
+/// that a failed run still reports its evaluations).
+#[allow(clippy::too_many_arguments)]
 pub fn integrate<M, O, const N: usize, const NA: usize>(
     system: &ReducedSystem<'_, M, N, NA>,
     options: Dop853Options,
@@ -208,7 +210,8 @@ pub fn integrate<M, O, const N: usize, const NA: usize>(
     t_end: f64,
     interval: f64,
     observer: &mut O,
-) -> Result<ChartReport, SolveError<ChartError>>
+    report: &mut ChartReport,
+) -> Result<(), SolveError<ChartError>>
 where
     M: Molecule<N, NA> + ?Sized,
     O: ChartObserver + ?Sized,
@@ -219,7 +222,6 @@ where
         CartesianSystem::new(m).map_err(|e| SolveError::InvalidInput(e.to_string()))?.with_return_pivot(RETURN_PIVOT);
     let mut dop_i = Dop853::new(internal.dim(), options)?;
     let mut dop_c = Dop853::new(6 * NA, options)?;
-    let mut report = ChartReport::default();
     let mut served: Option<u64> = None;
     let mut last_q = nalgebra::SVector::<f64, N>::zeros();
     let mut entered = t0;
@@ -270,7 +272,7 @@ where
                 report.last_chart = Some(Chart::Cartesian);
                 served = Some(0);
                 if observer.observe(t0, ChartState::Cartesian(&y)).is_break() || t_end <= t0 {
-                    return Ok(report);
+                    return Ok(());
                 }
                 let h = interval.min(t_end - t0) * 1e-3;
                 (
@@ -293,7 +295,7 @@ where
                     Ok((stats, resume)) => {
                         add(&mut report.stats, &stats);
                         report.resume = resume;
-                        return Ok(report);
+                        return Ok(());
                     }
                     Err(SolveError::Rhs { source, .. }) if is_switch(&source) => {
                         let (t, y, h, stats) = dop_i.last_accepted();
@@ -314,7 +316,10 @@ where
                         report.switches += 1;
                         entered = t;
                     }
-                    Err(e) => return Err(map_error(e, ChartError::Internal)),
+                    Err(e) => {
+                        add(&mut report.stats, &dop_i.last_accepted().3);
+                        return Err(map_error(e, ChartError::Internal));
+                    }
                 }
             }
             Chart::Cartesian => {
@@ -323,7 +328,7 @@ where
                     Ok((stats, _)) => {
                         add(&mut report.stats, &stats);
                         report.cartesian_time += t_end - entered;
-                        return Ok(report);
+                        return Ok(());
                     }
                     Err(SolveError::Rhs { source: CartesianError::Regular { .. }, .. }) => {
                         let (t, y, h, stats) = dop_c.last_accepted();
@@ -356,7 +361,10 @@ where
                             });
                         }
                     }
-                    Err(e) => return Err(map_error(e, ChartError::Cartesian)),
+                    Err(e) => {
+                        add(&mut report.stats, &dop_c.last_accepted().3);
+                        return Err(map_error(e, ChartError::Cartesian));
+                    }
                 }
             }
         }

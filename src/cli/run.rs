@@ -311,13 +311,21 @@ impl Run<'_> {
         let switching = uses_charts(scene, &system);
         let mut chart_report = None;
         let result = if switching {
-            let r = integrate_charts(&system, scene, t0, &start_body, lab_start.as_deref(), self.resume, &mut recorder);
-            r.map(|report| {
-                counted.evaluations = report.stats.rhs_evals;
-                let out = (report.stats, report.resume.clone());
-                chart_report = Some(report);
-                out
-            })
+            let mut report = ChartReport::default();
+            let r = integrate_charts(
+                &system,
+                scene,
+                t0,
+                &start_body,
+                lab_start.as_deref(),
+                self.resume,
+                &mut recorder,
+                &mut report,
+            );
+            counted.evaluations = report.stats.rhs_evals;
+            let out = r.map(|()| (report.stats, report.resume.clone()));
+            chart_report = Some(report);
+            out
         } else {
             integrate(&mut counted, scene, t0, &y0, self.resume, &mut recorder)
                 .map_err(|e| charts::map_error(e, ChartError::Internal))
@@ -470,6 +478,7 @@ fn restart_body<const N: usize>(r: &Restart) -> Result<BodyState<N>, CliError> {
 /// [`integrate`] with the chart switch of `crate::runtime::charts` (DOP853 only): fresh from
 /// `start`, or continuing `resume` (from its DOP853 point in the internal chart, else from its
 /// last output state with the output grid restarted there, as [`integrate`] does).
+#[allow(clippy::too_many_arguments)]
 fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const NA: usize>(
     system: &ReducedSystem<'_, M, N, NA>,
     scene: &Scene,
@@ -478,7 +487,8 @@ fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const 
     lab_start: Option<&[f64]>,
     resume: Option<&Restart>,
     observer: &mut O,
-) -> Result<ChartReport, SolveError<ChartError>> {
+    report: &mut ChartReport,
+) -> Result<(), SolveError<ChartError>> {
     let Method::Dop853(options) = scene.method else {
         return Err(SolveError::InvalidInput("the chart switch runs with dop853 only".into()));
     };
@@ -486,13 +496,13 @@ fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const 
     match resume {
         Some(r) if dop853_continues(scene, resume) => {
             let point = r.dop853.as_ref().expect("checked by dop853_continues").to_resume(r.outputs_done);
-            charts::integrate(system, options, 0.0, ChartStart::Resume(&point), t_end, interval, observer)
+            charts::integrate(system, options, 0.0, ChartStart::Resume(&point), t_end, interval, observer, report)
         }
         None if lab_start.is_some() => {
             let y = lab_start.expect("checked");
-            charts::integrate(system, options, t0, ChartStart::FreshCartesian(y), t_end, interval, observer)
+            charts::integrate(system, options, t0, ChartStart::FreshCartesian(y), t_end, interval, observer, report)
         }
-        _ => charts::integrate(system, options, t0, ChartStart::Fresh(start), t_end, interval, observer),
+        _ => charts::integrate(system, options, t0, ChartStart::Fresh(start), t_end, interval, observer, report),
     }
 }
 
