@@ -783,25 +783,26 @@ impl Validator<'_> {
                 "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
             ));
         }
+        // The dipole table's first mistake is collected with the others.
         let dipole = match &raw.dipole {
             None => None,
             Some(d) => {
-                let parsed = self.dipole(d, &atoms);
-                self.check(parsed).map(|(dipole, spans)| {
-                    let what = match &dipole {
-                        DipoleDef::Components(c) => c.to_vec(),
-                        DipoleDef::Charges(c) => c.clone(),
-                    };
-                    for (e, span) in what.into_iter().zip(spans) {
-                        if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
-                            self.errors.push(src.error(
-                                span,
-                                format!("this part of the dipole is {v} {place}"),
-                                "check for a division by zero, the logarithm or square root of a negative number, or values too large",
-                            ));
-                        }
+                let read = self.dipole(d, &atoms);
+                self.check(read).map(|(dipole, spans)| {
+                let what = match &dipole {
+                    DipoleDef::Components(c) => c.to_vec(),
+                    DipoleDef::Charges(c) => c.clone(),
+                };
+                for (e, span) in what.into_iter().zip(spans).filter(|_| constants_ok) {
+                    if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
+                        self.errors.push(src.error(
+                            span,
+                            format!("this part of the dipole is {v} {place}"),
+                            "check for a division by zero, the logarithm or square root of a negative number, or values too large",
+                        ));
                     }
-                    dipole
+                }
+                dipole
                 })
             }
         };

@@ -135,11 +135,14 @@ fn dipole_functions_are_generated_only_for_a_dipole() {
     assert_eq!(with.stats.len(), without.stats.len() + 2);
 }
 
+/// The one error of a definition with one mistake.
 fn error(text: &str) -> DefinitionError {
     match generate_molecule("molecules/xy2.toml", text) {
         Ok(_) => panic!("expected an error for:\n{text}"),
-        Err(mut errors) if errors.len() == 1 => errors.remove(0),
-        Err(errors) => panic!("expected one error, got {}: {errors:#?}\nfor:\n{text}", errors.len()),
+        Err(mut e) => {
+            assert_eq!(e.len(), 1, "one mistake, one error: {e:?}");
+            e.remove(0)
+        }
     }
 }
 

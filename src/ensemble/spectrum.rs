@@ -2,10 +2,11 @@
 //! when the scene's `[statistics] correlations` include `mu_x`, `mu_y` and `mu_z` (the lab-frame
 //! dipole of a molecule with a dipole surface).
 //!
-//! C(τ) = ⟨μ_lab(0)·μ_lab(τ)⟩ is the sum of the three components' autocorrelations (each of
-//! the fluctuation about its trajectory's time mean, averaged over trajectories); the transform,
-//! window and quantum corrections are [`crate::runtime::spectrum`]'s (docs/equations.md,
-//! section 11).
+//! C(τ) = ⟨μ_lab(0)·μ_lab(τ)⟩ is the sum of the three components' autocorrelations, each of
+//! the Hann-tapered fluctuation about its trajectory's time mean
+//! ([`crate::runtime::ensemble::CorrelationWorkspace::tapered_autocorrelation`]), averaged over
+//! trajectories; the transform and quantum corrections are [`crate::runtime::spectrum`]'s
+//! (docs/equations.md, section 11).
 
 use std::path::{Path, PathBuf};
 
@@ -63,7 +64,7 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         header.push(format!("sigma_{}_cm2", c.name()));
     }
     let mut f = OutputFile::create(dir, "spectrum.csv")?;
-    f.line(&format!("# resolution (FWHM) {:?} cm-1, Hann window over T = {:?} a.u.", s.resolution(), s.length))?;
+    f.line(&format!("# resolution (FWHM) {:?} cm-1, Hann taper over T = {:?} a.u.", s.resolution(), s.length))?;
     f.line(&header.join(","))?;
     for j in 0..s.wavenumber.len() {
         let mut row = format!("{:?},{:?}", s.wavenumber[j], s.lineshape[j]);
@@ -84,11 +85,20 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         title: label,
         x_label: "wavenumber (cm⁻¹)".to_owned(),
         y_label: y.to_owned(),
-        content: Content::Band(s.wavenumber.iter().zip(&values).map(|(&x, &v)| (x, v, 0.0)).collect()),
+        // Plotted every ~resolution/6 (the file has every grid point): the plot stays small.
+        content: Content::Band(
+            s.wavenumber.iter().zip(&values).step_by(plot_stride(&s)).map(|(&x, &v)| (x, v, 0.0)).collect(),
+        ),
     };
     let path = dir.join("spectrum.svg");
     std::fs::write(&path, svg(&[panel]))
         .map_err(|e| CliError::context(format!("cannot write {}", path.display()), e))?;
     files.push(path);
     Ok(files)
+}
+
+/// The step through the grid for the plot: points about a sixth of the resolution apart.
+fn plot_stride(s: &Spectrum) -> usize {
+    let spacing = s.wavenumber.get(1).map_or(1.0, |w| w - s.wavenumber[0]);
+    ((s.resolution() / 6.0 / spacing).floor() as usize).max(1)
 }
