@@ -9,6 +9,7 @@ use proc_macro2::{Ident, Span, TokenStream};
 use quote::quote;
 
 use crate::GeneratedMolecule;
+use crate::cartesian::CartesianExprs;
 use crate::definition::Definition;
 use crate::dipole::DipoleExprs;
 use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_lines, index};
@@ -102,12 +103,18 @@ fn kinetic_groups(target: &TokenStream, set: &KineticSet) -> Vec<OutputGroup> {
 pub(crate) fn molecule_items(
     def: &Definition,
     e: &KineticExprs,
+    cartesian: Option<&CartesianExprs>,
     parametric: Option<&ParametricExprs>,
     dipole: Option<&DipoleExprs>,
 ) -> (TokenStream, Vec<FunctionStats>) {
     let (n, na) = (index(e.n), index(def.atoms.len()));
     let ty = Ident::new(&type_name(&def.name), Span::call_site());
     let mut idents = var_idents(def);
+    if let Some(c) = cartesian {
+        // The Cartesian position variables come after the velocities (see `crate::cartesian`).
+        assert_eq!(idents.len(), c.first_var as usize, "position variables follow the velocities");
+        idents.extend((0..c.atoms).flat_map(|i| (0..3).map(move |a| crate::cartesian::ident(i, a))));
+    }
     if let Some(p) = parametric {
         // Parameter i is graph variable `first_var + i`, bound to `param{i}`.
         while idents.len() < p.first_var as usize {
@@ -240,6 +247,9 @@ pub(crate) fn molecule_items(
             barrier: None,
         },
     ];
+    if let Some(c) = cartesian {
+        specs.extend(crate::cartesian::specs(c, nc, &def.graph));
+    }
     // Large molecules: `kinetic` and `kinetic_and_gradient` emit `a` without its
     // centre-of-mass term plus `∂c/∂q` (inherent `*_sparse` functions), and the trait methods
     // wrap them with the runtime's rank-3 update (`kinetic::RunTimeCentreOfMass`).

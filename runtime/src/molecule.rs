@@ -215,6 +215,33 @@ pub trait Molecule<const N: usize, const NA: usize> {
     fn masses(&self) -> [f64; NA] {
         self.atoms().map(|a| a.mass)
     }
+
+    // Coordinates declared by kind (distance, angle, dihedral): closed forms in Cartesian
+    // positions. Generated for such definitions; the defaults say "not available".
+
+    /// The internal coordinates of Cartesian positions `x` (bohr, column `i` is atom `i`, any
+    /// frame and origin) in closed form, into `q`: distances, angles in `[0, π]`, dihedrals in
+    /// `(−π, π]`. Returns `false` (and leaves `q` alone) for a molecule whose definition gives
+    /// explicit positions without kinds; then only the iterative fit of `crate::frames` applies.
+    fn internal_coordinates(&self, x: &SMatrix<f64, 3, NA>, q: &mut SVector<f64, N>) -> bool {
+        let _ = (x, q);
+        false
+    }
+
+    /// The potential `U(q(x))` in hartree at Cartesian positions `x` (bohr), or `None` when the
+    /// coordinates have no closed form ([`Molecule::internal_coordinates`]).
+    fn cartesian_potential(&self, x: &SMatrix<f64, 3, NA>) -> Option<f64> {
+        let _ = x;
+        None
+    }
+
+    /// `∂U/∂x` (hartree per bohr, column `i` is atom `i`) into `grad` and `U` (hartree), or
+    /// `None` when the coordinates have no closed form. Not finite where a coordinate's closed
+    /// form is not differentiable (an angle at exactly 0 or π, a dihedral about collinear atoms).
+    fn cartesian_potential_gradient(&self, x: &SMatrix<f64, 3, NA>, grad: &mut SMatrix<f64, 3, NA>) -> Option<f64> {
+        let _ = (x, grad);
+        None
+    }
 }
 
 /// Something to do with a molecule chosen at run time by name, for code that is generic over

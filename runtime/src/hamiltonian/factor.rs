@@ -101,6 +101,21 @@ impl<const N: usize> MetricFactor<N> {
         Ok(Self { i_inv, y, l2, d2_inv })
     }
 
+    /// Whether [`MetricFactor::with_tolerance`] would succeed with `min_pivot`, without building
+    /// an error (so without allocating): the test the Cartesian chart of `crate::charts` makes at
+    /// every evaluation to know when the internal chart is regular again.
+    pub fn is_regular(k: &KineticMatrices<N>, min_pivot: f64) -> bool {
+        let tol = min_pivot.max(PIVOT_TOLERANCE);
+        if !(all_finite(k.a.as_slice()) & all_finite(k.coriolis.as_slice()) & all_finite(k.inertia.as_slice())) {
+            return false;
+        }
+        let Some(i_inv) = inverse_spd3(&k.inertia, tol) else {
+            return false;
+        };
+        let mut schur = k.a - k.coriolis.transpose() * (i_inv * k.coriolis);
+        ldl_in_place(&mut schur, |j| k.a[(j, j)], tol).is_some()
+    }
+
     /// `v = (ω, q̇) = M⁻¹ (j, p)`.
     #[inline]
     pub fn solve(&self, j: &Vector3<f64>, p: &SVector<f64, N>) -> (Vector3<f64>, SVector<f64, N>) {
