@@ -157,7 +157,9 @@ fn ranks_of(parent: u32) -> Vec<(u32, u32)> {
 /// single-process run.
 fn kill_rank_and_resume(victim: u32) {
     let d = dir(&format!("dead{victim}"));
-    let n = 1280;
+    // 80 blocks: enough that the job is still running when the kill arrives on a fast, idle
+    // machine (with 20 blocks it sometimes completed first).
+    let n = 5120;
     let scene = thermal_scene(&d, n, 500.0);
     let reference = d.join("single");
     ok(&single(&scene, &reference, &[]));
@@ -201,7 +203,8 @@ fn rank_0_killed_with_sigkill_ends_the_job_and_the_run_resumes_to_the_same_bytes
 #[test]
 fn sigterm_to_mpirun_ends_the_job_and_the_run_resumes_to_the_same_bytes() {
     let d = dir("sigterm");
-    let n = 1280;
+    // 80 blocks, for the same reason as in `kill_rank_and_resume`.
+    let n = 5120;
     // Trajectories 16 times longer than the other tests' (a run of about 5 s): `mpirun` passes
     // the signal on to the ranks only after 1-2 s here, and a run that finishes before that
     // completes (correctly, but untested).
