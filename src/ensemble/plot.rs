@@ -34,8 +34,9 @@ const COLUMNS: usize = 3;
 const BAND: RGBColor = RGBColor(0x1f, 0x77, 0xb4);
 const BARS: RGBColor = RGBColor(0xd6, 0x27, 0x28);
 
-/// A tick label for `v` on an axis whose ticks are `step` apart: as many digits as tell
-/// neighbouring ticks apart (a mean that barely moves needs many).
+/// A tick label for `v` on an axis whose ticks are multiples of `step` (1, 2 or 5 times a
+/// power of ten): as many digits as tell neighbouring ticks apart (a mean that barely moves
+/// needs many), no more.
 fn tick(v: f64, step: f64) -> String {
     if v == 0.0 || !step.is_finite() || step <= 0.0 {
         return "0".into();
@@ -43,12 +44,26 @@ fn tick(v: f64, step: f64) -> String {
     let magnitude = v.abs().log10().floor();
     let resolution = step.log10().floor();
     if (-2.0..4.0).contains(&magnitude) {
-        let decimals = (-resolution + 1.0).clamp(0.0, 15.0) as usize;
+        let decimals = (-resolution).clamp(0.0, 15.0) as usize;
         format!("{v:.decimals$}")
     } else {
-        let digits = (magnitude - resolution + 1.0).clamp(1.0, 15.0) as usize;
+        let digits = (magnitude - resolution).clamp(1.0, 15.0) as usize;
         format!("{v:.digits$e}")
     }
+}
+
+/// The spacing plotters gives at most `max` ticks on a range of width `width`: the smallest of
+/// 1, 2 and 5 times a power of ten that fits them (the search of plotters' `key_points`, one
+/// candidate finer so that a label never has too few digits).
+fn tick_step(width: f64, max: usize) -> f64 {
+    let mut step = 10f64.powf((width / max as f64).log10().floor());
+    for factor in [2.0, 2.5, 2.0].iter().cycle().take(12) {
+        if width / step < (max + 1) as f64 {
+            break;
+        }
+        step *= factor;
+    }
+    step
 }
 
 /// `[lo, hi]` widened a little, and never empty.
@@ -108,7 +123,7 @@ fn panel(area: &DrawingArea<SVGBackend<'_>, Shift>, p: &Panel) -> Option<()> {
         .y_label_area_size(72)
         .build_cartesian_2d(xlo..xhi, ylo * scale..yhi * scale)
         .ok()?;
-    let (xstep, ystep) = ((xhi - xlo) / 5.0, scale * (yhi - ylo) / 5.0);
+    let (xstep, ystep) = (tick_step(xhi - xlo, 5), tick_step(scale * (yhi - ylo), 5));
     chart
         .configure_mesh()
         .disable_mesh()
@@ -171,11 +186,21 @@ mod tests {
 
     #[test]
     fn ticks_have_the_digits_that_tell_them_apart() {
-        assert_eq!(tick(8.7751234, 2.5e-5), "8.775123");
-        assert_eq!(tick(2500.0, 2500.0), "2500");
-        assert_eq!(tick(4.5691e-3, 1e-9), "4.5691000e-3");
+        assert_eq!(tick(8.77512, 1e-5), "8.77512");
+        assert_eq!(tick(2500.0, 500.0), "2500");
+        assert_eq!(tick(4.5691e-3, 1e-9), "4.569100e-3");
         assert_eq!(tick(0.0, 1.0), "0");
-        assert_eq!(tick(-1.5, 0.25), "-1.50");
+        assert_eq!(tick(-1.5, 0.5), "-1.5");
+        assert_eq!(tick(1.84, 0.02), "1.84");
+    }
+
+    #[test]
+    fn tick_steps_are_one_two_or_five_times_a_power_of_ten_with_at_most_six_ticks() {
+        for (width, step) in [(2.9, 0.5), (0.05, 0.01), (0.035, 0.01), (4900.0, 1000.0), (1e-9, 2e-10)] {
+            let got = tick_step(width, 5);
+            assert!((got / step - 1.0).abs() < 1e-12, "width {width}: step {got}, expected {step}");
+            assert!(width / got < 6.0);
+        }
     }
 
     /// The text of every `<text>` element of an SVG document.
