@@ -22,6 +22,7 @@ pub mod definition;
 pub mod diff;
 pub mod elements;
 pub mod emit;
+pub mod emit_lanes;
 pub mod expr;
 pub mod kinetic;
 pub mod names;

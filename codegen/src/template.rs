@@ -247,6 +247,10 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
         functions.push(tokens);
         stats.push(s);
     }
+    // The lane-generic production functions (the same operations as their f64 counterparts,
+    // so their statistics are not counted again).
+    let (lane_functions, _) = crate::emit_lanes::lane_functions(&def.graph, e, &idents);
+    functions.extend(lane_functions);
 
     let atoms = def.atoms.iter().map(|a| {
         let (label, element) = (&a.label, &a.element);
@@ -296,6 +300,7 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
         use ::rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
         #unit_imports
         use ::rovib_runtime::{Atom, Coordinate, KineticMatrices, Molecule};
+        use ::rovib_runtime::lanes::{KineticLanes, Real};
 
         #doc
         #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]

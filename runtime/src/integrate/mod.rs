@@ -100,7 +100,7 @@ mod gauss_legendre;
 pub mod problems;
 mod rk4;
 
-pub use dop853::{Dop853, Dop853Options};
+pub use dop853::{Dop853, Dop853Lanes, Dop853Options, LaneFailure, LaneFeeder, LaneSystem};
 pub use gauss_legendre::{GaussLegendre, GaussLegendreOptions};
 pub use rk4::{Rk4, Rk4Options};
 
