@@ -13,6 +13,7 @@ pub fn ensemble(
     out_dir: Option<&Path>,
     threads: Option<usize>,
     quiet: bool,
+    lanes: bool,
 ) -> Result<EnsembleReport, CliError> {
     let scene = load_scene(path)?;
     let out_dir = match out_dir {
@@ -24,6 +25,7 @@ pub fn ensemble(
         threads,
         progress: !quiet && std::io::stderr().is_terminal(),
         stop: crate::interrupt::flag(),
+        lanes,
     };
     run_ensemble(&scene, &options)
 }

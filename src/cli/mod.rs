@@ -78,6 +78,11 @@ pub enum Command {
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
+        /// One trajectory at a time instead of four per SIMD vector (the results are the same,
+        /// bit for bit; lanes are used only with DOP853, no frozen coordinate and no kept
+        /// trajectories).
+        #[arg(long)]
+        no_lanes: bool,
     },
     /// Work-precision diagram: every integrator over a range of tolerances or steps, wall time
     /// against error; writes bench.csv, bench.md and bench.svg.
@@ -149,10 +154,12 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             say(&format!("{json}\n"))
         }
         Command::Run { scene, out, quiet } if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) => {
-            run_ensemble(&scene, out.as_deref(), None, quiet)
+            run_ensemble(&scene, out.as_deref(), None, quiet, true)
         }
         Command::Freq { molecule, json } => say(&freq::freq(&molecule, json)?),
-        Command::Ensemble { scene, out, threads, quiet } => run_ensemble(&scene, out.as_deref(), threads, quiet),
+        Command::Ensemble { scene, out, threads, quiet, no_lanes } => {
+            run_ensemble(&scene, out.as_deref(), threads, quiet, !no_lanes)
+        }
         Command::Run { scene, out, quiet } => {
             let report = run::run(&scene, out.as_deref(), quiet)?;
             if !quiet {
@@ -202,8 +209,9 @@ fn run_ensemble(
     out: Option<&std::path::Path>,
     threads: Option<usize>,
     quiet: bool,
+    lanes: bool,
 ) -> Result<(), CliError> {
-    let report = ensemble::ensemble(scene, out, threads, quiet)?;
+    let report = ensemble::ensemble(scene, out, threads, quiet, lanes)?;
     if !quiet {
         say(&ensemble::describe(&report))?;
     }

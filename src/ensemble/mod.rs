@@ -15,6 +15,7 @@
 //! number of threads; only the wall time, throughput and thread count in `summary.json` differ.
 
 pub mod checkpoint;
+pub mod lanes;
 pub mod output;
 mod plot;
 pub mod quantity;
@@ -53,12 +54,21 @@ pub struct EnsembleOptions {
     /// When set, no new trajectory starts and running ones stop at their next output time;
     /// the outputs then cover the trajectories that finished (status "interrupted").
     pub stop: Arc<AtomicBool>,
+    /// Run trajectories on SIMD lanes where possible (default; the results are the same bit
+    /// for bit, see `lanes`); `false` runs one trajectory at a time.
+    pub lanes: bool,
 }
 
 impl EnsembleOptions {
     /// Outputs into `out_dir`, threads from the scene, no progress bar, a stop flag of its own.
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
-        Self { out_dir: out_dir.into(), threads: None, progress: false, stop: Arc::new(AtomicBool::new(false)) }
+        Self {
+            out_dir: out_dir.into(),
+            threads: None,
+            progress: false,
+            stop: Arc::new(AtomicBool::new(false)),
+            lanes: true,
+        }
     }
 }
 
@@ -238,6 +248,7 @@ where
         min_pivot: scene.min_metric_pivot,
         keep: ensemble.keep_trajectories.map(|k| (k, options.out_dir.join("trajectories"))),
         time_scale: scene.time_unit.in_au(),
+        lanes: options.lanes,
     };
     let threads = options
         .threads
