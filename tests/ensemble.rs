@@ -391,7 +391,7 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
     }
 }
 
-/// A block on SIMD lanes (four trajectories per vector, each lane taking the next trajectory
+/// A block on SIMD lanes (two trajectories per vector, each lane taking the next trajectory
 /// when its own ends) has the outcome of the same block run one trajectory at a time, exactly:
 /// counts, work and every accumulator bit for bit (the lanes compute each trajectory's numbers
 /// bit for bit and the observations are folded in index order). Among the 70 trajectories, one

@@ -78,7 +78,7 @@ pub enum Command {
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
-        /// One trajectory at a time instead of four per SIMD vector (the results are the same,
+        /// One trajectory at a time instead of two per SIMD vector (the results are the same,
         /// bit for bit; lanes are used only with DOP853, no frozen coordinate and no kept
         /// trajectories).
         #[arg(long)]

@@ -19,11 +19,12 @@ use crate::runtime::Molecule;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
 use crate::runtime::integrate::{Dop853Lanes, LaneFailure, LaneFeeder, Method, Stats};
-use crate::runtime::lanes::{F64x4, Real};
+use crate::runtime::lanes::{F64x2, Real};
 use crate::runtime::sample::Sampler;
 
-/// The lane type of ensembles: four `f64` lanes (BENCHMARKS.md, "Many trajectories per core").
-pub type Lanes = F64x4;
+/// The lane type of ensembles: two `f64` lanes, which measured faster per trajectory than four
+/// on the baseline x86-64 build (BENCHMARKS.md, "Many trajectories per core").
+pub type Lanes = F64x2;
 /// Trajectories per vector.
 pub const LANES: usize = <Lanes as Real>::LANES;
 
@@ -37,7 +38,7 @@ pub fn applies<M, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>) ->
 }
 
 /// What became of one trajectory of the block.
-enum Result_ {
+enum Fate {
     /// Completed: its observations and statistics.
     Completed(Vec<f64>, Stats),
     /// Failed before integration (sampler, initial state).
@@ -67,12 +68,12 @@ struct Feeder<'a, 'm, M, const N: usize, const NA: usize> {
     stop: &'a AtomicBool,
     needs_potential: bool,
     slots: Vec<Option<Slot<'m, M, N, NA>>>,
-    results: Vec<Option<Result_>>,
+    results: Vec<Option<Fate>>,
     first: u64,
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, '_, M, N, NA> {
-    fn set(&mut self, index: u64, r: Result_) {
+    fn set(&mut self, index: u64, r: Fate) {
         self.results[(index - self.first) as usize] = Some(r);
     }
 }
@@ -83,7 +84,7 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             let index = self.next;
             self.next += 1;
             if self.stop.load(Ordering::Relaxed) {
-                self.set(index, Result_::Interrupted);
+                self.set(index, Fate::Interrupted);
                 continue;
             }
             let failure = |reason: &str, time: Option<f64>, detail: String| Failure {
@@ -95,7 +96,7 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             let state = match self.sampler.draw(index) {
                 Ok(s) => s,
                 Err(e) => {
-                    self.set(index, Result_::Failed(failure("sampler", None, e.to_string())));
+                    self.set(index, Fate::Failed(failure("sampler", None, e.to_string())));
                     continue;
                 }
             };
@@ -103,13 +104,13 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
                 && state.orientation.coords.iter().all(|v| v.is_finite());
             if !finite {
                 let detail = format!("the drawn state is not finite: {state:?}");
-                self.set(index, Result_::Failed(failure("invalid initial state", Some(0.0), detail)));
+                self.set(index, Fate::Failed(failure("invalid initial state", Some(0.0), detail)));
                 continue;
             }
             let system = ReducedSystem::from_body(self.plan.molecule, self.plan.reduction, &state)
                 .with_min_pivot(self.plan.min_pivot);
             if let Err(e) = system.reduce_body(&state, y0) {
-                self.set(index, Result_::Failed(failure("invalid initial state", Some(0.0), e.to_string())));
+                self.set(index, Fate::Failed(failure("invalid initial state", Some(0.0), e.to_string())));
                 continue;
             }
             self.slots[lane] = Some(Slot {
@@ -150,10 +151,10 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
         let Some(slot) = self.slots[lane].take() else { return };
         let n_times = self.plan.times.len();
         let r = match (result, slot.failure) {
-            (Ok(_), None) if slot.interrupted => Result_::Interrupted,
-            (Ok(stats), None) if slot.k == n_times => Result_::Completed(slot.buffer, stats),
+            (Ok(_), None) if slot.interrupted => Fate::Interrupted,
+            (Ok(stats), None) if slot.k == n_times => Fate::Completed(slot.buffer, stats),
             // A failed lane, an observer's failure or a short run: the scalar path reports it.
-            _ => Result_::Redo,
+            _ => Fate::Redo,
         };
         self.set(slot.index, r);
     }
@@ -201,20 +202,20 @@ where
     let mut correlation = vec![0.0; n_times];
     for (offset, result) in feeder.results.into_iter().enumerate() {
         let index = indices.start + offset as u64;
-        match result.unwrap_or(Result_::Interrupted) {
-            Result_::Completed(buffer, stats) => {
+        match result.unwrap_or(Fate::Interrupted) {
+            Fate::Completed(buffer, stats) => {
                 outcome.completed += 1;
                 outcome.steps += stats.steps;
                 outcome.rhs_evaluations += stats.rhs_evals;
                 fold(plan, &mut outcome.statistics, &buffer, workspace.as_mut(), &mut series, &mut correlation);
                 progress.done();
             }
-            Result_::Failed(f) => {
+            Fate::Failed(f) => {
                 outcome.fail(f, progress);
                 progress.done();
             }
-            Result_::Interrupted => outcome.interrupted += 1,
-            Result_::Redo => outcome.merge(&run_block_scalar(plan, sampler, index..index + 1, stop, progress)),
+            Fate::Interrupted => outcome.interrupted += 1,
+            Fate::Redo => outcome.merge(&run_block_scalar(plan, sampler, index..index + 1, stop, progress)),
         }
     }
     outcome

@@ -226,7 +226,7 @@ impl<T: Real> Dop853Lanes<T> {
         for i in 0..n {
             self.y_stage[i] = T::splat(self.lane_y[i]);
         }
-        let ok = system.rhs(T::splat(t), &self.y_stage, &mut self.tmp) & 1 == 1;
+        let ok = (system.rhs(T::splat(t), &self.y_stage, &mut self.tmp) & 1) == 1;
         for i in 0..n {
             self.k[stage * n + i].set_lane(lane, self.tmp[i].lane(0));
         }
