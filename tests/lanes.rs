@@ -102,6 +102,7 @@ struct GeneratedLanesMatchF64;
 impl MoleculeVisitor for GeneratedLanesMatchF64 {
     type Output = ();
 
+    #[allow(clippy::type_complexity)]
     fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
     where
         M: Molecule<N, NA> + Copy + Send + Sync + 'static,
