@@ -5,7 +5,10 @@
 //! make rustc slow, and on a bad definition prints readable errors and exits 1 (never a panic).
 //!
 //! `ROVIB_MOLECULES_DIR`, if set, replaces `molecules/` (for building a private set of
-//! molecules without editing the checkout).
+//! molecules without editing the checkout). `ROVIB_KINETIC_JACOBIAN=generated` also generates
+//! the symbolic `kinetic_jacobian` (the reference path's ∂a/∂q, ∂A/∂q, ∂I/∂q) instead of the
+//! runtime's default, which assembles them from the generated ∂T/∂q; it grows like n³ and is
+//! meant for small molecules.
 
 use std::path::PathBuf;
 
@@ -14,13 +17,24 @@ fn main() {
     let out_dir = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     println!("cargo::rerun-if-changed=build.rs");
     println!("cargo::rerun-if-env-changed=ROVIB_MOLECULES_DIR");
+    println!("cargo::rerun-if-env-changed=ROVIB_KINETIC_JACOBIAN");
+    let options = match std::env::var("ROVIB_KINETIC_JACOBIAN").as_deref() {
+        Ok("generated") => rovib_codegen::Options { kinetic_jacobian: true },
+        Ok("") | Ok("runtime") | Err(_) => rovib_codegen::Options::default(),
+        Ok(other) => {
+            eprintln!(
+                "rovib: ROVIB_KINETIC_JACOBIAN={other:?} is not understood; use `generated` or `runtime` (the default)"
+            );
+            std::process::exit(1);
+        }
+    };
     let (dir, display) = match std::env::var("ROVIB_MOLECULES_DIR") {
         Ok(d) if !d.is_empty() => (PathBuf::from(&d), d),
         _ => (manifest.join("molecules"), "molecules".to_owned()),
     };
     // The directory itself, so that adding a definition reruns generation.
     println!("cargo::rerun-if-changed={}", dir.display());
-    match rovib_codegen::generate(&dir, &display, &out_dir) {
+    match rovib_codegen::generate_with(&dir, &display, &out_dir, &options) {
         Ok(report) => {
             for input in &report.inputs {
                 println!("cargo::rerun-if-changed={}", input.display());

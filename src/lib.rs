@@ -11,7 +11,9 @@ pub mod ensemble;
 pub mod interrupt;
 pub mod molecules;
 pub mod output;
+pub mod parameters;
 pub mod plot;
+pub mod restart;
 pub mod scene;
 pub mod start;
 

@@ -14,9 +14,10 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 
+use crate::runtime::Coordinate;
 use crate::runtime::integrate::{Method, Stats};
 use crate::runtime::nalgebra::Vector3;
-use crate::runtime::units::BOHR_IN_ANGSTROM;
+use crate::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM, HARTREE_IN_EV};
 use crate::scene::Scene;
 
 /// A writer that remembers its path for error messages.
@@ -30,6 +31,42 @@ impl OutputFile {
     pub fn create(dir: &Path, name: &str) -> Result<Self, String> {
         let path = dir.join(name);
         let file = File::create(&path).map_err(|e| format!("cannot create {}: {e}", path.display()))?;
+        Ok(OutputFile { path, out: BufWriter::new(file) })
+    }
+
+    /// Opens `dir/name` to append to it (a resumed run), after checking that its first line is
+    /// `first_line` (the header this run would write), that it ends with a whole line and that
+    /// it has `lines` lines (what the run being continued wrote, no more and no less).
+    pub fn append(dir: &Path, name: &str, first_line: &str, lines: usize) -> Result<Self, String> {
+        use std::io::Read as _;
+        let path = dir.join(name);
+        let mut text = String::new();
+        File::open(&path)
+            .and_then(|mut f| f.read_to_string(&mut text))
+            .map_err(|e| format!("cannot read {} to continue it: {e}", path.display()))?;
+        let found = text.lines().next().unwrap_or("");
+        if found != first_line {
+            return Err(format!(
+                "{} starts with `{found}`, not `{first_line}` as this run writes it: it is not this run's (resume \
+                 into the directory of the run that wrote the restart file)",
+                path.display()
+            ));
+        }
+        if !text.is_empty() && !text.ends_with('\n') {
+            return Err(format!("{} ends inside a line; it was cut and cannot be continued", path.display()));
+        }
+        let found_lines = text.lines().count();
+        if found_lines != lines {
+            return Err(format!(
+                "{} has {found_lines} lines, but the run that wrote the restart file left {lines}: it was changed or \
+                 already continued",
+                path.display()
+            ));
+        }
+        let file = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&path)
+            .map_err(|e| format!("cannot open {} to continue it: {e}", path.display()))?;
         Ok(OutputFile { path, out: BufWriter::new(file) })
     }
 
@@ -49,40 +86,165 @@ impl OutputFile {
     }
 }
 
-/// `trajectory.csv`: one row per output time.
+/// `trajectory.csv`: one row per output time, with its units in `trajectory.units.json`.
 ///
-/// Columns: `t` (in the scene's time unit), each q by name (bohr or rad), each p as `p_NAME`
-/// (ħ/bohr or ħ), `phi`, `theta`, `psi` (rad), `p_phi`, `p_theta`, `p_psi` (ħ), `H` (hartree).
+/// Columns (no name can collide with another, whatever the coordinates are called: every
+/// coordinate column has a `q_` or `p_` prefix, and the fixed names have none of them):
+/// `t` (the scene's time unit), `q_NAME` per coordinate (bohr or rad), `p_NAME` per coordinate
+/// (ħ/bohr or ħ), `euler_phi`, `euler_theta`, `euler_psi` (rad, z-x-z), `pe_phi`, `pe_theta`,
+/// `pe_psi` (the momenta conjugate to the Euler angles, ħ), `H` (hartree), and with
+/// `run.euler_unwrapped = true` also `euler_phi_unwrapped`, `euler_psi_unwrapped` (rad,
+/// continuous: each output adds the change since the last one, taken in (−π, π]).
 pub struct TrajectoryCsv {
     file: OutputFile,
     row: String,
+    /// The unwrapped φ and ψ and the last raw values, when asked for.
+    unwrap: Option<Unwrapper>,
+}
+
+/// The file that states the units of `trajectory.csv`'s columns.
+pub const TRAJECTORY_UNITS_FILE: &str = "trajectory.units.json";
+
+/// The header of `trajectory.csv` and the unit of each column (see [`TrajectoryCsv`]).
+/// `coordinates` are the molecule's coordinates, `time_unit` the scene's.
+pub fn trajectory_columns(
+    coordinates: &[Coordinate],
+    time_unit: &str,
+    euler_unwrapped: bool,
+) -> Vec<(String, &'static str)> {
+    let unit = |c: &Coordinate| c.unit.atomic().name();
+    let time: &'static str = match time_unit {
+        "au" => "au",
+        "fs" => "fs",
+        "ps" => "ps",
+        _ => "unknown",
+    };
+    let mut columns = vec![("t".to_owned(), time)];
+    columns.extend(coordinates.iter().map(|c| (format!("q_{}", c.name), unit(c))));
+    columns.extend(coordinates.iter().map(|c| {
+        let momentum = if unit(c) == "rad" { "hbar" } else { "hbar/bohr" };
+        (format!("p_{}", c.name), momentum)
+    }));
+    for name in ["euler_phi", "euler_theta", "euler_psi"] {
+        columns.push((name.to_owned(), "rad"));
+    }
+    for name in ["pe_phi", "pe_theta", "pe_psi"] {
+        columns.push((name.to_owned(), "hbar"));
+    }
+    columns.push(("H".to_owned(), "hartree"));
+    if euler_unwrapped {
+        columns.push(("euler_phi_unwrapped".to_owned(), "rad"));
+        columns.push(("euler_psi_unwrapped".to_owned(), "rad"));
+    }
+    columns
+}
+
+/// Continuous φ and ψ from values wrapped into an interval of length 2π.
+#[derive(Clone, Copy, Debug)]
+struct Unwrapper {
+    /// The last raw (φ, ψ) and the unwrapped ones; `None` before the first output.
+    last: Option<([f64; 2], [f64; 2])>,
+}
+
+impl Unwrapper {
+    /// The unwrapped (φ, ψ) for raw ones: the first output as given, then each adds the change
+    /// since the last output reduced to (−π, π] (so the output interval must be short enough
+    /// that φ and ψ turn by less than π between outputs).
+    fn next(&mut self, raw: [f64; 2]) -> [f64; 2] {
+        use std::f64::consts::{PI, TAU};
+        let unwrapped = match self.last {
+            None => raw,
+            Some((last_raw, last)) => std::array::from_fn(|i| {
+                let mut d = (raw[i] - last_raw[i]) % TAU;
+                if d > PI {
+                    d -= TAU;
+                } else if d <= -PI {
+                    d += TAU;
+                }
+                last[i] + d
+            }),
+        };
+        self.last = Some((raw, unwrapped));
+        unwrapped
+    }
 }
 
 impl TrajectoryCsv {
-    /// Creates the file and writes the header.
-    pub fn create(dir: &Path, coordinates: &[&str]) -> Result<Self, String> {
+    /// Creates `trajectory.csv` with its header and `trajectory.units.json` (written at once and
+    /// whole: `{"file", "time_unit", "columns": {NAME: UNIT}, "order": [NAME, ...], "euler"}`).
+    pub fn create(
+        dir: &Path,
+        coordinates: &[Coordinate],
+        time_unit: &str,
+        euler_unwrapped: bool,
+    ) -> Result<Self, String> {
+        let columns = trajectory_columns(coordinates, time_unit, euler_unwrapped);
+        let units = json!({
+            "file": "trajectory.csv",
+            "time_unit": time_unit,
+            "columns": columns.iter().map(|(n, u)| (n.clone(), Value::from(*u))).collect::<serde_json::Map<_, _>>(),
+            "order": columns.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(),
+            "euler": "z-x-z, body to lab R = Rz(phi) Rx(theta) Rz(psi); pe are the momenta conjugate to phi, theta, psi",
+        });
+        write_atomically(dir, TRAJECTORY_UNITS_FILE, &units)?;
         let mut file = OutputFile::create(dir, "trajectory.csv")?;
-        let mut header = vec!["t".to_owned()];
-        header.extend(coordinates.iter().map(|c| (*c).to_owned()));
-        header.extend(coordinates.iter().map(|c| format!("p_{c}")));
-        header.extend(["phi", "theta", "psi", "p_phi", "p_theta", "p_psi", "H"].map(str::to_owned));
+        let header: Vec<&str> = columns.iter().map(|(n, _)| n.as_str()).collect();
         file.line(&header.join(","))?;
-        Ok(TrajectoryCsv { file, row: String::new() })
+        Ok(TrajectoryCsv { file, row: String::new(), unwrap: euler_unwrapped.then_some(Unwrapper { last: None }) })
     }
 
-    /// Writes one row: time, then the values in column order. Numbers are written with full
-    /// round-trip precision.
-    pub fn row(&mut self, t: f64, values: impl IntoIterator<Item = f64>) -> Result<(), String> {
+    /// Opens an existing `trajectory.csv` to append rows (a resumed run), after checking that its
+    /// header is the one this run would write. `last_euler` is the raw and unwrapped (φ, ψ) of
+    /// the last row written, for the unwrapped columns.
+    pub fn append(
+        dir: &Path,
+        coordinates: &[Coordinate],
+        time_unit: &str,
+        last_euler: Option<([f64; 2], [f64; 2])>,
+        rows: usize,
+    ) -> Result<Self, String> {
+        let euler_unwrapped = last_euler.is_some();
+        let columns = trajectory_columns(coordinates, time_unit, euler_unwrapped);
+        let header: Vec<&str> = columns.iter().map(|(n, _)| n.as_str()).collect();
+        let header = header.join(",");
+        let file = OutputFile::append(dir, "trajectory.csv", &header, rows + 1)?;
+        Ok(TrajectoryCsv {
+            file,
+            row: String::new(),
+            unwrap: euler_unwrapped.then_some(Unwrapper { last: last_euler }),
+        })
+    }
+
+    /// Writes one row: time (scene unit), q, p, the Euler angles, their momenta and H, then the
+    /// unwrapped φ and ψ if asked for. Numbers are written with full round-trip precision.
+    pub fn state_row(
+        &mut self,
+        t: f64,
+        q: &[f64],
+        p: &[f64],
+        euler: [f64; 3],
+        pe: [f64; 3],
+        energy: f64,
+    ) -> Result<(), String> {
         use std::fmt::Write as _;
         self.row.clear();
         let _ = write!(self.row, "{t:?}");
-        for v in values {
+        for v in q.iter().chain(p).chain(&euler).chain(&pe).chain([&energy]) {
             let _ = write!(self.row, ",{v:?}");
+        }
+        if let Some(u) = &mut self.unwrap {
+            let [phi, psi] = u.next([euler[0], euler[2]]);
+            let _ = write!(self.row, ",{phi:?},{psi:?}");
         }
         let row = std::mem::take(&mut self.row);
         let result = self.file.line(&row);
         self.row = row;
         result
+    }
+
+    /// The raw and unwrapped (φ, ψ) of the last row, if the unwrapped columns are written.
+    pub fn last_unwrapped(&self) -> Option<([f64; 2], [f64; 2])> {
+        self.unwrap.and_then(|u| u.last)
     }
 
     /// Flushes to disk.
@@ -91,31 +253,87 @@ impl TrajectoryCsv {
     }
 }
 
-/// `lab.xyz`: extended XYZ, one frame per output time, positions in Å, readable by ASE, VMD
-/// and OVITO. The comment line carries `Properties=species:S:1:pos:R:3`, the time and the
-/// energy.
+/// One ASE time unit in femtoseconds (Å·√(u/eV) with ASE's CODATA 2014 constants), the unit of
+/// the `momenta` column ASE reads.
+pub use crate::ensemble::states_xyz::ASE_TIME_IN_FS;
+
+/// The `Properties=` value of every `lab.xyz` frame: per atom the element, the position (Å), the
+/// mass (u), the momentum in ASE's units (u·Å per ASE time unit, so that ASE's `Atoms` get the
+/// masses and velocities) and the velocity in Å/fs.
+pub const LAB_XYZ_PROPERTIES: &str = "species:S:1:pos:R:3:masses:R:1:momenta:R:3:vel:R:3";
+
+/// `lab.xyz`: extended XYZ, one frame per output time, readable by ASE (`ase.io.read(path,
+/// index=":")` gives `Atoms` with positions, masses, velocities and the potential energy), VMD
+/// and OVITO. Per atom: element, position (Å), mass (u), momentum (ASE units) and velocity
+/// (Å/fs), all with full round-trip precision. The comment line carries `Time` and
+/// `time_unit`, `energy` (the potential energy U in eV, the key ASE reads as
+/// `get_potential_energy()`), `H_hartree`, `U_hartree` and `H_eV` (eV = 27.211386245988 per
+/// hartree, CODATA 2018) and `pbc="F F F"`.
 pub struct LabXyz {
     file: OutputFile,
     elements: Vec<&'static str>,
+    /// Atom masses, u (Da).
+    masses: Vec<f64>,
     time_unit: &'static str,
+    line: String,
 }
 
 impl LabXyz {
-    /// Creates the file for atoms of the given elements.
-    pub fn create(dir: &Path, elements: Vec<&'static str>, time_unit: &'static str) -> Result<Self, String> {
-        Ok(LabXyz { file: OutputFile::create(dir, "lab.xyz")?, elements, time_unit })
+    /// Creates the file for atoms of the given elements and masses (Da).
+    pub fn create(
+        dir: &Path,
+        elements: Vec<&'static str>,
+        masses: Vec<f64>,
+        time_unit: &'static str,
+    ) -> Result<Self, String> {
+        Ok(LabXyz { file: OutputFile::create(dir, "lab.xyz")?, elements, masses, time_unit, line: String::new() })
     }
 
-    /// Writes one frame; `positions` are in bohr, one `[x, y, z]` per atom.
-    pub fn frame(&mut self, t: f64, energy: f64, positions: impl IntoIterator<Item = [f64; 3]>) -> Result<(), String> {
+    /// Opens an existing `lab.xyz` of `frames` frames to append frames (a resumed run).
+    pub fn append(
+        dir: &Path,
+        elements: Vec<&'static str>,
+        masses: Vec<f64>,
+        time_unit: &'static str,
+        frames: usize,
+    ) -> Result<Self, String> {
+        let file = OutputFile::append(dir, "lab.xyz", &elements.len().to_string(), frames * (elements.len() + 2))?;
+        Ok(LabXyz { file, elements, masses, time_unit, line: String::new() })
+    }
+
+    /// Writes one frame: `energy` = H and `potential` = U (hartree), `atoms` = per atom the
+    /// lab-frame position (bohr) and velocity (bohr per ħ/E_h).
+    pub fn frame(
+        &mut self,
+        t: f64,
+        energy: f64,
+        potential: f64,
+        atoms: impl IntoIterator<Item = ([f64; 3], [f64; 3])>,
+    ) -> Result<(), String> {
+        use std::fmt::Write as _;
         self.file.line(&self.elements.len().to_string())?;
         self.file.line(&format!(
-            "Properties=species:S:1:pos:R:3 Time={t:?} time_unit={} energy_hartree={energy:?} pbc=\"F F F\"",
-            self.time_unit
+            "Properties={LAB_XYZ_PROPERTIES} Time={t:?} time_unit={} energy={:?} H_hartree={energy:?} \
+             U_hartree={potential:?} H_eV={:?} pbc=\"F F F\"",
+            self.time_unit,
+            potential * HARTREE_IN_EV,
+            energy * HARTREE_IN_EV,
         ))?;
-        for (element, x) in self.elements.iter().zip(positions) {
-            let [a, b, c] = x.map(|v| v * BOHR_IN_ANGSTROM);
-            self.file.line(&format!("{element} {a:.12} {b:.12} {c:.12}"))?;
+        // Å/fs per bohr/(ħ/E_h).
+        let velocity_scale = BOHR_IN_ANGSTROM / AU_TIME_IN_FS;
+        for ((element, mass), (x, v)) in self.elements.iter().zip(&self.masses).zip(atoms) {
+            let x = x.map(|c| c * BOHR_IN_ANGSTROM);
+            let v = v.map(|c| c * velocity_scale);
+            let momentum = v.map(|c| mass * c * ASE_TIME_IN_FS);
+            self.line.clear();
+            let _ = write!(self.line, "{element}");
+            for c in x.iter().chain([mass]).chain(&momentum).chain(&v) {
+                let _ = write!(self.line, " {c:?}");
+            }
+            let line = std::mem::take(&mut self.line);
+            let result = self.file.line(&line);
+            self.line = line;
+            result?;
         }
         Ok(())
     }
@@ -137,8 +355,26 @@ pub fn energy_scale(h0: f64) -> f64 {
     h0.abs().max(ENERGY_SCALE_FLOOR)
 }
 
+/// The energy guard of `rovib run` and `rovib ensemble`: `Err` with the message when
+/// `|H − H(0)| / max(|H(0)|, ENERGY_SCALE_FLOOR)` exceeds `max_energy_error` or is NaN (a
+/// non-finite energy is a runaway too). The message gives the absolute change, which is what
+/// `summary.json` reports as `max_abs_energy_error_hartree`, and the scale it was divided by.
+pub fn energy_guard(h0: f64, h: f64, max_energy_error: f64) -> Result<(), String> {
+    let change = (h - h0).abs();
+    let scale = energy_scale(h0);
+    let drift = change / scale;
+    if drift.is_nan() || drift > max_energy_error {
+        return Err(format!(
+            "the energy changed by {change:.3e} hartree from H(0) = {h0} hartree, {drift:.1e} relative to \
+             max(|H(0)|, {ENERGY_SCALE_FLOOR:e} hartree) = {scale:e} hartree, more than run.max_energy_error = \
+             {max_energy_error:e} (the step is too large or the tolerances too loose for this motion; reduce them)"
+        ));
+    }
+    Ok(())
+}
+
 /// Conservation diagnostics accumulated over the output times.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Conservation {
     /// H at the first output, hartree.
     pub initial_energy: Option<f64>,
@@ -207,14 +443,16 @@ impl Conservation {
 }
 
 /// Every file `rovib run` may write into its output directory.
-pub const RUN_FILES: [&str; 3] = ["trajectory.csv", "lab.xyz", "summary.json"];
+pub const RUN_FILES: [&str; 5] =
+    ["trajectory.csv", TRAJECTORY_UNITS_FILE, "lab.xyz", "summary.json", crate::restart::RESTART_FILE];
 
 /// Removes the files of [`RUN_FILES`] in `dir` that this run will not write (not in `keep`),
-/// and `summary.json` in any case (it is written at the end, atomically), so that no file of an
-/// earlier run remains looking like this run's. Missing files are fine.
+/// and `summary.json` and `restart.json` in any case (they are written at the end, atomically,
+/// and only a run that ends well writes `restart.json`), so that no file of an earlier run
+/// remains looking like this run's. Missing files are fine.
 pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), String> {
     for name in RUN_FILES {
-        if name != "summary.json" && keep.contains(&name) {
+        if name != "summary.json" && name != crate::restart::RESTART_FILE && keep.contains(&name) {
             continue;
         }
         let path = dir.join(name);
@@ -230,11 +468,17 @@ pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), String> {
 /// Writes `summary.json` (pretty-printed) atomically: to `summary.json.tmp`, flushed and synced,
 /// then renamed over `summary.json`, so a reader never sees a half-written summary.
 pub fn write_summary(dir: &Path, summary: &Value) -> Result<PathBuf, String> {
-    let tmp = dir.join("summary.json.tmp");
-    let path = dir.join("summary.json");
+    write_atomically(dir, "summary.json", summary)
+}
+
+/// Writes `value` (pretty-printed JSON) to `dir/name` atomically: to `name.tmp`, flushed and
+/// synced, then renamed over `name`.
+pub fn write_atomically(dir: &Path, name: &str, value: &Value) -> Result<PathBuf, String> {
+    let tmp = dir.join(format!("{name}.tmp"));
+    let path = dir.join(name);
     let write = || -> std::io::Result<()> {
         let mut file = File::create(&tmp)?;
-        writeln!(file, "{}", serde_json::to_string_pretty(summary).expect("a JSON value serialises"))?;
+        writeln!(file, "{}", serde_json::to_string_pretty(value).expect("a JSON value serialises"))?;
         file.sync_all()
     };
     write().map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
@@ -252,6 +496,8 @@ pub struct RunSummary<'a> {
     pub failure: Option<&'a str>,
     /// Whether SIGINT or SIGTERM stopped the run (status "interrupted" unless it also failed).
     pub interrupted: bool,
+    /// The stop condition (`run.stop_outside`) that ended the run, if one did (status "stopped").
+    pub stopped: Option<&'a Value>,
     /// The last output time written, in the scene's time unit (`None` if none was).
     pub t_reached: Option<f64>,
     /// The flat layout of the integrated state, e.g. `[r1, p_r1, quaternion w, x, y, z, J_x, J_y, J_z]`.
@@ -270,6 +516,10 @@ pub struct RunSummary<'a> {
     pub com_position: Vector3<f64>,
     /// Centre-of-mass velocity, bohr per ħ/E_h.
     pub com_velocity: Vector3<f64>,
+    /// The time (scene unit) a resumed run continued from (`None` for a run from t = 0).
+    pub resumed_from: Option<f64>,
+    /// Warnings about the scene (e.g. a start far above the reference energy).
+    pub warnings: &'a [String],
 }
 
 impl RunSummary<'_> {
@@ -280,24 +530,34 @@ impl RunSummary<'_> {
         json!({
             "scene": scene.path,
             "molecule": self.molecule,
-            "status": match (self.failure, self.interrupted) {
-                (Some(_), _) => "failed",
-                (None, true) => "interrupted",
-                (None, false) => "completed",
+            "status": match (self.failure, self.interrupted, self.stopped) {
+                (Some(_), _, _) => "failed",
+                (None, true, _) => "interrupted",
+                (None, false, Some(_)) => "stopped",
+                (None, false, None) => "completed",
             },
+            "stop": self.stopped,
             "error": self.failure,
             "t_reached": self.t_reached,
+            "resumed_from": self.resumed_from,
+            "warnings": self.warnings,
             "method": method_json(&scene.method),
             "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
             "state_layout": self.state_layout,
             "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
+            "potential_parameters": scene
+                .parameters
+                .iter()
+                .map(|(n, v)| (n.get_ref().clone(), Value::from(*v)))
+                .collect::<serde_json::Map<_, _>>(),
             "zero_angular_momentum": self.zero_angular_momentum,
             "min_metric_pivot": scene.min_metric_pivot,
             "max_energy_error": scene.max_energy_error,
             "t_end": scene.t_end / scene.time_unit.in_au(),
             "output_interval": scene.output_interval / scene.time_unit.in_au(),
             "time_unit": scene.time_unit.name(),
-            "units": "q in bohr or rad, p in hbar/bohr or hbar, angles in rad, p_e and J in hbar, H in hartree; lab.xyz in angstrom",
+            "units": "q in bohr or rad, p in hbar/bohr or hbar, angles in rad, p_e and J in hbar, H in hartree \
+                      (trajectory.csv: see trajectory.units.json); lab.xyz in angstrom, u, angstrom/fs and eV",
             // The solver reports its steps only when it finishes; evaluations are counted by the caller.
             "steps": stats.map(|s| s.steps),
             "accepted_steps": stats.map(|s| s.accepted),

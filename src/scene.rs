@@ -1,16 +1,16 @@
 //! Scene files: what `rovib run` integrates and what it writes.
 //!
 //! A scene names a molecule, an initial condition, an integrator, the end time, the output
-//! interval and the outputs. Every key is documented in the README ("Scene files"); a short
+//! interval and the outputs. Every key is documented in the README ("Scenes and `rovib run`"); a short
 //! example:
 //!
 //! ```toml
 //! molecule = "h2o"
 //!
 //! [units]                 # of the numbers in this file (not of the output, which is atomic)
-//! length = "angstrom"     # bohr | angstrom
-//! angle = "deg"           # rad | deg
-//! time = "fs"             # au | fs
+//! length = "angstrom"     # bohr | angstrom (default: q in each coordinate's declared unit,
+//! angle = "deg"           # rad | deg        positions in bohr, Euler angles in rad)
+//! time = "fs"             # au | fs | ps
 //!
 //! [initial]               # internal form: q, p or qdot, euler, pe or j
 //! q = { r1 = 1.0, r2 = 0.95, alpha = 100.0 }
@@ -40,8 +40,11 @@ use std::ops::Range;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::runtime::diagnostic::{FileError, Source};
-use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4Options};
+use crate::runtime::diagnostic::{Compact, FileError, Source};
+use crate::runtime::hamiltonian::{MIN_SIN_THETA, PIVOT_TOLERANCE};
+use crate::runtime::integrate::{
+    DEFAULT_MAX_STEPS, Dop853Options, GaussLegendreOptions, Method, Rk4Options, fixed_step_count,
+};
 use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit};
 
 /// A unit of time accepted in scenes.
@@ -65,6 +68,11 @@ impl TimeUnit {
         }
     }
 
+    /// The unit whose [`TimeUnit::in_au`] is exactly `scale`, if any.
+    pub fn of_scale(scale: f64) -> Option<TimeUnit> {
+        [TimeUnit::Au, TimeUnit::Fs, TimeUnit::Ps].into_iter().find(|u| u.in_au() == scale)
+    }
+
     /// The spelling used in files and column names.
     pub fn name(self) -> &'static str {
         match self {
@@ -84,6 +92,8 @@ pub struct Outputs {
     pub lab: bool,
     /// `summary.json`: work counters and conservation diagnostics.
     pub summary: bool,
+    /// `restart.json`: the final state, to continue the run (`rovib run --resume`).
+    pub restart: bool,
 }
 
 /// A name in the file with its place.
@@ -177,6 +187,15 @@ pub struct Scene {
     /// The largest relative energy error `|H(t) − H(0)| / |H(0)|` a run accepts at an output
     /// time before it stops as unstable or too loosely integrated.
     pub max_energy_error: f64,
+    /// Whether trajectory.csv also gets continuous (unwrapped) φ and ψ columns.
+    pub euler_unwrapped: bool,
+    /// `[potential.parameters]`: values that replace the definition's compiled-in parameters
+    /// for this run (names checked against the molecule when the run starts).
+    pub parameters: Vec<Named<f64>>,
+    /// Stop conditions: the run stops (status "stopped") at the first output time at which a
+    /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
+    /// molecule when the run starts).
+    pub stop_outside: Vec<Named<[f64; 2]>>,
 }
 
 impl Scene {
@@ -201,6 +220,13 @@ struct RawScene {
     #[serde(default)]
     integrator: Option<Spanned<RawIntegrator>>,
     run: Spanned<RawRun>,
+    potential: Option<RawScenePotential>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenePotential {
+    parameters: RawTable<f64>,
 }
 
 #[derive(Deserialize, Default)]
@@ -234,7 +260,7 @@ struct RawIntegrator {
     atol: Option<Spanned<f64>>,
     step: Option<Spanned<f64>>,
     stages: Option<Spanned<u32>>,
-    compensated: Option<bool>,
+    compensated: Option<Spanned<bool>>,
     max_steps: Option<Spanned<u64>>,
     min_step: Option<Spanned<f64>>,
 }
@@ -250,17 +276,21 @@ struct RawRun {
     min_metric_pivot: Option<Spanned<f64>>,
     max_energy_error: Option<Spanned<f64>>,
     max_outputs: Option<Spanned<u64>>,
+    #[serde(default)]
+    euler_unwrapped: bool,
+    stop_outside: Option<RawTable<Vec<f64>>>,
 }
 
 /// The largest number of output times a scene may ask for unless `run.max_outputs` raises it:
 /// a million rows of trajectory.csv for water is about 0.5 GB.
 pub const DEFAULT_MAX_OUTPUTS: u64 = 1_000_000;
 
-/// The default integrator: DOP853 at rtol = atol = 1e-10.
-pub const DEFAULT_TOLERANCE: f64 = 1e-10;
+/// The smallest relative tolerance DOP853 accepts: 10·ε ≈ 2.2e-15 (as in `dop853.f`); below
+/// it the error estimate is round-off.
+pub const MIN_RTOL: f64 = 10.0 * f64::EPSILON;
 
 /// The default smallest relative pivot of the kinetic metric (see `STABILITY.md`).
-pub const DEFAULT_MIN_METRIC_PIVOT: f64 = 1e-12;
+pub const DEFAULT_MIN_METRIC_PIVOT: f64 = PIVOT_TOLERANCE;
 
 /// The default largest relative energy error at an output time: a run whose energy has moved by
 /// 1 % is unstable or far too loosely integrated (the shipped scenes stay below 1e-8).
@@ -272,7 +302,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     let raw: RawScene = toml::from_str(text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
         let help = if message.starts_with("unknown field") || message.starts_with("missing field") {
-            "the README's \"Scene files\" section lists every key"
+            "the README's section \"Scenes and `rovib run`\" lists every key"
         } else {
             "see the TOML syntax at https://toml.io and the shipped scenes/ for examples"
         };
@@ -282,9 +312,25 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         }
     })?;
 
-    let length =
-        unit(&src, raw.units.length.as_ref(), LengthUnit::Bohr, LengthUnit::parse, "length", "\"bohr\", \"angstrom\"")?;
-    let angle = unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?;
+    // Without [units], lengths and angles of coordinates are in each coordinate's declared unit
+    // (`None`); Cartesian positions and velocities in bohr, Euler angles in rad.
+    let length = match &raw.units.length {
+        None => None,
+        Some(_) => Some(unit(
+            &src,
+            raw.units.length.as_ref(),
+            LengthUnit::Bohr,
+            LengthUnit::parse,
+            "length",
+            "\"bohr\", \"angstrom\"",
+        )?),
+    };
+    let angle = match &raw.units.angle {
+        None => None,
+        Some(_) => {
+            Some(unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?)
+        }
+    };
     let time = unit(
         &src,
         raw.units.time.as_ref(),
@@ -298,7 +344,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         "time",
         "\"au\", \"fs\", \"ps\"",
     )?;
-    let (l, a, t) = (length.in_bohr(), angle.in_rad(), time.in_au());
+    let (l, a, t) = (length.map_or(1.0, LengthUnit::in_bohr), angle.map_or(1.0, AngleUnit::in_rad), time.in_au());
 
     let initial = match (&raw.initial, &raw.ensemble) {
         (Some(i), _) => initial(&src, i, l, a, t)?,
@@ -336,7 +382,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         if !x.is_finite() || x == 0.0 {
             return Err(src.error(
                 span,
-                format!("`{what}` is {x:e} in atomic units of time"),
+                format!("`{what}` is {} in atomic units of time", Compact(x)),
                 "give a time that is finite and non-zero in atomic units (1 a.u. = 0.0242 fs)",
             ));
         }
@@ -353,19 +399,21 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         ));
     }
     let outputs = match &run.outputs {
-        None => Outputs { trajectory: true, lab: true, summary: true },
+        None => Outputs { trajectory: true, lab: true, summary: true, restart: true },
         Some(list) => {
-            let mut o = Outputs { trajectory: false, lab: false, summary: false };
+            let mut o = Outputs { trajectory: false, lab: false, summary: false, restart: false };
             for name in list.get_ref() {
                 match name.get_ref().as_str() {
                     "trajectory" => o.trajectory = true,
                     "lab" => o.lab = true,
                     "summary" => o.summary = true,
+                    "restart" => o.restart = true,
                     other => {
                         return Err(src.error(
                             name.span(),
                             format!("unknown output `{other}`"),
-                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz) and \"summary\" (summary.json)",
+                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz), \"summary\" (summary.json) \
+                             and \"restart\" (restart.json)",
                         ));
                     }
                 }
@@ -375,10 +423,8 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     };
 
     let method = match &raw.integrator {
-        None => {
-            Method::Dop853(Dop853Options { rtol: DEFAULT_TOLERANCE, atol: DEFAULT_TOLERANCE, ..Default::default() })
-        }
-        Some(i) => integrator(&src, i, t)?,
+        None => Method::Dop853(Dop853Options::default()),
+        Some(i) => integrator(&src, i, t, t_end, output_interval)?,
     };
 
     // A frozen coordinate has zero velocity; a velocity or momentum given for it would leak
@@ -392,7 +438,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             if *value != 0.0 && run.frozen.iter().any(|f| f.get_ref() == name.get_ref()) {
                 return Err(src.error(
                     name.span(),
-                    format!("`{}` is frozen (run.frozen) but {what} gives it {value}", name.get_ref()),
+                    format!("`{}` is frozen (run.frozen) but {what} gives it {}", name.get_ref(), Compact(*value)),
                     format!(
                         "a frozen coordinate has zero velocity: remove `{}` from {what}, or unfreeze it",
                         name.get_ref()
@@ -413,16 +459,66 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         t_end,
         output_interval,
         time_unit: time,
-        units: CoordinateScale { length: l, angle: a, time: t },
+        units: CoordinateScale {
+            length: length.map(LengthUnit::in_bohr),
+            angle: angle.map(AngleUnit::in_rad),
+            time: t,
+        },
         outputs,
         frozen: run.frozen.clone(),
         min_metric_pivot: match &run.min_metric_pivot {
-            Some(x) => positive(&src, x, "run.min_metric_pivot")?,
+            Some(x) => {
+                let v = *x.get_ref();
+                // A relative pivot (over the block's scale) lies in (0, 1]; the runtime cannot go
+                // below PIVOT_TOLERANCE (it would raise a smaller threshold silently).
+                if !(PIVOT_TOLERANCE..1.0).contains(&v) {
+                    return Err(src.error(
+                        x.span(),
+                        format!(
+                            "`run.min_metric_pivot` must lie in [{}, 1), got {}",
+                            Compact(PIVOT_TOLERANCE),
+                            Compact(v)
+                        ),
+                        format!(
+                            "a relative pivot below {} cannot be told from a singular matrix, and 1 or more stops \
+                             every run; leave it out for the default {}",
+                            Compact(PIVOT_TOLERANCE),
+                            Compact(DEFAULT_MIN_METRIC_PIVOT)
+                        ),
+                    ));
+                }
+                v
+            }
             None => DEFAULT_MIN_METRIC_PIVOT,
         },
         max_energy_error: match &run.max_energy_error {
             Some(x) => positive(&src, x, "run.max_energy_error")?,
             None => DEFAULT_MAX_ENERGY_ERROR,
+        },
+        euler_unwrapped: run.euler_unwrapped,
+        parameters: match &raw.potential {
+            Some(p) => named_numbers(&src, &p.parameters, "potential.parameters")?,
+            None => Vec::new(),
+        },
+        stop_outside: match &run.stop_outside {
+            None => Vec::new(),
+            Some(table) => table
+                .get_ref()
+                .iter()
+                .map(|(name, v)| {
+                    let what = format!("run.stop_outside.{}", name.get_ref());
+                    match v.get_ref().as_slice() {
+                        &[low, high] if !low.is_nan() && !high.is_nan() && low < high => {
+                            Ok((name.clone(), [low, high]))
+                        }
+                        _ => Err(src.error(
+                            v.span(),
+                            format!("`{what}` must be [low, high] with low < high"),
+                            "write the interval the coordinate may stay in, e.g. [0.5, 3.0] (inf allowed)",
+                        )),
+                    }
+                })
+                .collect::<Result<_, _>>()?,
         },
     })
 }
@@ -450,7 +546,7 @@ fn positive(src: &Source<'_>, x: &Spanned<f64>, what: &str) -> Result<f64, FileE
     } else {
         Err(src.error(
             x.span(),
-            format!("`{what}` must be a positive finite number, got {v}"),
+            format!("`{what}` must be a positive finite number, got {}", Compact(v)),
             "write a number greater than 0",
         ))
     }
@@ -477,7 +573,15 @@ fn triple(src: &Source<'_>, v: &Spanned<Vec<f64>>, what: &str, scale: f64) -> Re
     if values.iter().any(|x| !x.is_finite()) {
         return Err(src.error(v.span(), format!("`{what}` has a non-finite entry"), "write finite numbers"));
     }
-    Ok([values[0] * scale, values[1] * scale, values[2] * scale])
+    let au = [values[0] * scale, values[1] * scale, values[2] * scale];
+    if au.iter().any(|x| !x.is_finite()) {
+        return Err(src.error(
+            v.span(),
+            format!("`{what}` overflows in atomic units ([{}])", au.map(|x| Compact(x).to_string()).join(", ")),
+            "write numbers that stay finite in atomic units (bohr, ħ, bohr per ħ/E_h)",
+        ));
+    }
+    Ok(au)
 }
 
 /// A table of numbers by name, unscaled (the scale of each entry depends on the coordinate,
@@ -501,34 +605,35 @@ fn named_triples(
 
 /// The scene's units as factors to atomic units. Numbers given per coordinate (q, qdot) are
 /// kept in the scene's units until the molecule tells which coordinates are lengths and which
-/// are angles.
+/// are angles, and in which unit each is declared.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct CoordinateScale {
-    /// Bohr per scene length unit.
-    pub length: f64,
-    /// Radians per scene angle unit.
-    pub angle: f64,
+    /// Bohr per scene length unit; `None` when the scene gives no `units.length`: then each
+    /// coordinate's value is in the unit its definition declares (e.g. Å for water's r1).
+    pub length: Option<f64>,
+    /// Radians per scene angle unit; `None`: each coordinate's declared unit (e.g. degrees).
+    pub angle: Option<f64>,
     /// Atomic units of time per scene time unit.
     pub time: f64,
 }
 
 impl CoordinateScale {
-    /// A value of a coordinate declared with `unit`, given in the scene's length or angle unit,
-    /// in atomic units (bohr or rad).
+    /// A value of a coordinate declared with `unit`, given in the scene's length or angle unit
+    /// (without one, in `unit`), in atomic units (bohr or rad).
     pub fn coordinate_to_au(&self, unit: CoordinateUnit, value: f64) -> f64 {
         value * self.factor(unit)
     }
 
     /// A velocity of a coordinate declared with `unit`, given in the scene's length or angle
-    /// unit per its time unit, in atomic units (bohr or rad per ħ/E_h).
+    /// unit (without one, in `unit`) per its time unit, in atomic units (bohr or rad per ħ/E_h).
     pub fn velocity_to_au(&self, unit: CoordinateUnit, value: f64) -> f64 {
         value * self.factor(unit) / self.time
     }
 
     fn factor(&self, unit: CoordinateUnit) -> f64 {
         match unit {
-            CoordinateUnit::Length(_) => self.length,
-            CoordinateUnit::Angle(_) => self.angle,
+            CoordinateUnit::Length(_) => self.length.unwrap_or(unit.in_atomic_units()),
+            CoordinateUnit::Angle(_) => self.angle.unwrap_or(unit.in_atomic_units()),
         }
     }
 }
@@ -591,6 +696,22 @@ fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) 
         // θ = π/2 keeps the default orientation far from gimbal lock.
         None => [0.0, std::f64::consts::FRAC_PI_2, 0.0],
     };
+    // θ = 0 or π is an ordinary orientation for a run (the quaternion has no singularity), but
+    // there the Euler momenta do not determine J (J = W p_e, and W is singular).
+    if let (Some(pe), InitialAngularMomentum::Pe(values)) = (&r.pe, rotation)
+        && values != [0.0; 3]
+        && euler[1].sin().abs() < MIN_SIN_THETA
+    {
+        return Err(src.error(
+            pe.span(),
+            format!(
+                "at θ = {} rad (|sin θ| < {}) the Euler momenta pe do not determine the angular momentum",
+                Compact(euler[1]),
+                Compact(MIN_SIN_THETA)
+            ),
+            "give the body-frame angular momentum j = [Jx, Jy, Jz] instead (it is defined at every orientation)",
+        ));
+    }
     let q = match &r.q {
         Some(q) => named_numbers(src, q, "q")?,
         None => Vec::new(),
@@ -598,7 +719,17 @@ fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) 
     Ok(Initial::Internal { q, momenta, euler, rotation })
 }
 
-fn integrator(src: &Source<'_>, raw: &Spanned<RawIntegrator>, t: f64) -> Result<Method, FileError> {
+/// The `[integrator]` table, every setting checked here, where the file can point at it: the
+/// defaults are the runtime's own (`Dop853Options::default()` and the others: rtol = atol =
+/// 1e-10, `max_steps` = [`DEFAULT_MAX_STEPS`]), and what this accepts the solver accepts.
+/// `t` is a.u. of time per scene time unit; `t_end` and `output_interval` are in a.u.
+fn integrator(
+    src: &Source<'_>,
+    raw: &Spanned<RawIntegrator>,
+    t: f64,
+    t_end: f64,
+    output_interval: f64,
+) -> Result<Method, FileError> {
     let r = raw.get_ref();
     let name = r.method.get_ref().as_str();
     let not_for = |key: &str, span: Range<usize>, method: &str| {
@@ -608,18 +739,30 @@ fn integrator(src: &Source<'_>, raw: &Spanned<RawIntegrator>, t: f64) -> Result<
             "remove it, or choose a method it applies to",
         )
     };
-    let step = |required: bool| -> Result<f64, FileError> {
-        match &r.step {
-            Some(s) => Ok(positive(src, s, "integrator.step")? * t),
-            None if required => Err(src.error(
-                r.method.span(),
-                format!("the {name} method needs a step"),
-                "add step = ... (in the scene's time unit) to [integrator]",
-            )),
-            None => Ok(0.0),
+    // A time in the scene's unit, positive and finite there and in atomic units.
+    let time = |x: &Spanned<f64>, what: &str| -> Result<f64, FileError> {
+        let au = positive(src, x, what)? * t;
+        if !au.is_finite() || au == 0.0 {
+            return Err(src.error(
+                x.span(),
+                format!("`{what}` is {} in atomic units of time", Compact(au)),
+                "give a time that is finite and non-zero in atomic units (1 a.u. = 0.0242 fs)",
+            ));
         }
+        Ok(au)
     };
-    match name {
+    let max_steps = match &r.max_steps {
+        Some(x) if *x.get_ref() == 0 => {
+            return Err(src.error(
+                x.span(),
+                "`integrator.max_steps` is 0",
+                format!("give at least 1, or leave it out for the default {DEFAULT_MAX_STEPS}"),
+            ));
+        }
+        Some(x) => *x.get_ref(),
+        None => DEFAULT_MAX_STEPS,
+    };
+    let method = match name {
         "dop853" => {
             if let Some(s) = &r.step {
                 return Err(not_for("step", s.span(), "adaptive dop853"));
@@ -627,20 +770,52 @@ fn integrator(src: &Source<'_>, raw: &Spanned<RawIntegrator>, t: f64) -> Result<
             if let Some(s) = &r.stages {
                 return Err(not_for("stages", s.span(), "dop853"));
             }
-            let mut o = Dop853Options { rtol: DEFAULT_TOLERANCE, atol: DEFAULT_TOLERANCE, ..Default::default() };
+            if let Some(c) = &r.compensated {
+                return Err(not_for("compensated", c.span(), "dop853"));
+            }
+            let mut o = Dop853Options { max_steps, ..Default::default() };
             if let Some(x) = &r.rtol {
-                o.rtol = positive(src, x, "integrator.rtol")?;
+                let v = *x.get_ref();
+                if !(v > MIN_RTOL && v <= 1.0) {
+                    return Err(src.error(
+                        x.span(),
+                        format!("`integrator.rtol` must lie in (10·ε, 1] = ({MIN_RTOL:.2e}, 1], got {}", Compact(v)),
+                        "below 10·ε the error estimate is round-off (1e-13 is about the tightest useful); \
+                         above 1 it controls nothing",
+                    ));
+                }
+                o.rtol = v;
             }
             if let Some(x) = &r.atol {
-                o.atol = positive(src, x, "integrator.atol")?;
-            }
-            if let Some(x) = &r.max_steps {
-                o.max_steps = *x.get_ref();
+                let v = positive(src, x, "integrator.atol")?;
+                if v < f64::MIN_POSITIVE {
+                    return Err(src.error(
+                        x.span(),
+                        format!(
+                            "`integrator.atol` = {} is subnormal (below {})",
+                            Compact(v),
+                            Compact(f64::MIN_POSITIVE)
+                        ),
+                        "give an absolute tolerance of at least 1e-300 (1e-14 is about the tightest useful)",
+                    ));
+                }
+                o.atol = v;
             }
             if let Some(x) = &r.min_step {
-                o.min_step = positive(src, x, "integrator.min_step")? * t;
+                o.min_step = time(x, "integrator.min_step")?;
+                if o.min_step >= t_end {
+                    return Err(src.error(
+                        x.span(),
+                        format!(
+                            "`integrator.min_step` ({} a.u.) is not shorter than the run ({} a.u.)",
+                            Compact(o.min_step),
+                            Compact(t_end)
+                        ),
+                        "min_step is the smallest step before the run stops as stiff: give a small fraction of run.end",
+                    ));
+                }
             }
-            Ok(Method::Dop853(o))
+            Method::Dop853(o)
         }
         "gauss-legendre" | "rk4" => {
             for (key, given) in [("rtol", &r.rtol), ("atol", &r.atol), ("min_step", &r.min_step)] {
@@ -648,40 +823,67 @@ fn integrator(src: &Source<'_>, raw: &Spanned<RawIntegrator>, t: f64) -> Result<
                     return Err(not_for(key, x.span(), &format!("fixed-step {name}")));
                 }
             }
-            let h = step(true)?;
+            let Some(step) = &r.step else {
+                return Err(src.error(
+                    r.method.span(),
+                    format!("the {name} method needs a step"),
+                    "add step = ... (in the scene's time unit) to [integrator]",
+                ));
+            };
+            let h = time(step, "integrator.step")?;
+            // The steps the run will take, exactly as the solver will cut the output intervals.
+            let needed = fixed_step_count(0.0, t_end, output_interval, h);
+            if needed > max_steps {
+                return Err(src.error(
+                    r.max_steps.as_ref().map_or(step.span(), |m| m.span()),
+                    format!(
+                        "the run needs {needed} steps of at most {} a.u. (run.end / integrator.step, output \
+                         intervals cut into whole steps), more than integrator.max_steps = {max_steps}",
+                        Compact(h)
+                    ),
+                    "lengthen integrator.step, shorten run.end, or raise integrator.max_steps if you mean it",
+                ));
+            }
             if name == "rk4" {
+                for (key, given) in [
+                    ("stages", r.stages.as_ref().map(|s| s.span())),
+                    ("compensated", r.compensated.as_ref().map(|c| c.span())),
+                ] {
+                    if let Some(span) = given {
+                        return Err(not_for(key, span, "rk4"));
+                    }
+                }
+                Method::Rk4(Rk4Options { step: h, max_steps })
+            } else {
+                let mut o = GaussLegendreOptions { step: h, max_steps, ..Default::default() };
                 if let Some(s) = &r.stages {
-                    return Err(not_for("stages", s.span(), "rk4"));
+                    if !matches!(*s.get_ref(), 2 | 3) {
+                        return Err(src.error(
+                            s.span(),
+                            format!("Gauss–Legendre with {} stages is not available", s.get_ref()),
+                            "use stages = 2 (order 4) or stages = 3 (order 6)",
+                        ));
+                    }
+                    o.stages = *s.get_ref() as usize;
                 }
-                let mut o = Rk4Options { step: h, ..Default::default() };
-                if let Some(x) = &r.max_steps {
-                    o.max_steps = *x.get_ref();
+                if let Some(c) = &r.compensated {
+                    o.compensated = *c.get_ref();
                 }
-                return Ok(Method::Rk4(o));
+                Method::GaussLegendre(o)
             }
-            let mut o = GaussLegendreOptions { step: h, ..Default::default() };
-            if let Some(s) = &r.stages {
-                if !matches!(*s.get_ref(), 2 | 3) {
-                    return Err(src.error(
-                        s.span(),
-                        format!("Gauss–Legendre with {} stages is not available", s.get_ref()),
-                        "use stages = 2 (order 4) or stages = 3 (order 6)",
-                    ));
-                }
-                o.stages = *s.get_ref() as usize;
-            }
-            if let Some(c) = r.compensated {
-                o.compensated = c;
-            }
-            if let Some(x) = &r.max_steps {
-                o.max_steps = *x.get_ref();
-            }
-            Ok(Method::GaussLegendre(o))
         }
-        other => Err(src.error(
-            r.method.span(),
-            format!("unknown integrator `{other}`"),
-            "use \"dop853\" (adaptive, tolerances), \"gauss-legendre\" (symplectic, fixed step) or \"rk4\" (fixed step)",
-        )),
-    }
+        other => {
+            return Err(src.error(
+                r.method.span(),
+                format!("unknown integrator `{other}`"),
+                "use \"dop853\" (adaptive, tolerances), \"gauss-legendre\" (symplectic, fixed step) or \"rk4\" (fixed step)",
+            ));
+        }
+    };
+    // Everything the solver checks has been checked above with its place; this is the backstop
+    // that keeps the two in step (a failure here is a bug of this function).
+    method.validate().map_err(|e| {
+        src.error(raw.span(), format!("invalid integrator settings: {e}"), "see the README's \"Scene files\"")
+    })?;
+    Ok(method)
 }

@@ -6,11 +6,11 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use crate::runtime::diagnostic::{FileError, Source};
-use crate::runtime::frames::{FitOptions, LabState, from_lab};
+use crate::runtime::diagnostic::{Compact, FileError, MAX_INPUT_BYTES, Source, read_text_capped};
+use crate::runtime::frames::{FitOptions, LabState, from_lab_body};
 use crate::runtime::hamiltonian::{
-    PhaseState, ReducedSystem, Reduction, ReductionError, RotationPart, euler_momenta_from_angular_momentum,
-    momenta_from_velocities, w_matrix,
+    BodyState, PhaseState, ReducedSystem, Reduction, ReductionError, RotationPart, euler_momenta_from_angular_momentum,
+    momenta_from_velocities, quaternion_of_euler, w_matrix,
 };
 use crate::runtime::integrate::OdeSystem;
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
@@ -47,8 +47,7 @@ impl From<FileError> for StartError {
 /// default `out/SCENE_NAME` followed by `default_subdir` (`rovib run` uses none, `rovib bench`
 /// `bench`).
 pub fn load_scene(path: &Path, out_dir: Option<&Path>, default_subdir: &str) -> Result<(Scene, PathBuf), StartError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| StartError::Message(format!("cannot read {}: {e}", path.display())))?;
+    let text = read_text_capped(path, MAX_INPUT_BYTES).map_err(StartError::Message)?;
     let scene = parse_scene(&path.display().to_string(), &text)?;
     let out_dir = match out_dir {
         Some(d) => d.to_owned(),
@@ -59,9 +58,15 @@ pub fn load_scene(path: &Path, out_dir: Option<&Path>, default_subdir: &str) -> 
     Ok((scene, out_dir))
 }
 
-/// Where a run starts: the phase-space state and the centre-of-mass motion (bohr, bohr/a.u.).
+/// Where a run starts: the body-formulation state a run integrates from, the same as a
+/// phase-space state, and the centre-of-mass motion (bohr, bohr/a.u.).
 pub struct Start<const N: usize> {
-    /// The internal state, in atomic units.
+    /// The start as a run integrates it: q, p, the orientation as a quaternion and the body-frame
+    /// J. Defined at every orientation, θ = 0 included.
+    pub body: BodyState<N>,
+    /// The same start in Euler angles and their momenta, for output and the Euler-angle
+    /// formulations (`p_e = Mᵀ J` is defined everywhere; at θ = 0 or π, `J = W p_e` is not, so
+    /// the Euler-angle Hamiltonian cannot be evaluated there: use `body`).
     pub state: PhaseState<N>,
     /// Centre-of-mass position.
     pub com_position: Vector3<f64>,
@@ -84,7 +89,7 @@ pub fn find_name(
 
 /// Binds the scene's initial condition to molecule `m`: names to indices, the scene's units to
 /// atomic units, velocities to momenta (the Legendre map), lab-frame positions and velocities to
-/// q, p, the orientation and J (a mass-weighted fit, [`from_lab`]).
+/// q, p, the orientation and J (a mass-weighted fit, [`frames::from_lab_body`](crate::runtime::frames::from_lab_body)).
 pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
@@ -144,17 +149,26 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                 }
             }
             let euler = Vector3::from(*euler);
-            let (pv, pe) = match (momenta, rotation) {
+            // J from p_e needs W, which the scene parser has checked is defined when p_e ≠ 0.
+            let j_of_pe = |pe: &[f64; 3]| -> Result<Vector3<f64>, FileError> {
+                if *pe == [0.0; 3] {
+                    return Ok(Vector3::zeros());
+                }
+                Ok(w_matrix(&euler).map_err(|e| {
+                    src.whole_file(format!("the initial orientation: {e}"), "give j instead of pe at θ = 0 or π")
+                })? * Vector3::from(*pe))
+            };
+            let (pv, j) = match (momenta, rotation) {
                 (Momenta::P(p), rot) => {
                     let mut pv = SVector::<f64, N>::zeros();
                     for (name, value) in p {
                         pv[index(name, "p")?] = *value;
                     }
-                    let pe = match rot {
-                        InitialAngularMomentum::Pe(pe) => Vector3::from(*pe),
-                        InitialAngularMomentum::J(j) => euler_momenta_from_angular_momentum(&euler, &Vector3::from(*j)),
+                    let j = match rot {
+                        InitialAngularMomentum::Pe(pe) => j_of_pe(pe)?,
+                        InitialAngularMomentum::J(j) => Vector3::from(*j),
                     };
-                    (pv, pe)
+                    (pv, j)
                 }
                 (Momenta::Qdot(qd), rot) => {
                     let mut qdot = SVector::<f64, N>::zeros();
@@ -165,11 +179,7 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                     // J is given (or follows from p_e); then ω = I⁻¹(J − A q̇) and p = Aᵀω + a q̇.
                     let j = match rot {
                         InitialAngularMomentum::J(j) => Vector3::from(*j),
-                        InitialAngularMomentum::Pe(pe) => {
-                            w_matrix(&euler).map_err(|e| {
-                                src.whole_file(format!("the initial orientation: {e}"), "choose θ away from 0 and π")
-                            })? * Vector3::from(*pe)
-                        }
+                        InitialAngularMomentum::Pe(pe) => j_of_pe(pe)?,
                     };
                     let mut k = KineticMatrices::<N>::default();
                     m.kinetic(&qv, &mut k);
@@ -185,15 +195,13 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                     })?;
                     let omega = inertia.solve(&(j - k.coriolis * qdot));
                     let (_, pv) = momenta_from_velocities(&k, &omega, &qdot);
-                    let pe = match rot {
-                        InitialAngularMomentum::Pe(pe) => Vector3::from(*pe),
-                        InitialAngularMomentum::J(_) => euler_momenta_from_angular_momentum(&euler, &j),
-                    };
-                    (pv, pe)
+                    (pv, j)
                 }
             };
+            let body = BodyState { q: qv, p: pv, orientation: quaternion_of_euler(&euler), j };
             Ok(Start {
-                state: PhaseState { q: qv, p: pv, euler, pe },
+                body,
+                state: PhaseState { q: qv, p: pv, euler, pe: euler_momenta_from_angular_momentum(&euler, &j) },
                 com_position: Vector3::zeros(),
                 com_velocity: Vector3::zeros(),
             })
@@ -232,16 +240,64 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             for (label, v) in velocities {
                 lab.velocities.set_column(atom_index(label, "velocities")?, &Vector3::from(*v));
             }
-            let (state, com, _) = from_lab(m, &lab, &FitOptions::default()).map_err(|e| {
+            // Before the fit: a huge velocity would only make the fit's numbers overflow.
+            let com = lab.centre_of_mass(&m.masses());
+            check_centre_of_mass(&src, span, com.position, com.velocity, scene.t_end)?;
+            let (body, com, _) = from_lab_body(m, &lab, &FitOptions::default()).map_err(|e| {
                 src.error(
                     span.clone(),
                     format!("the lab-frame positions cannot start a run of {}: {e}", m.name()),
-                    "check the atom positions and their units; rotate the input if θ is at 0 or π",
+                    "check the atom positions and their units",
                 )
             })?;
-            Ok(Start { state, com_position: com.position, com_velocity: com.velocity })
+            Ok(Start { body, state: body.to_phase(), com_position: com.position, com_velocity: com.velocity })
         }
     }
+}
+
+/// The speed of light in atomic units (bohr per ħ/E_h): 1/α = 137.036.
+pub const SPEED_OF_LIGHT_AU: f64 = 137.035_999_084;
+
+/// The farthest the centre of mass may travel from the origin during a run, bohr (about 5 cm):
+/// lab.xyz writes positions with 12 decimals, and beyond this they are digits of nothing.
+pub const MAX_LAB_DISTANCE: f64 = 1e9;
+
+/// The centre of mass of a lab-frame start must move slower than light and stay within
+/// [`MAX_LAB_DISTANCE`] of the origin until `t_end` (a.u.): an infinite or huge velocity would
+/// write `inf` or hundreds of digits into lab.xyz.
+fn check_centre_of_mass(
+    src: &Source<'_>,
+    span: &std::ops::Range<usize>,
+    position: Vector3<f64>,
+    velocity: Vector3<f64>,
+    t_end: f64,
+) -> Result<(), FileError> {
+    let speed = velocity.norm();
+    if speed.is_nan() || speed >= SPEED_OF_LIGHT_AU {
+        return Err(src.error(
+            span.clone(),
+            format!(
+                "the centre of mass moves at {} bohr per ħ/E_h, not slower than light ({SPEED_OF_LIGHT_AU})",
+                Compact(speed)
+            ),
+            "check the velocities and their unit (the scene's length per its time unit); a classical run needs \
+             speeds far below light",
+        ));
+    }
+    let farthest = position.norm() + speed * t_end;
+    if farthest.is_nan() || farthest > MAX_LAB_DISTANCE {
+        return Err(src.error(
+            span.clone(),
+            format!(
+                "the centre of mass would reach {} bohr from the origin by the end of the run, more than {}",
+                Compact(farthest),
+                Compact(MAX_LAB_DISTANCE)
+            ),
+            "centre the positions nearer the origin or remove the common velocity (it does not change the \
+             molecule's motion)",
+        ));
+    }
+    Ok(())
 }
 
 /// The coordinates the scene's `run.frozen` names, frozen (rotation free); an unknown name is
@@ -265,20 +321,25 @@ pub fn frozen_reduction<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 /// The system every command integrates, chosen from the scene: the body formulation (no
 /// gimbal lock) on the fast path, reduced to what the scene needs: frozen coordinates as it
 /// names them, `J = 0` when the initial angular momentum is exactly zero (then `J` stays
-/// zero), and the orientation only when an output needs it. Returns the system and the
-/// initial flat state.
+/// zero), and the orientation only when an output needs it or when nothing else would be
+/// integrated (a rigid molecule at rest, or everything frozen with J = 0: the solver then
+/// carries the constant orientation, so that the run still has its output times and summary).
+/// Returns the system and the initial flat state.
 pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &'m M,
     scene: &Scene,
-    start: &PhaseState<N>,
+    start: &BodyState<N>,
 ) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
     let mut reduction = frozen_reduction(m, scene)?;
-    if start.pe == Vector3::zeros() {
-        reduction.rotation =
-            RotationPart::ZeroAngularMomentum { orientation: scene.outputs.lab || scene.outputs.trajectory };
+    if start.j == Vector3::zeros() {
+        let orientation = scene.outputs.lab || scene.outputs.trajectory || reduction.active_count() == 0;
+        reduction.rotation = RotationPart::ZeroAngularMomentum { orientation };
     }
-    let system = ReducedSystem::new(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
+    let system = ReducedSystem::from_body(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
     let mut y0 = vec![0.0; system.dim()];
-    system.reduce(start, &mut y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
+    system.reduce_body(start, &mut y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
+    // H(0) before anything is written: the kinetic metric must be invertible and the energy
+    // finite at the start (the same evaluation the run makes at its first output time).
+    system.energy(&y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
     Ok((system, y0))
 }

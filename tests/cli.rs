@@ -33,7 +33,9 @@ fn list_names_every_molecule_with_atoms_and_coordinates() {
     for name in rovib::molecules::NAMES {
         assert!(text.contains(&format!("{name} (molecules/{name}.toml)")), "{text}");
     }
-    assert!(text.contains("coordinates: r1 [angstrom in the definition, bohr at run time]"), "{text}");
+    assert!(text.contains("h2o (molecules/h2o.toml): 3 atoms, 3 internal coordinates\n  atoms:       O (O, 15.99491461957 Da), H1 (H, 1.00782503223 Da), H2 (H, 1.00782503223 Da)\n  coordinates: r1 [angstrom], r2 [angstrom], alpha [rad]"), "{text}");
+    // The unit note once, not per coordinate.
+    assert_eq!(text.matches("at run time").count(), 1, "{text}");
 }
 
 #[test]

@@ -12,7 +12,7 @@ mod common;
 use common::cartesian::{CrossCheck, cross_check};
 use common::internal_coordinates::{self, Dual, V3};
 use common::{Rng, random_state};
-use rovib::molecules::{Ch4, Co2, H2o2, Nh3};
+use rovib::molecules::{Ch4, Co2, Ethane, H2o2, Nh3};
 use rovib::runtime::Molecule;
 use rovib::runtime::frames::CentreOfMass;
 use rovib::runtime::nalgebra::Vector3;
@@ -65,4 +65,11 @@ fn nh3_agrees_with_cartesian_dynamics() {
 #[test]
 fn ch4_agrees_with_cartesian_dynamics() {
     check(&Ch4, internal_coordinates::ch4, 24);
+}
+
+/// The largest shipped molecule (18 coordinates): its sparse generated kinetic code and the
+/// production path against free atoms.
+#[test]
+fn ethane_agrees_with_cartesian_dynamics() {
+    check(&Ethane, internal_coordinates::ethane, 25);
 }

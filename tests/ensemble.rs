@@ -260,6 +260,42 @@ fn the_energy_guard_fails_trajectories_whose_energy_moves_more_than_allowed() {
     assert!(rows.iter().all(|r| r[column(&header, "n")] == 0.0 && r[column(&header, "H_mean_hartree")].is_nan()));
 }
 
+/// Issue 11, item 14: near H(0) = 0 the guard measures the change against the same absolute
+/// floor as `rovib run` (`output::ENERGY_SCALE_FLOOR`), not against H(0) alone.
+#[test]
+fn the_energy_guard_near_zero_energy_uses_the_absolute_floor_like_rovib_run() {
+    // Water at its minimum, almost at rest: H(0) ≈ 3e-22 hartree, and DOP853's round-off moves
+    // H by about as much, so a guard relative to H(0) alone fails every trajectory.
+    fn at_rest(s: &mut BodyState<3>) {
+        s.q = H2o.reference_geometry().unwrap();
+        s.p = SVector::<f64, 3>::new(1e-9, 0.0, 0.0);
+        s.j = Vector3::zeros();
+    }
+    let text = "molecule = \"h2o\"\n[ensemble]\ntrajectories = 3\nmethod = \"thermal\"\ntemperature = 300\n\
+                [run]\nend = 2000\noutput_interval = 40\n";
+    let s = parse_scene("near0.toml", text).unwrap();
+    let mut sampler = Gaussian::new(1);
+    sampler.replace = (0..3).map(|i| (i, at_rest as Edit)).collect();
+    let report = run_with_sampler(&H2o, &s, &sampler, "at rest", &options("near0", 1)).unwrap();
+    assert_eq!(report.outcome.completed, 3, "{:?}", report.outcome.first_failures);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report.files.last().unwrap()).unwrap()).unwrap();
+    assert_eq!(summary["max_energy_error_relative_to"], "max(|H(0)|, 1e-3 hartree) of each trajectory");
+
+    // A guard that trips gives the absolute change and the scale, as `rovib run` does.
+    fn moving(s: &mut BodyState<3>) {
+        at_rest(s);
+        s.p[0] = 1.0;
+    }
+    let text = text.replace("[run]", "[integrator]\nmethod = \"rk4\"\nstep = 40\n[run]\nmax_energy_error = 1e-9\n");
+    let s = parse_scene("near0.toml", &text).unwrap();
+    sampler.replace = (0..3).map(|i| (i, moving as Edit)).collect();
+    let report = run_with_sampler(&H2o, &s, &sampler, "moving", &options("near0-trip", 1)).unwrap();
+    assert_eq!(report.outcome.failed.get("energy guard"), Some(&3), "{:?}", report.outcome.failed);
+    let detail = &report.outcome.first_failures[0].detail;
+    assert!(detail.contains("hartree from H(0)") && detail.contains("max(|H(0)|, 1e-3 hartree) = "), "{detail}");
+}
+
 #[test]
 fn an_interrupt_keeps_consistent_outputs_for_the_trajectories_that_finished() {
     let s = scene(1000, "[statistics]\nmeans = [\"r1\", \"H\"]", DOP853, 500.0);
@@ -326,7 +362,7 @@ fn a_states_file_starts_trajectory_i_from_row_i_and_kept_trajectories_are_writte
     for i in [0, 4] {
         let (header, rows) = csv(&dir.join(format!("out/trajectories/{i}/trajectory.csv")));
         assert_eq!(rows.len(), 11);
-        assert_eq!(rows[0][column(&header, "r1")], states[i].q[0]);
+        assert_eq!(rows[0][column(&header, "q_r1")], states[i].q[0]);
     }
     assert!(!dir.join("out/trajectories/1").exists());
 }

@@ -71,7 +71,7 @@ fn thermal_water_is_stationary_under_propagation() {
     for i in 0..400 {
         let (h, rows) = csv(&o.out_dir.join(format!("trajectories/{i}/trajectory.csv")));
         assert_eq!(rows.len(), 2);
-        let (cr1, cr2, ca, ch) = (column(&h, "r1"), column(&h, "r2"), column(&h, "alpha"), column(&h, "H"));
+        let (cr1, cr2, ca, ch) = (column(&h, "q_r1"), column(&h, "q_r2"), column(&h, "q_alpha"), column(&h, "H"));
         // T = H − U(q), U from the molecule (trajectory.csv carries H, not T).
         let kinetic = |row: &[f64]| row[ch] - H2o.potential(&SVector::from([row[cr1], row[cr2], row[ca]]));
         let values = |row: &[f64]| [kinetic(row), row[cr1], row[ca]];

@@ -402,3 +402,102 @@ proptest! {
         }
     }
 }
+
+/// Numbers for scene keys: huge, tiny, subnormal, signed zero, non-finite, ordinary.
+const SCENE_NUMBERS: &[&str] = &[
+    "1.0", "1e308", "1e307", "5e-324", "1e-300", "1e-16", "2.3e-15", "-0.0", "0", "-1.0", "nan", "inf", "-inf",
+    "1e-10", "0.5", "20.0", "1e20", "1e-7", "137.0", "3000.0",
+];
+
+/// A random scene for water built from edge numbers in every time, tolerance and limit key,
+/// hostile names in its tables, and either form of `[initial]`.
+fn hostile_scene(seed: u64) -> String {
+    let mut p = Pick(seed);
+    let n = |p: &mut Pick| p.of(SCENE_NUMBERS).to_owned();
+    let mut text = format!("molecule = \"{}\"\n[units]\n", p.of(&["h2o", "h2o", "h2o", "", "fn", "h2o\\n", "H2O"]));
+    text += &format!("time = \"{}\"\nlength = \"{}\"\n", p.of(&["au", "fs", "ps"]), p.of(&["bohr", "angstrom"]));
+    text += "[initial]\n";
+    if p.below(3) == 0 {
+        let v = n(&mut p);
+        let x = n(&mut p);
+        text += &format!(
+            "positions = {{ O = [{x}, 0, 0.12], H1 = [0.76, 0, -0.47], H2 = [-0.76, 0, -0.47] }}\n\
+             velocities = {{ {} = [{v}, 0, 0] }}\n",
+            p.of(&["O", "H1", "H2", "None", "r1", "\"H\\n1\""])
+        );
+    } else {
+        let name = p.of(&["r1", "r2", "alpha", "theta", "None", "self", "\"r 1\"", "\"\""]);
+        text += &format!("q = {{ {name} = {} }}\n", n(&mut p));
+        text += &format!("{} = {{ {} = {} }}\n", p.of(&["p", "qdot"]), p.of(&["r1", "alpha", "x"]), n(&mut p));
+        text += &format!("euler = [{}, {}, 0]\n", n(&mut p), p.of(&["0", "90", "180", "1e-9", "3.14159"]));
+        text += &format!("{} = [{}, {}, {}]\n", p.of(&["j", "pe"]), n(&mut p), n(&mut p), p.of(&["0", "1.0"]));
+    }
+    let method = p.of(&["dop853", "gauss-legendre", "rk4"]);
+    text += &format!("[integrator]\nmethod = \"{method}\"\n");
+    for key in ["rtol", "atol", "step", "min_step"] {
+        if p.below(2) == 0 {
+            text += &format!("{key} = {}\n", n(&mut p));
+        }
+    }
+    if p.below(3) == 0 {
+        text += &format!("max_steps = {}\n", p.of(&["0", "1", "100", "18446744073709551615"]));
+    }
+    text += &format!("[run]\nend = {}\n", n(&mut p));
+    if p.below(4) > 0 {
+        text += &format!("output_interval = {}\n", n(&mut p));
+    }
+    if p.below(3) == 0 {
+        text += &format!("max_outputs = {}\n", p.of(&["0", "10", "18446744073709551615"]));
+    }
+    if p.below(3) == 0 {
+        text += &format!("min_metric_pivot = {}\n", n(&mut p));
+    }
+    if p.below(3) == 0 {
+        text += &format!("frozen = [\"{}\"]\n", p.of(&["r1", "alpha", "theta", ""]));
+    }
+    if p.below(3) == 0 {
+        text += &format!("outputs = [{}]\n", p.of(&["\"summary\"", "", "\"lab\", \"trajectory\"", "\"xyz\""]));
+    }
+    text
+}
+
+proptest! {
+    #![proptest_config(config(cases(2000), 19))]
+
+    /// Scenes built from edge numbers and hostile names (issue 11, item 12): no panic; every
+    /// scene the parser accepts has integrator settings the solver accepts, finite non-zero
+    /// times in atomic units, an output count within its limit and, for fixed steps, a step
+    /// count within max_steps; bound to water, it starts a run or gives a located error.
+    #[test]
+    fn hostile_scenes_are_refused_where_written_or_run(seed in any::<u64>()) {
+        use rovib::runtime::integrate::{Method, fixed_step_count};
+        let text = hostile_scene(seed);
+        match parse_scene("scenes/fuzz.toml", &text) {
+            Ok(scene) => {
+                prop_assert!(scene.method.validate().is_ok(), "{:?} accepted from\n{text}", scene.method);
+                prop_assert!(scene.t_end.is_finite() && scene.t_end > 0.0, "{text}");
+                prop_assert!(scene.output_interval.is_finite() && scene.output_interval > 0.0, "{text}");
+                let h = match scene.method {
+                    Method::GaussLegendre(o) => Some((o.step, o.max_steps)),
+                    Method::Rk4(o) => Some((o.step, o.max_steps)),
+                    Method::Dop853(_) => None,
+                };
+                if let Some((h, max_steps)) = h {
+                    prop_assert!(fixed_step_count(0.0, scene.t_end, scene.output_interval, h) <= max_steps, "{text}");
+                }
+                if scene.molecule.get_ref() == "h2o" {
+                    match initial_state(&H2o, &scene) {
+                        Ok(start) => {
+                            prop_assert!(start.com_velocity.norm() < 137.1, "{text}");
+                            if let Err(e) = rovib::start::production_system(&H2o, &scene, &start.body) {
+                                prop_assert!(!e.to_string().is_empty());
+                            }
+                        }
+                        Err(e) => well_formed(&e, &text),
+                    }
+                }
+            }
+            Err(e) => well_formed(&e, &text),
+        }
+    }
+}

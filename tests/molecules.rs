@@ -16,7 +16,7 @@ mod common;
 
 use common::internal_coordinates::{self as ic, V3};
 use common::{Rng, random_q};
-use rovib::molecules::{Ch4, Co2, H2o, H2o2, Nh3};
+use rovib::molecules::{Ch4, Co2, Ethane, H2o, H2o2, Nh3};
 use rovib::runtime::hamiltonian::InverseMetric;
 use rovib::runtime::nalgebra::{DMatrix, Rotation3, SMatrix, SVector, Vector3};
 use rovib::runtime::units::{BOHR_IN_ANGSTROM, HARTREE_IN_WAVENUMBERS};
@@ -73,6 +73,7 @@ fn intrinsic_coordinates_of_the_generated_positions_are_q() {
     assert_round_trip(&H2o2, ic::h2o2);
     assert_round_trip(&Nh3, ic::nh3);
     assert_round_trip(&Ch4, ic::ch4);
+    assert_round_trip(&Ethane, ic::ethane);
 }
 
 /// The h2o2 torsion is the IUPAC dihedral H1–O1–O2–H2: at τ = +90° with both O–O–H angles
@@ -170,6 +171,29 @@ fn potentials_match_their_documented_models() {
             - 356.73784 * (dr[0] * dr[1] + dr[0] * dr[2] + dr[1] * dr[2])
             + 0.5 * 27652.4291 * da.iter().map(|d| d * d).sum::<f64>()
             - 4008.0974 * (da[0] * da[1] + da[0] * da[2] + da[1] * da[2])
+    });
+    assert_potential_matches(&Ethane, ic::ethane, |x, q| {
+        let (rcc, rch, te) = (1.53, 1.09, (-1.0_f64 / 3.0).acos());
+        // The definition converts with 1 aJ = 50341.166 cm-1 (rounded).
+        let aj = 50_341.166;
+        let (fcc, fch, fb) = (4.5 * aj, 4.8 * aj, 0.65 * aj);
+        let (dcc, dch) = (31500.0, 35400.0);
+        let mut u = morse(dcc, (fcc / (2.0 * dcc)).sqrt(), rcc, q[0]);
+        // Bond angles at each carbon from the positions: H-C-C' and H-C-H'.
+        for (c, other, hs) in [(0, 1, [2, 3, 4]), (1, 0, [5, 6, 7])] {
+            for (k, &h) in hs.iter().enumerate() {
+                u += morse(dch, (fch / (2.0 * dch)).sqrt(), rch, ic::distance(x[h], x[c]));
+                u += 0.5 * fb * (ic::angle(x[h], x[c], x[other]) - te).powi(2);
+                for &h2 in &hs[k + 1..] {
+                    u += 0.5 * fb * (ic::angle(x[h], x[c], x[h2]) - te).powi(2);
+                }
+            }
+        }
+        // Three-fold torsion in the dihedrals H1a-C1-C2-H2x.
+        for h in 5..8 {
+            u += 1000.0 / 6.0 * (1.0 + (3.0 * ic::dihedral(x[2], x[0], x[1], x[h])).cos());
+        }
+        u
     });
     assert_potential_matches(&Ch4, ic::ch4, |x, q| {
         let (re, ae) = (1.0858, (-1.0_f64 / 3.0).acos());
@@ -401,4 +425,23 @@ fn quoted_force_constant_conversion() {
     let aj = 1e-18 / (6.626_070_15e-34 * 2.997_924_58e10);
     assert!((aj - AJ_IN_WAVENUMBERS).abs() < 1e-4);
     assert!((0.784_779 * AJ_IN_WAVENUMBERS - 39_506.67).abs() < 0.05);
+}
+
+/// Ethane's torsional barrier: the eclipsed geometry (C2's azimuths turned by 60°) lies exactly
+/// V3 = 1000 cm⁻¹ above the staggered reference, and the reference is a stationary point.
+#[test]
+fn ethane_torsional_barrier_is_v3() {
+    let m = Ethane;
+    let q0 = m.reference_geometry().unwrap();
+    let names = m.coordinates().map(|c| c.name);
+    let mut eclipsed = q0;
+    for h in ["d_H2a", "d_H2b", "d_H2c"] {
+        let k = names.iter().position(|&n| n == h).unwrap();
+        eclipsed[k] -= 60f64.to_radians();
+    }
+    let barrier = (m.potential(&eclipsed) - m.potential(&q0)) * HARTREE_IN_WAVENUMBERS;
+    assert!((barrier - 1000.0).abs() < 1e-8, "barrier {barrier} cm-1");
+    let mut grad = SVector::zeros();
+    m.potential_gradient(&q0, &mut grad);
+    assert!(grad.amax() < 1e-12, "gradient at the reference {grad:?}");
 }

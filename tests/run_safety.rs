@@ -188,3 +188,152 @@ fn the_energy_guard_near_zero_energy_uses_the_absolute_floor_and_agrees_with_the
     assert!(abs > 0.0, "{s}");
     assert!(err.contains(&format!("the energy changed by {abs:.3e} hartree")), "{abs:.3e} not in {err}");
 }
+
+/// The numbers of a CSV file's data rows.
+fn rows(path: &Path) -> Vec<Vec<f64>> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect()
+}
+
+/// The atom positions (Å) of every frame of lab.xyz.
+fn frames(path: &Path) -> Vec<Vec<[f64; 3]>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let n: usize = lines[0].trim().parse().unwrap();
+    lines
+        .chunks(n + 2)
+        .map(|f| {
+            f[2..]
+                .iter()
+                .map(|l| {
+                    let v: Vec<f64> = l.split_whitespace().skip(1).map(|x| x.parse().unwrap()).collect();
+                    assert!(v.iter().all(|x| x.is_finite()), "{l}");
+                    [v[0], v[1], v[2]]
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Issue 11, item 15: `euler = [0, 0, 0]` (θ = 0) was refused at the start though the run
+/// integrates a quaternion. It runs, and it is the same motion as the start turned by 90° about
+/// the lab x axis (rotational invariance, independent of how the orientation is stored): the
+/// same q(t) and H(t), and lab positions turned by the same rotation.
+#[test]
+fn a_start_at_theta_zero_runs_and_is_the_turned_motion_of_a_start_at_ninety_degrees() {
+    let d = dir("theta0");
+    let run = |euler: &str| {
+        let path = d.join(format!("e{}.toml", euler.len()));
+        std::fs::write(
+            &path,
+            format!(
+                "molecule = \"h2o\"\n[units]\nangle = \"deg\"\ntime = \"fs\"\n[initial]\nq = {{ r1 = 1.95, r2 = 1.8, alpha = 1.9 }}\n\
+                 euler = {euler}\nj = [3.0, -2.0, 6.0]\n[integrator]\nmethod = \"dop853\"\nrtol = 1e-12\natol = 1e-12\n\
+                 [run]\nend = 50.0\noutput_interval = 5.0\n"
+            )
+            .replace("angle = \"deg\"\n", ""),
+        )
+        .unwrap();
+        let out = d.join(format!("out{}", euler.len()));
+        let o = rovib(&["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+        assert!(o.status.success(), "{euler}: {}", String::from_utf8_lossy(&o.stderr));
+        (rows(&out.join("trajectory.csv")), frames(&out.join("lab.xyz")))
+    };
+    let (a, lab_a) = run("[0, 0, 0]");
+    let (b, lab_b) = run("[0, 1.5707963267948966, 0]");
+    assert_eq!(a.len(), 11);
+    // t, r1, r2, alpha, p_r1, p_r2, p_alpha, then the Euler angles and momenta (which differ), H.
+    for (ra, rb) in a.iter().zip(&b) {
+        for c in (0..7).chain([ra.len() - 1]) {
+            assert!((ra[c] - rb[c]).abs() < 1e-9 * (1.0 + rb[c].abs()), "column {c}: {} vs {}", ra[c], rb[c]);
+        }
+    }
+    // R(b) = Rx(90°) R(a) with R(a) = 1: (x, y, z) → (x, −z, y).
+    for (fa, fb) in lab_a.iter().zip(&lab_b) {
+        for (xa, xb) in fa.iter().zip(fb) {
+            let turned = [xa[0], -xa[2], xa[1]];
+            assert!(turned.iter().zip(xb).all(|(u, v)| (u - v).abs() < 1e-8), "{turned:?} vs {xb:?}");
+        }
+    }
+}
+
+/// Issue 11, item 15: a rigid molecule at rest with only a summary, and everything frozen with
+/// J = 0, have nothing to integrate ("dimension must be at least 1" before): they run, and the
+/// summary says the energy stayed H(0) = U(q) exactly.
+#[test]
+fn nothing_to_integrate_is_a_valid_run() {
+    let d = dir("empty");
+    for (name, text) in [
+        ("rigid", "molecule = \"h2o_rigid\"\n[initial]\n[run]\nend = 100.0\noutputs = [\"summary\"]\n"),
+        (
+            "frozen",
+            "molecule = \"h2o\"\n[initial]\n[run]\nend = 100.0\nfrozen = [\"r1\", \"r2\", \"alpha\"]\noutputs = [\"summary\"]\n",
+        ),
+        ("frozen-lab", "molecule = \"h2o\"\n[initial]\n[run]\nend = 100.0\nfrozen = [\"r1\", \"r2\", \"alpha\"]\n"),
+    ] {
+        let path = d.join(format!("{name}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let out = d.join(name);
+        let o = rovib(&["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"]);
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let s = summary(&out);
+        assert_eq!(s["status"], "completed", "{s}");
+        assert_eq!(s["conservation"]["samples"], 101, "{s}");
+        assert_eq!(s["conservation"]["max_abs_energy_error_hartree"], 0.0, "{s}");
+        if name == "frozen-lab" {
+            // At rest the lab positions never move.
+            let f = frames(&out.join("lab.xyz"));
+            assert!(f.iter().all(|frame| frame == &f[0]));
+        }
+    }
+}
+
+/// Issue 11, item 16: a scene read from /dev/zero grew memory without bound; input files are
+/// read up to a stated size.
+#[test]
+fn an_endless_input_file_is_refused_with_its_size_limit() {
+    if !Path::new("/dev/zero").exists() {
+        return;
+    }
+    let d = dir("zero");
+    let o = rovib(&["run", "/dev/zero", "--out", d.join("out").to_str().unwrap(), "-q"]);
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(!o.status.success());
+    assert!(err.contains("cannot read /dev/zero: it is larger than 16777216 bytes (16 MiB)"), "{err}");
+    let o = rovib(&["eval", "--molecule", "h2o", "--state", "/dev/zero"]);
+    assert!(String::from_utf8(o.stderr).unwrap().contains("larger than 16777216 bytes"));
+}
+
+/// Issue 11, item 13: `rovib bench` with many output times aborted allocating 10¹⁵ bytes; it
+/// refuses with the numbers before allocating.
+#[test]
+fn bench_refuses_a_scene_whose_states_would_not_fit_its_buffers() {
+    let d = dir("bench");
+    let path = d.join("many.toml");
+    std::fs::write(
+        &path,
+        "molecule = \"h2o\"\n[initial]\nj = [1.0, 2.0, 3.0]\n[run]\nend = 1e9\noutput_interval = 1.0\nmax_outputs = 2000000000\n",
+    )
+    .unwrap();
+    let o = rovib(&["bench", path.to_str().unwrap(), "--out", d.join("out").to_str().unwrap()]);
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(!o.status.success());
+    assert!(!err.contains("panicked") && !err.contains("memory allocation"), "{err}");
+    assert!(err.contains("1000000001 output times × 13 numbers × 8 bytes") && err.contains("limit of 64 MiB"), "{err}");
+}
+
+/// Issue 11, item 16: a molecule named `""` in a scene said "add molecules/.toml".
+#[test]
+fn an_empty_molecule_name_is_not_told_to_add_molecules_dot_toml() {
+    let d = dir("noname");
+    let path = d.join("s.toml");
+    std::fs::write(&path, "molecule = \"\"\n[initial]\n[run]\nend = 1.0\n").unwrap();
+    let o = rovib(&["run", path.to_str().unwrap(), "--out", d.join("out").to_str().unwrap(), "-q"]);
+    let err = String::from_utf8(o.stderr).unwrap();
+    assert!(err.contains("unknown molecule ``") && !err.contains("molecules/.toml"), "{err}");
+    assert!(err.contains("s.toml:1:12"), "{err}");
+}

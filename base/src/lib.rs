@@ -1,5 +1,7 @@
 //! What rovib's build-time generator (`rovib-codegen`) and its runtime (`rovib-runtime`) share:
-//! errors located in a text file ([`diagnostic`]) and units with their conversions ([`units`]).
+//! errors located in a text file ([`diagnostic`]), units with their conversions ([`units`]),
+//! input files read with a size limit ([`input`]) and numbers written compactly in messages
+//! ([`number`]).
 //!
 //! A crate of its own, with no dependencies, so that definition errors (from the build) and
 //! scene errors (from `rovib run`) are one type displayed one way, and both sides convert with
@@ -7,4 +9,6 @@
 //! `rovib_runtime::units`.
 
 pub mod diagnostic;
+pub mod input;
+pub mod number;
 pub mod units;

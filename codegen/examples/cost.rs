@@ -3,7 +3,12 @@
 //!
 //! ```text
 //! cargo run --release -p rovib-codegen --example cost -- molecules/*.toml
+//! cargo run --release -p rovib-codegen --example cost -- --kinetic-jacobian molecules/*.toml
 //! ```
+//!
+//! `--kinetic-jacobian` also generates the symbolic `kinetic_jacobian` (off by default, see
+//! `rovib_codegen::Options`). The column "dr nz" counts the (atom, coordinate) pairs whose raw
+//! position derivative is not a structural zero, out of atoms × coordinates.
 //!
 //! Prints one summary row per molecule, then each molecule's per-function table
 //! (`GeneratedMolecule::stats_table`). Codegen time is the wall time of
@@ -13,13 +18,15 @@
 use std::process::ExitCode;
 use std::time::Duration;
 
-use rovib_codegen::{GeneratedMolecule, generate_molecule};
+use rovib_codegen::{GeneratedMolecule, Options, generate_molecule_with};
 
 /// Generation runs per molecule; the fastest is reported.
 const RUNS: usize = 3;
 
 fn main() -> ExitCode {
-    let paths: Vec<String> = std::env::args().skip(1).collect();
+    let mut paths: Vec<String> = std::env::args().skip(1).collect();
+    let options = Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian") };
+    paths.retain(|p| p != "--kinetic-jacobian");
     if paths.is_empty() {
         eprintln!(
             "usage: cost MOLECULE.toml...   (e.g. cargo run --release -p rovib-codegen --example cost -- molecules/*.toml)"
@@ -37,7 +44,7 @@ fn main() -> ExitCode {
         };
         let mut best: Option<(GeneratedMolecule, Duration)> = None;
         for _ in 0..RUNS {
-            match generate_molecule(path, &text) {
+            match generate_molecule_with(path, &text, &options) {
                 Ok(m) => {
                     let t = m.codegen_time;
                     if best.as_ref().is_none_or(|(_, b)| t < *b) {
@@ -54,17 +61,18 @@ fn main() -> ExitCode {
     }
 
     println!(
-        "{:<12} {:>3} {:>3} {:>11} {:>8} {:>12} {:>14} {:>11}",
-        "molecule", "N", "NA", "codegen ms", "lines", "graph nodes", "ops (each)", "ops (CSE)"
+        "{:<12} {:>3} {:>3} {:>9} {:>11} {:>8} {:>12} {:>14} {:>11}",
+        "molecule", "N", "NA", "dr nz", "codegen ms", "lines", "graph nodes", "ops (each)", "ops (CSE)"
     );
     for (m, t) in &generated {
         let per_output: u64 = m.stats.iter().map(|s| s.ops_per_output).sum();
         let emitted: u64 = m.stats.iter().map(|s| s.ops_emitted).sum();
         println!(
-            "{:<12} {:>3} {:>3} {:>11.1} {:>8} {:>12} {:>14} {:>11}",
+            "{:<12} {:>3} {:>3} {:>9} {:>11.1} {:>8} {:>12} {:>14} {:>11}",
             m.name,
             m.coordinates,
             m.atoms,
+            format!("{}/{}", m.nonzero_derivatives, m.coordinates * m.atoms),
             t.as_secs_f64() * 1e3,
             m.lines(),
             m.graph_nodes,

@@ -103,6 +103,14 @@ pub struct Definition {
     pub potential: ExprId,
     /// The energy unit the file used for the potential.
     pub energy_unit: EnergyUnit,
+    /// The potential's parameters, sorted by name, with their values as written (in the units
+    /// the potential expression uses them in).
+    pub parameters: Vec<(String, f64)>,
+    /// The names the potential expression sees (parameters bound to their values) and its text,
+    /// to build it again with the parameters as variables (`crate::parametric`).
+    pub potential_scope: HashMap<String, ExprId>,
+    /// See `potential_scope`.
+    pub potential_text: String,
 }
 
 #[derive(Deserialize)]
@@ -187,6 +195,18 @@ impl ExpressionPlace for Source<'_> {
         let offset = self.offset_in_string(span, value, e.line, e.column);
         self.error_at_offset(offset, e.message, e.help)
     }
+}
+
+/// The punctuation an atom label may contain besides letters and digits.
+const LABEL_PUNCTUATION: &str = "_-+'.*()";
+
+/// The longest atom label, in characters.
+const MAX_LABEL_CHARS: usize = 32;
+
+/// Whether `c` may appear in an atom label: a letter, a digit or [`LABEL_PUNCTUATION`] (no
+/// whitespace, control characters, commas or quotes, which break lists and files).
+fn label_char(c: char) -> bool {
+    c.is_alphanumeric() || LABEL_PUNCTUATION.contains(c)
 }
 
 fn is_identifier(name: &str) -> bool {
@@ -408,6 +428,25 @@ impl Validator<'_> {
             if label.trim().is_empty() {
                 return Err(src.error(a.label.span(), "empty atom label", "give every atom a label such as \"H1\""));
             }
+            // Labels are printed in lists (`rovib list`, messages) and are keys of scenes and
+            // states files: one short word.
+            if let Some(c) = label.chars().find(|&c| !label_char(c)) {
+                return Err(src.error(
+                    a.label.span(),
+                    format!("atom label {label:?} contains {c:?}"),
+                    format!("labels are one word of letters, digits and {LABEL_PUNCTUATION}, e.g. \"H1\""),
+                ));
+            }
+            if label.chars().count() > MAX_LABEL_CHARS {
+                return Err(src.error(
+                    a.label.span(),
+                    format!(
+                        "atom label `{label}` has {} characters, more than {MAX_LABEL_CHARS}",
+                        label.chars().count()
+                    ),
+                    "use a short label such as \"H1\"",
+                ));
+            }
             if let Some(first) = labels.get(label) {
                 let (line, _) = src.place(first.start);
                 return Err(src.error(
@@ -488,6 +527,7 @@ impl Validator<'_> {
             let c = self.graph.constant(*v.get_ref());
             self.names.insert(k.get_ref().clone(), c);
         }
+        let potential_scope = self.names.clone();
         let u = self.expression(&pot.expression, "the potential")?;
         let scale = self.graph.constant(energy_unit.in_hartree());
         let potential = self.graph.mul(scale, u);
@@ -534,6 +574,9 @@ impl Validator<'_> {
             positions,
             potential,
             energy_unit,
+            parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
+            potential_scope,
+            potential_text: pot.expression.get_ref().clone(),
         })
     }
 

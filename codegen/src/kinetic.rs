@@ -1,24 +1,58 @@
 //! From body-frame positions to the kinetic matrices and every derivative the runtime needs.
 //!
-//! Given the positions `R_i(q)` of a [`Definition`], this builds, in the definition's graph:
+//! Given the positions `r_i(q)` of a [`Definition`] (as written, not centred), this builds, in
+//! the definition's graph:
 //!
-//! * the centred positions `R_i − Σ_j m_j R_j / M` (the shift is symbolic, so the generated
-//!   positions satisfy `Σ m_i R_i = 0` for every q);
-//! * `∂R_i/∂q_k`;
-//! * `a_jk = Σ_i m_i ∂R_i/∂q_j · ∂R_i/∂q_k`, `A_jk = Σ_i m_i [R_i × ∂R_i/∂q_k]_j`,
-//!   `I = Σ_i m_i (|R_i|² 1 − R_i R_iᵀ)` and their derivatives along every `q_k`;
-//! * the kinetic energy `T = ½ Σ_i m_i |ω × R_i + Σ_j ∂R_i/∂q_j q̇_j|²` as a function of q, ω and
-//!   q̇, and its q-gradient at fixed (ω, q̇), which gives `∂H/∂q` without differentiating any
-//!   inverse matrix;
-//! * `U(q)` and `∂U/∂q`.
+//! * the centre of mass `c = Σ m_i r_i / M` and the centred positions `R_i = r_i − c`, as
+//!   values: `c` is one shared node the generated code computes once, never substituted into
+//!   anything symbolically;
+//! * the raw derivatives `∂r_i/∂q_k`, which are structurally sparse for local (Z-matrix-like)
+//!   coordinates: an atom's position depends only on the coordinates between it and the
+//!   body frame's origin; `∂c/∂q_k = Σ m_i ∂r_i/∂q_k / M`; and `∂R_i/∂q_k = ∂r_i/∂q_k − ∂c/∂q_k`
+//!   (dense, for `positions_jacobian` only);
+//! * `a`, `A`, `I` from the sparse raw derivatives, with the centre of mass applied once per
+//!   entry instead of inside every atom's term (`docs/equations.md`, section 2, "Sparse
+//!   assembly"):
 //!
-//! Sums are built as sums (not expanded), so the generated code evaluates the kinetic matrices
-//! the way one would by hand, and hash-consing shares `R_i` and `∂R_i/∂q_k` among all of them.
+//!   ```text
+//!   a_jk = Σ_i m_i ∂r_i/∂q_j · ∂r_i/∂q_k − M ∂c/∂q_j · ∂c/∂q_k
+//!   A_·k = Σ_i m_i R_i × ∂r_i/∂q_k                          (Σ_i m_i R_i = 0)
+//!   I    = Σ_i m_i (|R_i|² 1 − R_i R_iᵀ)
+//!   ```
+//!
+//!   where the sums run only over the atoms whose `∂r_i/∂q_k` is not a structural zero;
+//! * the kinetic energy `T = ½ Σ_i m_i |u_i|²` with the body-frame atom velocities
+//!   `u_i = ω × R_i + Σ_j ∂r_i/∂q_j q̇_j − Σ_j ∂c/∂q_j q̇_j`, and its q-gradient at fixed
+//!   (ω, q̇), built directly as
+//!
+//!   ```text
+//!   ∂T/∂q_l = Σ_i m_i u_i · (ω × ∂r_i/∂q_l + Σ_j ∂²r_i/∂q_j∂q_l q̇_j)    (Σ_i m_i u_i = 0)
+//!   ```
+//!
+//!   again over the atoms that depend on `q_l`, with each second derivative built once for
+//!   `j ≤ l` (the symbolic derivative of a shared first derivative);
+//! * `U(q)` and `∂U/∂q`;
+//! * only if asked for ([`Options::kinetic_jacobian`]), `∂a/∂q`, `∂A/∂q`, `∂I/∂q` symbolically;
+//!   by default the reference path gets them from the runtime (`Molecule::kinetic_jacobian`'s
+//!   default, from the generated `∂T/∂q`), since the production path never needs them.
+//!
+//! The cost of the generated production code is then about `Σ_i n_i² + n²` operations (`n_i`
+//! the coordinates atom i depends on) instead of `NA · n²` (dense centred derivatives), and
+//! the optional `kinetic_jacobian` adds `n³`-order code.
 
 use crate::definition::Definition;
 use crate::diff::Differentiator;
 use crate::expr::{ExprId, Graph};
 use crate::units::DALTON_IN_ELECTRON_MASSES;
+
+/// What to generate beyond the production path.
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub struct Options {
+    /// Generate `kinetic_jacobian` (∂a/∂q, ∂A/∂q, ∂I/∂q) symbolically; `n(n² + 3n + 9)`
+    /// outputs, by far the largest function for large molecules. Off by default: the runtime's
+    /// default method computes the same matrices from the generated `∂T/∂q`.
+    pub kinetic_jacobian: bool,
+}
 
 /// Every expression the generated code evaluates, for one molecule.
 pub struct KineticExprs {
@@ -26,12 +60,12 @@ pub struct KineticExprs {
     pub n: usize,
     /// Centred positions in bohr: `positions[atom][axis]`.
     pub positions: Vec<[ExprId; 3]>,
-    /// `jacobian[k][atom][axis] = ∂R/∂q_k`.
+    /// `jacobian[k][atom][axis] = ∂R/∂q_k` (centred).
     pub jacobian: Vec<Vec<[ExprId; 3]>>,
     /// The kinetic matrices.
     pub kinetic: KineticSet,
-    /// `kinetic_jacobian[k]`: the derivatives of the kinetic matrices along `q_k`.
-    pub kinetic_jacobian: Vec<KineticSet>,
+    /// `kinetic_jacobian[k]`: the derivatives of the kinetic matrices along `q_k`, if generated.
+    pub kinetic_jacobian: Option<Vec<KineticSet>>,
     /// The kinetic energy as a function of q, ω (variables n..n+3) and q̇ (variables n+3..2n+3).
     pub kinetic_energy: ExprId,
     /// `∂T/∂q_k` at fixed ω and q̇.
@@ -40,6 +74,8 @@ pub struct KineticExprs {
     pub potential: ExprId,
     /// `∂U/∂q_k`.
     pub potential_gradient: Vec<ExprId>,
+    /// (atom, coordinate) pairs whose raw position derivative is not a structural zero.
+    pub nonzero_derivatives: usize,
 }
 
 /// `a` (n × n, row-major), `A` (3 × n), `I` (3 × 3), or one derivative of each.
@@ -57,50 +93,107 @@ pub struct KineticSet {
 pub const OMEGA_NAMES: [&str; 3] = ["omega_x", "omega_y", "omega_z"];
 
 /// Builds every expression for `def` into its graph.
-pub fn build(def: &mut Definition) -> KineticExprs {
+pub fn build(def: &mut Definition, options: &Options) -> KineticExprs {
     let n = def.coordinates.len();
     let masses: Vec<f64> = def.atoms.iter().map(|a| a.mass_da * DALTON_IN_ELECTRON_MASSES).collect();
+    let total: f64 = masses.iter().sum();
+    let na = masses.len();
     let g = &mut def.graph;
     let mut diff = Differentiator::new();
 
-    let positions = centred(g, &def.positions, &masses);
-    let jacobian: Vec<Vec<[ExprId; 3]>> =
-        (0..n).map(|k| positions.iter().map(|r| r.map(|c| diff.derivative(g, c, k as u32))).collect()).collect();
+    // Raw derivatives and which atoms depend on which coordinates.
+    let raw = def.positions.clone();
+    let dr: Vec<Vec<[ExprId; 3]>> =
+        (0..n).map(|k| raw.iter().map(|r| r.map(|c| diff.derivative(g, c, k as u32))).collect()).collect();
+    let depends: Vec<Vec<bool>> =
+        (0..n).map(|k| (0..na).map(|i| dr[k][i].iter().any(|&c| !g.is_zero(c))).collect()).collect();
+    // Coordinates of each atom, in order.
+    let support: Vec<Vec<usize>> = (0..na).map(|i| (0..n).filter(|&k| depends[k][i]).collect()).collect();
+    let nonzero_derivatives = support.iter().map(Vec::len).sum();
 
-    let kinetic = kinetic_set(g, &masses, &positions, &jacobian);
-    let kinetic_jacobian = (0..n)
-        .map(|l| {
-            let l = l as u32;
-            KineticSet {
-                a: kinetic.a.iter().map(|row| row.iter().map(|&e| diff.derivative(g, e, l)).collect()).collect(),
-                coriolis: kinetic.coriolis.clone().map(|row| row.iter().map(|&e| diff.derivative(g, e, l)).collect()),
-                inertia: kinetic.inertia.map(|row| row.map(|e| diff.derivative(g, e, l))),
-            }
-        })
-        .collect();
+    // Centre of mass and its derivatives: shared values, applied once.
+    let weights: Vec<f64> = masses.iter().map(|m| m / total).collect();
+    let com = weighted_sum(g, raw.iter().zip(&weights).map(|(r, &w)| (*r, w)));
+    let positions: Vec<[ExprId; 3]> = raw.iter().map(|r| [0, 1, 2].map(|axis| g.sub(r[axis], com[axis]))).collect();
+    let dcom: Vec<[ExprId; 3]> =
+        (0..n).map(|k| weighted_sum(g, (0..na).filter(|&i| depends[k][i]).map(|i| (dr[k][i], weights[i])))).collect();
+    let jacobian: Vec<Vec<[ExprId; 3]>> =
+        (0..n).map(|k| dr[k].iter().map(|d| [0, 1, 2].map(|axis| g.sub(d[axis], dcom[k][axis]))).collect()).collect();
+
+    let kinetic = kinetic_set(g, &masses, total, &positions, &dr, &dcom, &support);
+    let kinetic_jacobian = options.kinetic_jacobian.then(|| {
+        (0..n)
+            .map(|l| {
+                let l = l as u32;
+                KineticSet {
+                    a: kinetic.a.iter().map(|row| row.iter().map(|&e| diff.derivative(g, e, l)).collect()).collect(),
+                    coriolis: kinetic
+                        .coriolis
+                        .clone()
+                        .map(|row| row.iter().map(|&e| diff.derivative(g, e, l)).collect()),
+                    inertia: kinetic.inertia.map(|row| row.map(|e| diff.derivative(g, e, l))),
+                }
+            })
+            .collect()
+    });
 
     // Velocity variables come after the coordinates, in this order.
     // Their graph names are not identifiers, so no coordinate name can alias them (a coordinate
     // called `omega_x` must stay a variable of its own).
     let omega: Vec<ExprId> = ["ω_x", "ω_y", "ω_z"].iter().map(|name| g.var(name)).collect();
+    let omega = [omega[0], omega[1], omega[2]];
     let qdot: Vec<ExprId> = def.coordinates.iter().map(|c| g.var(&format!("q̇_{}", c.name))).collect();
     assert_eq!(g.var_count(), 2 * n + 3, "velocity variables are new variables");
+
+    // u_i = ω × R_i + Σ_j ∂r_i/∂q_j q̇_j − Σ_j ∂c/∂q_j q̇_j, the body-frame velocity of atom i.
+    let mut com_velocity = [g.zero(); 3];
+    for (k, &qd) in qdot.iter().enumerate() {
+        for axis in 0..3 {
+            let t = g.mul(dcom[k][axis], qd);
+            com_velocity[axis] = g.add(com_velocity[axis], t);
+        }
+    }
+    let mut velocities = Vec::with_capacity(na);
     let mut kinetic_energy = g.zero();
     for (i, r) in positions.iter().enumerate() {
-        // u_i = ω × R_i + Σ_j ∂R_i/∂q_j q̇_j, the body-frame velocity of atom i.
-        let mut u = cross(g, [omega[0], omega[1], omega[2]], *r);
-        for (j, &qd) in qdot.iter().enumerate() {
+        let mut u = cross(g, omega, *r);
+        for &j in &support[i] {
             for axis in 0..3 {
-                let t = g.mul(jacobian[j][i][axis], qd);
+                let t = g.mul(dr[j][i][axis], qdot[j]);
                 u[axis] = g.add(u[axis], t);
             }
+        }
+        for axis in 0..3 {
+            u[axis] = g.sub(u[axis], com_velocity[axis]);
         }
         let u2 = dot(g, u, u);
         let m = g.constant(0.5 * masses[i]);
         let term = g.mul(m, u2);
         kinetic_energy = g.add(kinetic_energy, term);
+        velocities.push(u);
     }
-    let kinetic_gradient = (0..n).map(|k| diff.derivative(g, kinetic_energy, k as u32)).collect();
+    // ∂T/∂q_l = Σ_i m_i u_i · ∂u_i/∂q_l over the atoms that depend on q_l; the centre-of-mass
+    // part of ∂u_i/∂q_l drops out because Σ_i m_i u_i = 0.
+    let mut kinetic_gradient = vec![g.zero(); n];
+    for i in 0..na {
+        for &l in &support[i] {
+            let mut du = cross(g, omega, dr[l][i]);
+            for &j in &support[i] {
+                // ∂²r_i/∂q_j∂q_l, built once per unordered pair (the derivative of the
+                // lower-numbered first derivative), so both orders share it.
+                let (lo, hi) = if j <= l { (j, l) } else { (l, j) };
+                for axis in 0..3 {
+                    let d2 = diff.derivative(g, dr[lo][i][axis], hi as u32);
+                    let t = g.mul(d2, qdot[j]);
+                    du[axis] = g.add(du[axis], t);
+                }
+            }
+            let p = dot(g, velocities[i], du);
+            let m = g.constant(masses[i]);
+            let t = g.mul(m, p);
+            kinetic_gradient[l] = g.add(kinetic_gradient[l], t);
+        }
+    }
 
     let potential = def.potential;
     let potential_gradient = (0..n).map(|k| diff.derivative(g, potential, k as u32)).collect();
@@ -115,21 +208,21 @@ pub fn build(def: &mut Definition) -> KineticExprs {
         kinetic_gradient,
         potential,
         potential_gradient,
+        nonzero_derivatives,
     }
 }
 
-/// Shifts the positions so that the centre of mass is at the origin.
-fn centred(g: &mut Graph, positions: &[[ExprId; 3]], masses: &[f64]) -> Vec<[ExprId; 3]> {
-    let total: f64 = masses.iter().sum();
-    let mut com = [g.zero(); 3];
-    for (r, &m) in positions.iter().zip(masses) {
+/// `Σ w v` over weighted vectors.
+fn weighted_sum(g: &mut Graph, terms: impl Iterator<Item = ([ExprId; 3], f64)>) -> [ExprId; 3] {
+    let mut s = [g.zero(); 3];
+    for (v, w) in terms {
+        let w = g.constant(w);
         for axis in 0..3 {
-            let w = g.constant(m / total);
-            let t = g.mul(w, r[axis]);
-            com[axis] = g.add(com[axis], t);
+            let t = g.mul(w, v[axis]);
+            s[axis] = g.add(s[axis], t);
         }
     }
-    positions.iter().map(|r| [0, 1, 2].map(|axis| g.sub(r[axis], com[axis]))).collect()
+    s
 }
 
 fn dot(g: &mut Graph, u: [ExprId; 3], v: [ExprId; 3]) -> ExprId {
@@ -149,36 +242,51 @@ fn cross(g: &mut Graph, u: [ExprId; 3], v: [ExprId; 3]) -> [ExprId; 3] {
     })
 }
 
-/// `a`, `A` and `I` from the positions and their jacobian (eq. 3 of the seed).
-fn kinetic_set(g: &mut Graph, masses: &[f64], r: &[[ExprId; 3]], dr: &[Vec<[ExprId; 3]>]) -> KineticSet {
+/// `a`, `A` and `I` (eq. 3 of the seed) from the centred positions `r`, the raw derivatives
+/// `dr` with their atom supports, and the centre of mass's derivatives `dcom`.
+fn kinetic_set(
+    g: &mut Graph,
+    masses: &[f64],
+    total: f64,
+    r: &[[ExprId; 3]],
+    dr: &[Vec<[ExprId; 3]>],
+    dcom: &[[ExprId; 3]],
+    support: &[Vec<usize>],
+) -> KineticSet {
     let n = dr.len();
+    // a_jk = Σ_i m_i ∂r_i/∂q_j · ∂r_i/∂q_k − M ∂c/∂q_j · ∂c/∂q_k, accumulated atom by atom over
+    // the pairs (j, k) both in the atom's support.
+    let mut sums = vec![vec![g.zero(); n]; n];
+    for (i, &m) in masses.iter().enumerate() {
+        let m = g.constant(m);
+        for (x, &j) in support[i].iter().enumerate() {
+            for &k in &support[i][x..] {
+                let d = dot(g, dr[j][i], dr[k][i]);
+                let t = g.mul(m, d);
+                sums[j][k] = g.add(sums[j][k], t);
+            }
+        }
+    }
     let mut a = vec![vec![g.zero(); n]; n];
+    let total = g.constant(total);
     for j in 0..n {
         for k in j..n {
-            let mut s = g.zero();
-            for (i, &m) in masses.iter().enumerate() {
-                let d = dot(g, dr[j][i], dr[k][i]);
-                let m = g.constant(m);
-                let t = g.mul(m, d);
-                s = g.add(s, t);
-            }
+            let d = dot(g, dcom[j], dcom[k]);
+            let c = g.mul(total, d);
+            let s = g.sub(sums[j][k], c);
             a[j][k] = s;
             a[k][j] = s;
         }
     }
     let mut coriolis: [Vec<ExprId>; 3] = [vec![g.zero(); n], vec![g.zero(); n], vec![g.zero(); n]];
-    for k in 0..n {
-        let mut s = [g.zero(); 3];
-        for (i, &m) in masses.iter().enumerate() {
+    for (i, &m) in masses.iter().enumerate() {
+        let m = g.constant(m);
+        for &k in &support[i] {
             let c = cross(g, r[i], dr[k][i]);
-            let m = g.constant(m);
             for axis in 0..3 {
                 let t = g.mul(m, c[axis]);
-                s[axis] = g.add(s[axis], t);
+                coriolis[axis][k] = g.add(coriolis[axis][k], t);
             }
-        }
-        for axis in 0..3 {
-            coriolis[axis][k] = s[axis];
         }
     }
     let mut inertia = [[g.zero(); 3]; 3];

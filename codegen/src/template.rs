@@ -14,6 +14,7 @@ use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_l
 use crate::expr;
 use crate::kinetic::{KineticExprs, KineticSet, OMEGA_NAMES};
 use crate::names::{self, type_name};
+use crate::parametric::ParametricExprs;
 use crate::units::{AngleUnit, CoordinateUnit, DALTON_IN_ELECTRON_MASSES, LengthUnit};
 
 /// Local variable names for the graph's variables, in variable order: the coordinates, ω, then
@@ -97,12 +98,24 @@ fn kinetic_groups(target: &TokenStream, set: &KineticSet) -> Vec<OutputGroup> {
 }
 
 /// The items of one generated molecule file, and the statistics of its functions.
-pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream, Vec<FunctionStats>) {
+pub(crate) fn molecule_items(
+    def: &Definition,
+    e: &KineticExprs,
+    parametric: Option<&ParametricExprs>,
+) -> (TokenStream, Vec<FunctionStats>) {
     let (n, na) = (index(e.n), index(def.atoms.len()));
     let ty = Ident::new(&type_name(&def.name), Span::call_site());
-    let idents = var_idents(def);
+    let mut idents = var_idents(def);
+    if let Some(p) = parametric {
+        // Parameter i is graph variable `first_var + i`, bound to `param{i}`.
+        while idents.len() < p.first_var as usize {
+            idents.push(Ident::new(&format!("unused{}", idents.len()), Span::call_site()));
+        }
+        idents.extend((0..def.parameters.len()).map(|i| Ident::new(&format!("param{i}"), Span::call_site())));
+    }
     let nc = e.n;
     let q_inputs: Vec<(u32, TokenStream)> = (0..nc).map(|k| (k as u32, ix(quote!(q), k))).collect();
+    let q_inputs_for_parameters = q_inputs.clone();
     let mut velocity_inputs = q_inputs.clone();
     velocity_inputs.extend((0..3).map(|a| ((nc + a) as u32, ix(quote!(omega), a))));
     velocity_inputs.extend((0..nc).map(|k| ((nc + 3 + k) as u32, ix(quote!(qdot), k))));
@@ -118,7 +131,7 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
     };
 
     let q_ty = quote!(&SVector<f64, #n>);
-    let specs = vec![
+    let mut specs = vec![
         FunctionSpec {
             name: "positions",
             doc: "Body-frame positions R_i(q) in bohr (column i is atom i), centre of mass at the origin.".into(),
@@ -145,21 +158,6 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             signature: quote!(fn kinetic(&self, q: #q_ty, k: &mut KineticMatrices<#n>)),
             inputs: q_inputs.clone(),
             groups: kinetic_groups(&quote!(k), &e.kinetic),
-            ret: None,
-            ret_wrap: None,
-            barrier: None,
-        },
-        FunctionSpec {
-            name: "kinetic_jacobian",
-            doc: "`dk[l]` holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
-            signature: quote!(fn kinetic_jacobian(&self, q: #q_ty, dk: &mut [KineticMatrices<#n>; #n])),
-            inputs: q_inputs.clone(),
-            groups: e
-                .kinetic_jacobian
-                .iter()
-                .enumerate()
-                .flat_map(|(l, set)| kinetic_groups(&ix(quote!(dk), l), set))
-                .collect(),
             ret: None,
             ret_wrap: None,
             barrier: None,
@@ -230,7 +228,7 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             name: "potential_gradient",
             doc: "∂U/∂q in hartree per unit of q; returns U.".into(),
             signature: quote!(fn potential_gradient(&self, q: #q_ty, grad: &mut SVector<f64, #n>) -> f64),
-            inputs: q_inputs,
+            inputs: q_inputs.clone(),
             groups: vec![OutputGroup {
                 target: quote!(grad),
                 entries: e.potential_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
@@ -240,6 +238,65 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             barrier: None,
         },
     ];
+    let mut parameter_items = quote!();
+    if let Some(p) = parametric {
+        let mut inputs = q_inputs_for_parameters.clone();
+        inputs.extend((0..def.parameters.len()).map(|i| (p.first_var + i as u32, ix(quote!(params), i))));
+        specs.push(FunctionSpec {
+            name: "potential_with",
+            doc: "U(q) in hartree with the parameters `params` (in the order of `parameters()`) instead of the\n\
+                  compiled-in values."
+                .into(),
+            signature: quote!(fn potential_with(&self, q: #q_ty, params: &[f64]) -> f64),
+            inputs: inputs.clone(),
+            groups: vec![],
+            ret: Some(p.potential),
+            ret_wrap: None,
+            barrier: None,
+        });
+        specs.push(FunctionSpec {
+            name: "potential_gradient_with",
+            doc: "∂U/∂q with the parameters `params`; returns U.".into(),
+            signature: quote!(
+                fn potential_gradient_with(&self, q: #q_ty, params: &[f64], grad: &mut SVector<f64, #n>) -> f64
+            ),
+            inputs,
+            groups: vec![OutputGroup {
+                target: quote!(grad),
+                entries: p.gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
+            }],
+            ret: Some(p.potential),
+            ret_wrap: None,
+            barrier: None,
+        });
+        let entries = def.parameters.iter().map(|(name, value)| {
+            let value = float(*value);
+            quote!((#name, #value))
+        });
+        parameter_items = quote! {
+            fn parameters(&self) -> &'static [(&'static str, f64)] {
+                &[#(#entries),*]
+            }
+        };
+    }
+    // The symbolic ∂a/∂q, ∂A/∂q, ∂I/∂q only on request (kinetic::Options): by default the
+    // runtime's `Molecule::kinetic_jacobian` assembles them from `kinetic_energy_gradient`.
+    if let Some(kinetic_jacobian) = &e.kinetic_jacobian {
+        specs.push(FunctionSpec {
+            name: "kinetic_jacobian",
+            doc: "`dk[l]` holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
+            signature: quote!(fn kinetic_jacobian(&self, q: #q_ty, dk: &mut [KineticMatrices<#n>; #n])),
+            inputs: q_inputs,
+            groups: kinetic_jacobian
+                .iter()
+                .enumerate()
+                .flat_map(|(l, set)| kinetic_groups(&ix(quote!(dk), l), set))
+                .collect(),
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+    }
     let mut functions = Vec::new();
     let mut stats = Vec::new();
     for spec in &specs {
@@ -329,6 +386,8 @@ pub(crate) fn molecule_items(def: &Definition, e: &KineticExprs) -> (TokenStream
             fn coordinates(&self) -> [Coordinate; #n] {
                 [#(#coordinates),*]
             }
+
+            #parameter_items
 
             #(#functions)*
         }

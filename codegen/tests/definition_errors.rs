@@ -369,3 +369,22 @@ fn coordinate_ranges() {
     let e = error(&with("name = \"r2\"\nunit = \"bohr\"", "name = \"r2\"\nunit = \"bohr\"\nreference = -2.05"));
     assert_eq!(e.message, "reference value -2.05 of `r2` is outside its range [0.0, inf] bohr");
 }
+
+/// Issue 11, item 16: a label with a newline (or a comma, a space, a quote) broke `rovib list`
+/// and the comma-separated lists of messages; labels are one short word.
+#[test]
+fn atom_labels_are_one_short_word() {
+    for (label, shown) in [("H\\n1", "'\\n'"), ("H 1", "' '"), ("H,1", "','"), ("H\\t1", "'\\t'"), ("H\\\"1", "'\"'")] {
+        let e = error(&with("label = \"H1\"", &format!("label = \"{label}\"")));
+        assert_eq!((e.line, e.column), (21, 9), "{e}");
+        assert!(e.message.starts_with("atom label ") && e.message.ends_with(&format!("contains {shown}")), "{e}");
+    }
+    let long = "H".repeat(33);
+    let e = error(&with("label = \"H1\"", &format!("label = \"{long}\"")));
+    assert!(e.message.contains("has 33 characters, more than 32"), "{e}");
+    // Letters of any script, digits and a little punctuation are fine.
+    for label in ["H1'", "H(a)", "H-3", "H.2", "H_b"] {
+        let text = with("label = \"H1\"", &format!("label = \"{label}\""));
+        assert!(generate_molecule("molecules/xy2.toml", &text).is_ok(), "{label}");
+    }
+}

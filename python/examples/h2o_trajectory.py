@@ -26,9 +26,9 @@ trajectory = rovib.run(scene)
 print(f"{len(trajectory)} output times in {trajectory.out_dir}; columns: {', '.join(trajectory.names)}")
 
 
-# %% Columns by coordinate name (headers `r1` or `q_r1`), converted from bohr to Å
+# %% Columns by coordinate name (header `q_NAME`; units in trajectory.units.json), from bohr to Å
 def coordinate(name):
-    return trajectory.columns.get(name, trajectory.columns.get("q_" + name))
+    return trajectory.columns["q_" + name]
 
 
 t = trajectory["t"]  # in the scene's time unit

@@ -30,6 +30,7 @@ __all__ = [
     "evaluate",
     "run",
     "run_ensemble",
+    "resume",
     "from_lab",
     "to_lab",
     "BOHR_IN_ANGSTROM",
@@ -83,10 +84,12 @@ def _rows(x) -> Optional[List[List[float]]]:
 class Trajectory:
     """A finished run: the columns of ``trajectory.csv`` as NumPy arrays, and ``summary.json``.
 
-    ``columns`` maps each CSV header name to its array (``t`` in the scene's time unit,
-    ``summary["time_unit"]``; q in bohr or rad, p in ħ/bohr or ħ, Euler angles in rad, H in
-    hartree). ``units`` maps names to units when the run wrote ``trajectory.units.json``, else it
-    is empty. ``out_dir`` holds every file written (lab.xyz, plots ...).
+    ``columns`` maps each CSV header name to its array: ``t`` (the scene's time unit), ``q_NAME``
+    (bohr or rad), ``p_NAME`` (ħ/bohr or ħ), ``euler_phi``, ``euler_theta``, ``euler_psi`` (rad),
+    ``pe_phi``, ``pe_theta``, ``pe_psi`` (ħ), ``H`` (hartree), and with ``run.euler_unwrapped``
+    ``euler_phi_unwrapped``, ``euler_psi_unwrapped``. ``units`` maps every column to its unit, in
+    file order (from ``trajectory.units.json``). ``out_dir`` holds every file written (lab.xyz,
+    restart.json ...).
     """
 
     out_dir: str
@@ -162,7 +165,9 @@ def read_trajectory(out_dir: PathLike) -> Trajectory:
     summary = _read_json(os.path.join(out_dir, "summary.json")) or {}
     units = _read_json(os.path.join(out_dir, "trajectory.units.json")) or {}
     if "columns" in units and isinstance(units["columns"], dict):
-        units = units["columns"]
+        # JSON objects are unordered: "order" lists the columns in file order.
+        order = units.get("order") or list(units["columns"])
+        units = {name: units["columns"][name] for name in order if name in units["columns"]}
     return Trajectory(out_dir=out_dir, columns=columns, summary=summary, units=units)
 
 
@@ -186,6 +191,29 @@ def run(scene: Union[PathLike, Dict[str, Any]], out_dir: Optional[PathLike] = No
     files = [os.fspath(f) for f in _rovib.run_scene(path, out)]
     if not os.path.exists(os.path.join(out, "trajectory.csv")):
         raise RovibError(f"error: the run wrote no trajectory.csv into {out} (add \"trajectory\" to the scene's outputs)")
+    trajectory = read_trajectory(out)
+    trajectory.files = files
+    return trajectory
+
+
+def resume(out_dir: PathLike, scene: Union[None, PathLike, Dict[str, Any]] = None) -> Trajectory:
+    """Continues the run in ``out_dir`` from its ``restart.json`` as ``rovib run --resume OUT_DIR
+    [SCENE]`` does, and reads the whole trajectory (both parts).
+
+    Without ``scene`` the run continues to its own scene's end (after an interrupt); a scene (a
+    path, or a dict written to ``OUT_DIR/scene.resume.toml``) may change only ``run.end`` (and
+    ``max_energy_error``, ``max_outputs``). With DOP853 every row after the first run's last one
+    is bit for bit the row of one uninterrupted run (README, "Restarts").
+    """
+    out = os.fspath(out_dir)
+    path = None
+    if isinstance(scene, dict):
+        path = os.path.join(out, "scene.resume.toml")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(_rovib.scene_toml(scene))
+    elif scene is not None:
+        path = os.fspath(scene)
+    files = [os.fspath(f) for f in _rovib.resume_scene(out, path)]
     trajectory = read_trajectory(out)
     trajectory.files = files
     return trajectory

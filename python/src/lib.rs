@@ -342,6 +342,15 @@ fn run_scene(py: Python<'_>, path: PathBuf, out_dir: PathBuf) -> PyResult<Vec<Pa
     Ok(report.files)
 }
 
+/// Continues the run in `out_dir` from its restart.json exactly as `rovib run --resume OUT_DIR
+/// [SCENE]` does; returns the files written.
+#[pyfunction]
+#[pyo3(signature = (out_dir, path=None))]
+fn resume_scene(py: Python<'_>, out_dir: PathBuf, path: Option<PathBuf>) -> PyResult<Vec<PathBuf>> {
+    let report = py.detach(|| rovib::cli::run::resume(&out_dir, path.as_deref(), true)).map_err(cli_error)?;
+    Ok(report.files)
+}
+
 /// Runs the ensemble of the scene file at `path` into `out_dir` as `rovib ensemble` does.
 #[pyfunction]
 #[pyo3(signature = (path, out_dir, threads=None))]
@@ -498,6 +507,7 @@ fn _rovib(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(molecule_info, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(run_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(resume_scene, m)?)?;
     m.add_function(wrap_pyfunction!(run_ensemble_scene, m)?)?;
     m.add_function(wrap_pyfunction!(from_lab_frame, m)?)?;
     m.add_function(wrap_pyfunction!(to_lab_frame, m)?)?;

@@ -19,19 +19,28 @@ else:  # pragma: no cover
 H2O_SCENE = os.path.join(ROOT, "scenes", "h2o.toml")
 
 
-def column(trajectory, coordinate, prefix=""):
-    """A trajectory column by coordinate name, whether the header is `NAME` or `q_NAME`."""
-    for name in (prefix + coordinate, ("q_" + coordinate) if not prefix else None):
-        if name and name in trajectory.columns:
-            return trajectory.columns[name]
-    raise KeyError(f"no column for {prefix}{coordinate} in {trajectory.names}")
+def column(trajectory, coordinate, prefix="q_"):
+    """A trajectory column by coordinate name: ``q_NAME`` (or ``p_NAME`` with prefix="p_")."""
+    return trajectory.columns[prefix + coordinate]
 
 
 def energy_column(trajectory):
-    for name in trajectory.names:
-        if name == "H" or name.startswith("H_") or name.startswith("H["):
-            return trajectory.columns[name]
-    raise KeyError(f"no energy column in {trajectory.names}")
+    return trajectory.columns["H"]
+
+
+EULER = ["euler_phi", "euler_theta", "euler_psi"]
+PE = ["pe_phi", "pe_theta", "pe_psi"]
+
+
+def state_at(t, k):
+    """The phase state (atomic units) of row k of a water trajectory."""
+    names = rovib.molecule_info("h2o")["coordinates"]["names"]
+    return {
+        "q": [column(t, n)[k] for n in names],
+        "p": [column(t, n, "p_")[k] for n in names],
+        "euler": [t[c][k] for c in EULER],
+        "pe": [t[c][k] for c in PE],
+    }
 
 
 def test_molecules_lists_h2o_and_info_matches_definition():
@@ -118,27 +127,12 @@ def test_run_conserves_energy_to_the_stated_error_and_matches_output_times(tmp_p
     assert drift == pytest.approx(s["conservation"]["max_abs_energy_error_hartree"], rel=1e-6)
     assert drift < 1e-9
     # The CSV's H, recomputed independently from its own state columns by the G-matrix path.
-    names = rovib.molecule_info("h2o")["coordinates"]["names"]
     for k in (0, 500, 1000):
-        q = [column(t, n)[k] for n in names]
-        p = [column(t, n, "p_")[k] for n in names]
-        euler = [t[c][k] for c in _euler_names(t)]
-        pe = [t[c][k] for c in _pe_names(t)]
-        assert rovib.evaluate("h2o", q=q, p=p, euler=euler, pe=pe)["H"] == pytest.approx(h[k], rel=1e-11)
-
-
-def _euler_names(t):
-    for names in (["phi", "theta", "psi"], ["euler_phi", "euler_theta", "euler_psi"]):
-        if all(n in t.columns for n in names):
-            return names
-    raise KeyError(t.names)
-
-
-def _pe_names(t):
-    for names in (["p_phi", "p_theta", "p_psi"], ["pe_phi", "pe_theta", "pe_psi"], ["p_euler_phi", "p_euler_theta", "p_euler_psi"]):
-        if all(n in t.columns for n in names):
-            return names
-    raise KeyError(t.names)
+        assert rovib.evaluate("h2o", **state_at(t, k))["H"] == pytest.approx(h[k], rel=1e-11)
+    # The units file names every column's unit.
+    assert t.units["t"] == "fs" and t.units["q_r1"] == "bohr" and t.units["q_alpha"] == "rad"
+    assert t.units["p_r1"] == "hbar/bohr" and t.units["pe_phi"] == "hbar" and t.units["H"] == "hartree"
+    assert list(t.units) == t.names
 
 
 @pytest.mark.skipif(tomllib is None, reason="tomllib needs Python 3.11")
@@ -248,21 +242,55 @@ def test_run_ensemble_means_conserve_energy(tmp_path):
     assert abs(t[0] - 3 * kt) < 4 * t_err[0]
 
 
-def test_lab_xyz_reads_in_ase_and_matches_to_lab_of_the_csv(tmp_path):
+def test_lab_xyz_reads_in_ase_with_masses_velocities_and_energies(tmp_path):
     import ase.io
+    from ase import units
 
     t = rovib.run(H2O_SCENE, tmp_path / "out")
     frames = ase.io.read(os.path.join(t.out_dir, "lab.xyz"), index=":")
     assert len(frames) == len(t)
-    names = rovib.molecule_info("h2o")["coordinates"]["names"]
+    info = rovib.molecule_info("h2o")
+    masses = np.asarray(info["atoms"]["masses_da"])
+    hartree_in_ev = 27.211386245988  # CODATA 2018, as rovib writes it
     for k in (0, 400, 1000):
-        state = {
-            "q": [column(t, n)[k] for n in names],
-            "p": [column(t, n, "p_")[k] for n in names],
-            "euler": [t[c][k] for c in _euler_names(t)],
-            "pe": [t[c][k] for c in _pe_names(t)],
-        }
-        x, _ = rovib.to_lab("h2o", state)
-        assert frames[k].get_chemical_symbols() == ["O", "H", "H"]
-        # lab.xyz prints positions to at least 12 decimals in Å.
-        assert np.allclose(frames[k].get_positions(), x, rtol=0, atol=1e-9), k
+        atoms = frames[k]
+        state = state_at(t, k)
+        x, v = rovib.to_lab("h2o", state)
+        assert atoms.get_chemical_symbols() == ["O", "H", "H"]
+        # Full round-trip precision: the positions are the library's to round-off.
+        assert np.allclose(atoms.get_positions(), x, rtol=0, atol=1e-13), k
+        assert np.array_equal(atoms.get_masses(), masses), k
+        # ASE's velocities (Å per ASE time unit) in Å/fs.
+        assert np.allclose(atoms.get_velocities() * units.fs, v, rtol=1e-12, atol=1e-15), k
+        # ASE's potential energy (eV) is U(q) of the same row, by the G-matrix path.
+        u = rovib.evaluate("h2o", q=state["q"])["U"]
+        assert atoms.get_potential_energy() == pytest.approx(u * hartree_in_ev, rel=1e-12, abs=1e-15), k
+        assert atoms.info["H_hartree"] == t["H"][k]
+        # ASE's kinetic energy from its masses and momenta is the Hamiltonian's T (this scene has
+        # no centre-of-mass motion): T + U = H, in ASE's own eV (CODATA 2014), to 1e-8.
+        total_ev = atoms.get_kinetic_energy() + atoms.get_potential_energy()
+        assert total_ev / units.Hartree == pytest.approx(t["H"][k], rel=1e-7), k
+
+
+@pytest.mark.skipif(tomllib is None, reason="tomllib needs Python 3.11")
+def test_resume_continues_a_run_bit_for_bit(tmp_path):
+    with open(H2O_SCENE, "rb") as f:
+        scene = tomllib.load(f)
+    scene["run"]["end"] = 100.0
+    whole = rovib.run(scene, tmp_path / "whole")
+    scene["run"]["end"] = 50.0
+    first = rovib.run(scene, tmp_path / "split")
+    assert len(first) == 51 and os.path.exists(os.path.join(first.out_dir, "restart.json"))
+    scene["run"]["end"] = 100.0
+    split = rovib.resume(first.out_dir, scene)
+    assert len(split) == len(whole) == 101
+    assert split.summary["resumed_from"] == pytest.approx(50.0)
+    for name in whole.names:
+        # After t = 50 fs the continuation is the uninterrupted run, bit for bit.
+        assert np.array_equal(split[name][51:], whole[name][51:]), name
+        assert np.allclose(split[name][:51], whole[name][:51], rtol=1e-8, atol=1e-10), name
+    # A scene that changes the integrator is another run.
+    scene["integrator"]["rtol"] = 1e-9
+    scene["run"]["end"] = 150.0
+    with pytest.raises(rovib.RovibError, match=r"differs from the run being continued.*\[integrator\]"):
+        rovib.resume(first.out_dir, scene)

@@ -97,7 +97,7 @@
 //! about 1e-13 relative at generic orientations (tested to 1e-10), with angles compared modulo
 //! 2π.
 
-use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 pub use crate::hamiltonian::euler_angles;
 use crate::hamiltonian::fast::{BodyState, MetricFactor};
@@ -530,6 +530,30 @@ pub fn from_lab<M, const N: usize, const NA: usize>(
 where
     M: Molecule<N, NA> + ?Sized,
 {
+    let (body, com, report) = from_lab_body(molecule, lab, options)?;
+    let euler = euler_angles(&body.rotation());
+    if euler[1].sin().abs() < MIN_SIN_THETA {
+        return Err(FrameError::EulerSingular { theta: euler[1] });
+    }
+    let state = PhaseState { q: body.q, p: body.p, euler, pe: euler_momenta_from_angular_momentum(&euler, &body.j) };
+    if state.check_finite().is_err() {
+        return Err(FrameError::NonFinite { quantity: "fitted phase state" });
+    }
+    Ok((state, com, report))
+}
+
+/// [`from_lab`] in the body formulation: the orientation as a unit quaternion and the
+/// body-frame `J`, which are defined at every orientation, so that a fitted rotation with
+/// θ = 0 or π (e.g. positions given in the molecule's own body frame) is not an error. The
+/// errors are those of [`from_lab`] except [`FrameError::EulerSingular`].
+pub fn from_lab_body<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    lab: &LabState<NA>,
+    options: &FitOptions<N>,
+) -> Result<(BodyState<N>, CentreOfMass, FitReport), FrameError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
     match lab.is_finite() {
         (false, _) => return Err(FrameError::NonFinite { quantity: "lab positions" }),
         (_, false) => return Err(FrameError::NonFinite { quantity: "lab velocities" }),
@@ -612,11 +636,6 @@ where
         });
     }
 
-    let euler = euler_angles(&rotation);
-    if euler[1].sin().abs() < MIN_SIN_THETA {
-        return Err(FrameError::EulerSingular { theta: euler[1] });
-    }
-
     // Velocities: body frame, centre-of-mass motion removed, then projected onto (J, p).
     let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
     molecule.positions_jacobian(&q, &mut dr);
@@ -625,8 +644,8 @@ where
         u.set_column(i, &(rotation.transpose() * (lab.velocities.column(i) - com.velocity)));
     }
     let (j, p) = projections(&masses, &r, &dr, &u);
-    let pe = euler_momenta_from_angular_momentum(&euler, &j);
-    let state = PhaseState { q, p, euler, pe };
+    let orientation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotation));
+    let state = BodyState { q, p, orientation, j };
 
     // What the projection discarded: u_i minus the velocity field of (ω, q̇) = M⁻¹ (J, p).
     let mut kinetic = KineticMatrices::<N>::default();
@@ -649,7 +668,8 @@ where
         velocity_residual: rms(discarded),
         discarded_kinetic_energy: 0.5 * discarded,
     };
-    if state.check_finite().is_err() || !report.velocity_residual.is_finite() {
+    let finite = state.q.iter().chain(state.p.iter()).chain(state.j.iter()).all(|x| x.is_finite());
+    if !finite || !report.velocity_residual.is_finite() {
         return Err(FrameError::NonFinite { quantity: "fitted phase state" });
     }
     Ok((state, com, report))
@@ -724,7 +744,7 @@ where
         let mut factor = 1.0;
         let mut accepted = false;
         for _ in 0..if converged { 1 } else { 40 } {
-            let step_rotation = nalgebra::Rotation3::new(d_theta * factor).into_inner();
+            let step_rotation = Rotation3::new(d_theta * factor).into_inner();
             let trial_rotation = nearest_rotation(&(rotation * step_rotation))
                 .ok_or(FrameError::NonFinite { quantity: "rotation of the fit" })?;
             let trial_q = q + d_q * factor;

@@ -17,10 +17,13 @@ pub mod integrate;
 pub mod lanes;
 pub mod modes;
 pub mod molecule;
+pub mod polarization;
 pub mod sample;
 pub mod units;
 
-pub use frames::{CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, to_lab, to_lab_body};
+pub use frames::{
+    CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, from_lab_body, to_lab, to_lab_body,
+};
 pub use hamiltonian::{FastSystem, HamiltonianError, HamiltonianSystem, PhaseState};
 pub use molecule::{Atom, Coordinate, KineticMatrices, Molecule, MoleculeVisitor};
 pub use nalgebra;

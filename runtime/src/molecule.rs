@@ -104,7 +104,14 @@ pub trait Molecule<const N: usize, const NA: usize> {
     fn kinetic(&self, q: &SVector<f64, N>, k: &mut KineticMatrices<N>);
 
     /// Their q-derivatives: element `k` of `dk` holds `∂a/∂q_k`, `∂A/∂q_k`, `∂I/∂q_k`.
-    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]);
+    ///
+    /// Only the G-matrix reference path needs them. The default assembles them from
+    /// [`Molecule::kinetic_energy_gradient`] by polarization ([`crate::polarization`]: exact up
+    /// to rounding, `(N + 3)(N + 4)/2` gradient calls); the generator emits a symbolic version
+    /// only on request (`ROVIB_KINETIC_JACOBIAN=generated`), since it grows like `N³`.
+    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]) {
+        crate::polarization::kinetic_jacobian(self, q, dk);
+    }
 
     /// The gradient in q of the kinetic energy `T = ½ Σ m_i |ω × R_i + Σ_j ∂R_i/∂q_j q̇_j|²`
     /// at fixed body-frame angular velocity `omega` and fixed `qdot`; returns `T` as well.
@@ -194,6 +201,27 @@ pub trait Molecule<const N: usize, const NA: usize> {
             }
         }
         u
+    }
+
+    /// The potential's parameters (`[potential.parameters]` of the definition, sorted by name)
+    /// with their compiled-in values as written there; empty for a potential without any.
+    fn parameters(&self) -> &'static [(&'static str, f64)] {
+        &[]
+    }
+
+    /// `U(q)` in hartree with the parameters `params` (one per [`Molecule::parameters`], in
+    /// that order; a shorter slice panics) instead of the compiled-in values. Generated
+    /// molecules with parameters override this; the default ignores `params`.
+    fn potential_with(&self, q: &SVector<f64, N>, params: &[f64]) -> f64 {
+        let _ = params;
+        self.potential(q)
+    }
+
+    /// [`Molecule::potential_gradient`] with the parameters `params` (see
+    /// [`Molecule::potential_with`]).
+    fn potential_gradient_with(&self, q: &SVector<f64, N>, params: &[f64], grad: &mut SVector<f64, N>) -> f64 {
+        let _ = params;
+        self.potential_gradient(q, grad)
     }
 
     /// The reference geometry in atomic units, or `None` if the definition gave none for some

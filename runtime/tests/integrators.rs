@@ -9,7 +9,7 @@ use std::f64::consts::PI;
 
 use rovib_runtime::integrate::{
     Dop853, Dop853Options, GaussLegendre, GaussLegendreOptions, Method, Observer, OdeSystem, Rk4, Rk4Options,
-    SolveError, Stats, solve,
+    SolveError, Stats, fixed_step_count, solve,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -303,6 +303,33 @@ fn every_full_output_interval_gets_the_same_number_of_steps() {
     let method = Method::Rk4(Rk4Options { step: h, ..Default::default() });
     let (_, stats) = final_state(&mut Oscillator, &method, &[1.0, 0.0], 1e6 * h, 100.0 * h);
     assert_eq!(stats.steps, 1_000_000);
+}
+
+/// `fixed_step_count` (what a scene is checked against `max_steps` with, before the run) is
+/// the number of steps the fixed-step driver then takes, counted by running it: whole and
+/// partial last intervals, steps exact and not exact in binary, step longer than the interval.
+#[test]
+fn the_fixed_step_count_known_in_advance_is_the_count_taken() {
+    let h_fs = 0.001 / 0.024_188_843_265_857;
+    for (t_end, interval, step) in [
+        (2.25, 0.5, 0.07),
+        (2.0, 0.5, 0.07),
+        (1e4 * h_fs, 100.0 * h_fs, h_fs),
+        (3.0, 0.3, 0.1),
+        (1.0, 0.25, 5.0),
+        (0.7, 1.0, 0.2),
+        (10.0, 10.0 / 3.0, 1.0 / 7.0),
+    ] {
+        let predicted = fixed_step_count(0.0, t_end, interval, step);
+        for method in [Method::Rk4(Rk4Options { step, ..Default::default() }), gauss(2, step, true)] {
+            let (_, stats) = final_state(&mut Oscillator, &method, &[1.0, 0.0], t_end, interval);
+            assert_eq!(stats.steps, predicted, "t_end {t_end}, interval {interval}, step {step}, {}", method.name());
+        }
+    }
+    // Saturates instead of overflowing; nothing to do for invalid times.
+    assert_eq!(fixed_step_count(0.0, 1e300, 1e290, 5e-324), u64::MAX);
+    assert_eq!(fixed_step_count(0.0, 1.0, 0.5, f64::NAN), 0);
+    assert_eq!(fixed_step_count(0.0, 0.0, 0.5, 0.1), 0);
 }
 
 #[test]

@@ -5,7 +5,8 @@
 //! * Final-state error: the largest difference of any lab-frame atomic position (centre of mass
 //!   removed) at the end time, in bohr. Positions are what the physics sees and, unlike q or the
 //!   Euler angles, do not depend on the coordinates chosen.
-//! * Energy error: max |H(t) − H(0)| / |H(0)| over the output times.
+//! * Energy error: max |H(t) − H(0)| / max(|H(0)|, 1e-3 hartree) over the output times (the
+//!   scale of `rovib run`'s energy guard, `output::energy_scale`).
 //! * Reference: DOP853 at rtol = atol = 1e-14; its own error is estimated by its difference from
 //!   DOP853 at 1e-13 and reported, so that errors below it are read as "at most this".
 //! * Fixed steps start at twice DOP853's mean step at rtol = 1e-6, rounded down to a whole
@@ -21,10 +22,10 @@ use std::time::Instant;
 
 use super::CliError;
 use crate::molecules;
-use crate::output::OutputFile;
+use crate::output::{OutputFile, energy_scale};
 use crate::plot::{Panel, Series, svg};
+use crate::runtime::diagnostic::Compact;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
-use crate::runtime::hamiltonian::hamiltonian;
 use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4Options, Stats, solve};
 use crate::runtime::nalgebra::SMatrix;
 use crate::runtime::{Molecule, MoleculeVisitor};
@@ -46,7 +47,7 @@ pub struct Trial {
     pub stats: Stats,
     /// Largest lab-frame position difference from the reference at the end, bohr.
     pub final_error: f64,
-    /// max |H(t) − H(0)| / |H(0)| at output times.
+    /// max |H(t) − H(0)| / max(|H(0)|, 1e-3 hartree) at output times.
     pub energy_error: f64,
 }
 
@@ -75,6 +76,29 @@ struct Bench<'a> {
     quick: bool,
 }
 
+/// The most bytes one run's states may take: the benchmark keeps every output state of the
+/// reference, its check and the run being measured (three such buffers at once).
+pub const MAX_STATE_BYTES: u64 = 64 << 20;
+
+/// The number of output states a run keeps (`t0`, the grid, `t_end`), or the error when they
+/// would take more than [`MAX_STATE_BYTES`]: a scene with many output times is refused with the
+/// numbers instead of aborting on an allocation.
+fn check_buffer(scene: &Scene, dim: usize) -> Result<usize, CliError> {
+    let outputs = (scene.t_end / scene.output_interval).ceil() + 2.0;
+    let bytes = outputs * dim as f64 * 8.0;
+    if bytes.is_nan() || bytes > MAX_STATE_BYTES as f64 {
+        return Err(CliError::Message(format!(
+            "rovib bench keeps every output state of a run: {} output times × {dim} numbers × 8 bytes = {} MiB, \
+             more than its limit of {} MiB; lengthen run.output_interval (the diagram uses the final state and \
+             the energy at output times, which a few hundred outputs sample well)",
+            outputs - 1.0,
+            Compact(bytes / f64::from(1 << 20)),
+            MAX_STATE_BYTES >> 20
+        )));
+    }
+    Ok(outputs as usize)
+}
+
 /// Lab-frame positions (centre of mass at the origin) of a flat state, bohr.
 fn lab_positions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     system: &ReducedSystem<'_, M, N, NA>,
@@ -92,8 +116,9 @@ impl MoleculeVisitor for Bench<'_> {
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         let scene = self.scene;
         let start = initial_state(&m, scene)?;
-        let h0 = hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
-        let (system, y0) = production_system(&m, scene, &start.state)?;
+        let (system, y0) = production_system(&m, scene, &start.body)?;
+        let h0 = system.energy(&y0).map_err(|e| CliError::context("the initial state", e))?;
+        let outputs = check_buffer(scene, y0.len())?;
 
         // One timed run: the states at output times, the work counters, the best wall time.
         let run = |method: &Method| -> (Result<Vec<f64>, String>, Stats, f64) {
@@ -101,8 +126,7 @@ impl MoleculeVisitor for Bench<'_> {
             let mut spent = 0.0;
             let mut repeats = 0;
             loop {
-                let mut states: Vec<f64> =
-                    Vec::with_capacity(y0.len() * ((scene.t_end / scene.output_interval) as usize + 2));
+                let mut states: Vec<f64> = Vec::with_capacity(y0.len() * outputs);
                 let mut observer = |_t: f64, y: &[f64]| {
                     states.extend_from_slice(y);
                     ControlFlow::Continue(())
@@ -180,7 +204,7 @@ impl MoleculeVisitor for Bench<'_> {
                     let energy_error = states
                         .chunks(dim)
                         .map(|y| match system.energy(y) {
-                            Ok(h) => ((h - h0) / h0).abs(),
+                            Ok(h) => (h - h0).abs() / energy_scale(h0),
                             Err(_) => f64::INFINITY,
                         })
                         .fold(0.0, f64::max);
@@ -266,7 +290,7 @@ fn write_svg(dir: &Path, scene: &Scene, trials: &[Trial], reference_error: f64) 
         Panel {
             title: format!("{}: energy error along the run", scene.molecule.get_ref()),
             x_label: "wall time (s)".into(),
-            y_label: "max |H(t) − H(0)| / |H(0)|".into(),
+            y_label: "max |H(t) − H(0)| / max(|H(0)|, 1e-3 Eh)".into(),
             series: series(|t| t.energy_error),
         },
     ];
@@ -281,11 +305,19 @@ fn fastest(trials: &[Trial], target: f64, error: fn(&Trial) -> f64) -> Option<&T
     trials.iter().filter(|t| t.status.is_ok() && error(t) <= target).min_by(|a, b| a.wall_time.total_cmp(&b.wall_time))
 }
 
-fn parameter_text(t: &Trial) -> String {
+/// A trial's tolerance, or its step in the scene's time unit (and in a.u.).
+fn parameter_text(t: &Trial, scene: &Scene) -> String {
     if t.method == "dop853" {
         format!("rtol = atol = {:.0e}", t.parameter)
-    } else {
+    } else if scene.time_unit.name() == "au" {
         format!("step = {:.4} a.u.", t.parameter)
+    } else {
+        format!(
+            "step = {:.4e} {} ({:.4} a.u.)",
+            t.parameter / scene.time_unit.in_au(),
+            scene.time_unit.name(),
+            t.parameter
+        )
     }
 }
 
@@ -322,7 +354,7 @@ fn write_markdown(
                     s,
                     "| {} | {} | {:.3e} | {} | {:.1e} | {:.1e} |",
                     t.method,
-                    parameter_text(t),
+                    parameter_text(t, scene),
                     t.wall_time,
                     t.stats.rhs_evals,
                     t.final_error,
@@ -330,7 +362,7 @@ fn write_markdown(
                 );
             }
             Err(e) => {
-                let _ = writeln!(s, "| {} | {} | – | – | failed: {} | – |", t.method, parameter_text(t), e);
+                let _ = writeln!(s, "| {} | {} | – | – | failed: {} | – |", t.method, parameter_text(t, scene), e);
             }
         }
     }
@@ -340,7 +372,7 @@ fn write_markdown(
     let _ = writeln!(s, "| --- | --- | --- |");
     for target in [1e-3, 1e-5, 1e-7, 1e-9, 1e-11] {
         let pick = |error: fn(&Trial) -> f64| match fastest(trials, target, error) {
-            Some(t) => format!("{} ({}), {:.2e} s", t.method, parameter_text(t), t.wall_time),
+            Some(t) => format!("{} ({}), {:.2e} s", t.method, parameter_text(t, scene), t.wall_time),
             None => "none of these runs".into(),
         };
         let _ = writeln!(s, "| {target:.0e} | {} | {} |", pick(|t| t.final_error), pick(|t| t.energy_error));

@@ -87,8 +87,8 @@ impl<const N: usize> Sampler<N> for Spread<N> {
 /// Runs the ensemble benchmark of the scene at `path` (which has `[initial]` and `[ensemble]`
 /// and no `[statistics]`) with `trajectories` trajectories (default the scene's).
 pub fn bench(path: &Path, out_dir: Option<&Path>, trajectories: Option<u64>) -> Result<EnsembleBenchReport, CliError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
+    let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)
+        .map_err(CliError::Message)?;
     let name = path.display().to_string();
     let scene = parse_scene(&name, &text)?;
     if !scene.ensemble || text.lines().any(|l| l.trim_start().starts_with("[statistics]")) {
@@ -161,7 +161,7 @@ impl MoleculeVisitor for Visit<'_> {
 
         let ensemble = crate::ensemble::scene::parse_ensemble(&scenes[0].1)?;
         let start = initial_state(&m, self.scene)?;
-        let centre = BodyState::from_phase(&start.state).map_err(|e| CliError::context("the initial state", e))?;
+        let centre = start.body;
         let spread = Spread { centre, seed: ensemble.seed };
         let times = crate::ensemble::output_times(self.scene.t_end, self.scene.output_interval);
         let bound = ensemble.bind(&m, &scenes[0].1, &times)?;

@@ -7,27 +7,34 @@ use super::CliError;
 use crate::ensemble::{EnsembleOptions, EnsembleReport, load_scene, run_ensemble};
 
 /// Runs the ensemble of the scene at `path` into `out_dir` (default `out/SCENE_NAME`), with
-/// `threads` worker threads (default: the scene's, else every core). Ctrl-C stops it cleanly.
+/// `threads` worker threads (default: the scene's, else every core), continuing its checkpoint
+/// with `resume`. Ctrl-C stops it cleanly. Started by an MPI launcher (and built with the `mpi`
+/// feature) it runs as one rank of several: the report is then on rank 0 only (`None` on the
+/// others).
 pub fn ensemble(
     path: &Path,
     out_dir: Option<&Path>,
     threads: Option<usize>,
     quiet: bool,
+    resume: bool,
     lanes: bool,
-) -> Result<EnsembleReport, CliError> {
-    let scene = load_scene(path)?;
+) -> Result<Option<EnsembleReport>, CliError> {
     let out_dir = match out_dir {
         Some(d) => d.to_owned(),
         None => PathBuf::from("out").join(path.file_stem().unwrap_or_default()),
     };
-    let options = EnsembleOptions {
-        out_dir,
-        threads,
-        progress: !quiet && std::io::stderr().is_terminal(),
-        stop: crate::interrupt::flag(),
-        lanes,
-    };
-    run_ensemble(&scene, &options)
+    let mut options = EnsembleOptions::new(out_dir);
+    options.threads = threads;
+    options.progress = !quiet && std::io::stderr().is_terminal();
+    options.stop = crate::interrupt::flag();
+    options.resume = resume;
+    options.lanes = lanes;
+    #[cfg(feature = "mpi")]
+    if crate::ensemble::mpi::launched() {
+        return crate::ensemble::mpi::run(path, &options);
+    }
+    let scene = load_scene(path)?;
+    run_ensemble(&scene, &options).map(Some)
 }
 
 /// The report printed on stdout.

@@ -1,6 +1,6 @@
 //! `rovib eval`: everything about one state, as one JSON object.
 
-use std::io::Read as _;
+use crate::runtime::diagnostic::{MAX_INPUT_BYTES, read_capped, read_text_capped};
 use std::path::Path;
 
 use serde::Deserialize;
@@ -136,14 +136,9 @@ pub fn eval(molecule: &str, state_path: Option<&Path>) -> Result<String, CliErro
         None => None,
         Some(path) => {
             let text = if path.as_os_str() == "-" {
-                let mut s = String::new();
-                std::io::stdin()
-                    .read_to_string(&mut s)
-                    .map_err(|e| CliError::context("cannot read the state from stdin", e))?;
-                s
+                read_capped(std::io::stdin(), "the state from stdin", MAX_INPUT_BYTES).map_err(CliError::Message)?
             } else {
-                std::fs::read_to_string(path)
-                    .map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?
+                read_text_capped(path, MAX_INPUT_BYTES).map_err(CliError::Message)?
             };
             Some(serde_json::from_str(&text).map_err(|e| CliError::context(format!("invalid {file}"), e))?)
         }

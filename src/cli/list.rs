@@ -19,20 +19,20 @@ impl MoleculeVisitor for Describe {
         if N == 0 {
             let _ = writeln!(s, "  coordinates: none (rigid)");
         } else {
-            let coords: Vec<String> = m
-                .coordinates()
-                .iter()
-                .map(|c| {
-                    format!("{} [{} in the definition, {} at run time]", c.name, c.unit.name(), c.unit.atomic().name())
-                })
-                .collect();
+            let coords: Vec<String> =
+                m.coordinates().iter().map(|c| format!("{} [{}]", c.name, c.unit.name())).collect();
             let _ = writeln!(s, "  coordinates: {}", coords.join(", "));
         }
         s
     }
 }
 
+/// The note on units `rovib list` prints once, after the molecules.
+pub const UNIT_NOTE: &str = "Coordinates are listed in the unit their definition declares, which is also the unit of q \
+                             values in a scene without [units]; at run time and in trajectory.csv they are in bohr or rad.";
+
 /// The text `rovib list` prints.
 pub fn list() -> String {
-    molecules::NAMES.iter().filter_map(|name| molecules::visit(name, Describe)).collect::<Vec<_>>().join("\n")
+    let molecules: Vec<String> = molecules::NAMES.iter().filter_map(|name| molecules::visit(name, Describe)).collect();
+    format!("{}\n{UNIT_NOTE}\n", molecules.join("\n"))
 }

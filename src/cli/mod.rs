@@ -53,13 +53,19 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Integrate a scene: write trajectory.csv, lab.xyz and summary.json.
+    /// Integrate a scene: write trajectory.csv (with trajectory.units.json), lab.xyz,
+    /// summary.json and restart.json.
     Run {
-        /// The scene file (see scenes/ and the README).
-        scene: PathBuf,
+        /// The scene file (see scenes/ and the README). With --resume: optional, a scene that
+        /// differs from the stored one only in run.end (to continue further).
+        #[arg(required_unless_present = "resume")]
+        scene: Option<PathBuf>,
         /// Output directory [default: out/SCENE_NAME].
-        #[arg(long)]
+        #[arg(long, conflicts_with = "resume")]
         out: Option<PathBuf>,
+        /// Continue the run in this directory from its restart.json, appending to its files.
+        #[arg(long, value_name = "DIR")]
+        resume: Option<PathBuf>,
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
@@ -72,7 +78,7 @@ pub enum Command {
         /// Output directory [default: out/SCENE_NAME].
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Worker threads [default: the scene's `threads`, else every core].
+        /// Worker threads (per MPI rank) [default: the scene's `threads`, else every core].
         #[arg(long)]
         threads: Option<usize>,
         /// No progress bar and no report on stdout.
@@ -83,6 +89,10 @@ pub enum Command {
         /// trajectories).
         #[arg(long)]
         no_lanes: bool,
+        /// Continue a run that was killed or interrupted from OUT/checkpoint.jsonl: only the
+        /// trajectories not finished there run; the outputs equal an uninterrupted run's.
+        #[arg(long)]
+        resume: bool,
     },
     /// Work-precision diagram: every integrator over a range of tolerances or steps, wall time
     /// against error; writes bench.csv, bench.md and bench.svg.
@@ -153,15 +163,21 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             let json = eval::eval(&molecule, state.as_deref())?;
             say(&format!("{json}\n"))
         }
-        Command::Run { scene, out, quiet } if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) => {
-            run_ensemble(&scene, out.as_deref(), None, quiet, true)
+        Command::Run { scene: Some(scene), out, resume: None, quiet }
+            if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) =>
+        {
+            run_ensemble(&scene, out.as_deref(), None, quiet, false, true)
         }
         Command::Freq { molecule, json } => say(&freq::freq(&molecule, json)?),
-        Command::Ensemble { scene, out, threads, quiet, no_lanes } => {
-            run_ensemble(&scene, out.as_deref(), threads, quiet, !no_lanes)
+        Command::Ensemble { scene, out, threads, quiet, resume, no_lanes } => {
+            run_ensemble(&scene, out.as_deref(), threads, quiet, resume, !no_lanes)
         }
-        Command::Run { scene, out, quiet } => {
-            let report = run::run(&scene, out.as_deref(), quiet)?;
+        Command::Run { scene, out, resume, quiet } => {
+            let report = match (&resume, &scene) {
+                (Some(dir), scene) => run::resume(dir, scene.as_deref(), quiet)?,
+                (None, Some(scene)) => run::run(scene, out.as_deref(), quiet)?,
+                (None, None) => return Err(CliError::Message("give a scene file, or --resume DIR".into())),
+            };
             if !quiet {
                 let c = &report.conservation;
                 let mut text = format!(
@@ -173,6 +189,12 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
                     c.max_relative_energy_error(),
                     c.max_j_change
                 );
+                if let Some(stop) = &report.stopped {
+                    text.push_str(&format!(
+                        "stopped at t = {}: {} = {} (atomic units) left run.stop_outside {}\n",
+                        stop["t"], stop["coordinate"], stop["value_au"], stop["bounds_au"]
+                    ));
+                }
                 for f in &report.files {
                     text.push_str(&format!("wrote {}\n", f.display()));
                 }
@@ -209,9 +231,13 @@ fn run_ensemble(
     out: Option<&std::path::Path>,
     threads: Option<usize>,
     quiet: bool,
+    resume: bool,
     lanes: bool,
 ) -> Result<(), CliError> {
-    let report = ensemble::ensemble(scene, out, threads, quiet, lanes)?;
+    // Under `mpirun` (with the `mpi` feature) only rank 0 has a report to print.
+    let Some(report) = ensemble::ensemble(scene, out, threads, quiet, resume, lanes)? else {
+        return Ok(());
+    };
     if !quiet {
         say(&ensemble::describe(&report))?;
     }
@@ -240,8 +266,20 @@ fn say(text: &str) -> Result<(), CliError> {
 
 /// The error for a molecule name that is not compiled in.
 pub(crate) fn unknown_molecule(name: &str) -> CliError {
+    // Only a name a definition could have (a lowercase identifier) gets "add molecules/NAME.toml":
+    // an empty name would say "molecules/.toml".
+    let definable = name.chars().next().is_some_and(|c| c.is_ascii_lowercase())
+        && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+    let add = if definable {
+        format!("add molecules/{name}.toml and rebuild to add it")
+    } else {
+        "a new molecule needs a name of lowercase letters, digits and `_`, starting with a letter, and its \
+         molecules/NAME.toml"
+            .to_owned()
+    };
     CliError::Message(format!(
-        "unknown molecule `{name}`; the compiled-in molecules are {} (add molecules/{name}.toml and rebuild to add it)",
+        "unknown molecule `{}`; the compiled-in molecules are {} ({add})",
+        name.escape_debug(),
         crate::molecules::NAMES.join(", ")
     ))
 }

@@ -11,15 +11,19 @@ use super::{CliError, unknown_molecule};
 use crate::dir_lock::DirLock;
 use crate::molecules;
 use crate::output::{
-    Conservation, ENERGY_SCALE_FLOOR, LabXyz, RunSummary, TrajectoryCsv, energy_scale, remove_stale_outputs,
+    Conservation, LabXyz, RunSummary, TRAJECTORY_UNITS_FILE, TrajectoryCsv, energy_guard, remove_stale_outputs,
     write_summary,
 };
-use crate::runtime::hamiltonian::hamiltonian;
+use crate::parameters::{WithParameters, scene_parameters};
+use crate::restart::{Dop853Point, FinalState, Restart};
+use crate::runtime::frames::{CentreOfMass, LabState, to_lab_body};
+use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::hamiltonian::{ReducedSystem, Reduction, RotationPart};
-use crate::runtime::integrate::{Observer, OdeSystem, SolveError, Stats, solve};
-use crate::runtime::nalgebra::{SMatrix, Vector3};
+use crate::runtime::integrate::{Dop853, Dop853Resume, Method, Observer, OdeSystem, SolveError, Stats, solve};
+use crate::runtime::nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
 use crate::runtime::{Molecule, MoleculeVisitor};
-use crate::scene::Scene;
+use crate::scene::{Scene, parse_scene};
+use crate::start::frozen_reduction;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 // The initial state and the production system live in `crate::start`; re-exported here for
@@ -38,13 +42,78 @@ pub struct RunReport {
     pub conservation: Conservation,
     /// Wall time of the integration, s.
     pub wall_time: f64,
+    /// Warnings about the scene (also in summary.json), e.g. a start far above the reference
+    /// energy.
+    pub warnings: Vec<String>,
+    /// The stop condition that ended the run (`run.stop_outside`), as in summary.json.
+    pub stopped: Option<serde_json::Value>,
 }
 
 /// Runs the scene at `path`, writing into `out_dir` (default `out/SCENE_NAME`).
 pub fn run(path: &Path, out_dir: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
     let (scene, out_dir) = load_scene(path, out_dir, "")?;
+    visit(&scene, &out_dir, quiet, None)
+}
+
+/// Continues the run in `dir` from its `restart.json` (`rovib run --resume DIR [SCENE]`): with
+/// the scene stored there, or with `scene`, which may change `run.end` (to continue further) but
+/// nothing that would make the continuation a different run. Appends to trajectory.csv and
+/// lab.xyz, rewrites summary.json (this part's work, `resumed_from`) and restart.json.
+pub fn resume(dir: &Path, scene: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
+    let restart = Restart::read(dir)?;
+    let stored = parse_scene(&restart.scene_path, &restart.scene_text)?;
+    let scene = match scene {
+        Some(path) => load_scene(path, Some(dir), "")?.0,
+        None => stored.clone(),
+    };
+    compatible(&scene, &stored, &restart)?;
+    visit(&scene, dir, quiet, Some(&restart))
+}
+
+/// Whether `scene` continues the run that wrote `restart` (with scene `stored`): the same
+/// molecule, integrator, output times, units, outputs and frozen coordinates, and a later end.
+fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), CliError> {
+    let frozen = |s: &Scene| s.frozen.iter().map(|f| f.get_ref().clone()).collect::<Vec<_>>();
+    let parameters =
+        |s: &Scene| s.parameters.iter().map(|(n, v)| (n.get_ref().clone(), v.to_bits())).collect::<Vec<_>>();
+    let differences: Vec<&str> = [
+        (scene.molecule.get_ref() != stored.molecule.get_ref(), "molecule"),
+        (scene.method != stored.method, "[integrator]"),
+        (scene.output_interval.to_bits() != stored.output_interval.to_bits(), "run.output_interval"),
+        (scene.time_unit != stored.time_unit, "units.time"),
+        (scene.outputs != stored.outputs, "run.outputs"),
+        (frozen(scene) != frozen(stored), "run.frozen"),
+        (scene.euler_unwrapped != stored.euler_unwrapped, "run.euler_unwrapped"),
+        (scene.min_metric_pivot != stored.min_metric_pivot, "run.min_metric_pivot"),
+        (parameters(scene) != parameters(stored), "potential.parameters"),
+    ]
+    .into_iter()
+    .filter_map(|(differs, what)| differs.then_some(what))
+    .collect();
+    if !differences.is_empty() {
+        return Err(CliError::Message(format!(
+            "{} differs from the run being continued ({}) in {}: a continuation may change only run.end (and \
+             run.max_energy_error, run.max_outputs)",
+            scene.path,
+            restart.scene_path,
+            differences.join(", ")
+        )));
+    }
+    if scene.t_end <= restart.t_au {
+        return Err(CliError::Message(format!(
+            "the run already reached t = {} {}, and the scene ends at {} {}: give a later run.end to continue",
+            restart.t,
+            restart.time_unit,
+            scene.t_end / scene.time_unit.in_au(),
+            scene.time_unit.name()
+        )));
+    }
+    Ok(())
+}
+
+fn visit(scene: &Scene, out_dir: &Path, quiet: bool, resume: Option<&Restart>) -> Result<RunReport, CliError> {
     let name = scene.molecule.get_ref().clone();
-    let visitor = Run { scene: &scene, out_dir: &out_dir, progress: !quiet && std::io::stderr().is_terminal() };
+    let visitor = Run { scene, out_dir, progress: !quiet && std::io::stderr().is_terminal(), resume };
     molecules::visit(&name, visitor).ok_or_else(|| {
         let e = unknown_molecule(&name);
         CliError::File(scene.source().error(scene.molecule.span(), e.to_string(), "use a name from `rovib list`"))
@@ -55,64 +124,140 @@ struct Run<'a> {
     scene: &'a Scene,
     out_dir: &'a Path,
     progress: bool,
+    resume: Option<&'a Restart>,
+}
+
+/// H(0) − U(reference) above which a run warns that it starts far above the reference energy,
+/// hartree (0.1 hartree = 2.7 eV, about half the dissociation energy of a single bond and 100
+/// times kT at 300 K; a length given in the wrong unit typically lands at or above it: water's
+/// r1 = 1.81 meant in bohr but read in Å starts 0.14 hartree up).
+pub const HIGH_START_ENERGY: f64 = 0.1;
+
+/// The warning for a start at `h0` when the potential at the reference geometry is `u_ref`
+/// (hartree), if it is far above.
+pub fn start_energy_warning(name: &str, h0: f64, u_ref: f64) -> Option<String> {
+    use crate::runtime::units::{HARTREE_IN_EV, HARTREE_IN_WAVENUMBERS};
+    let above = h0 - u_ref;
+    (above > HIGH_START_ENERGY).then(|| {
+        format!(
+            "the start is {:.3} eV ({:.0} cm-1) above the potential at {name}'s reference geometry, more than {:.1} eV: \
+             the molecule may dissociate or leave the potential's valid region (check the scene's units: q values \
+             are in each coordinate's declared unit unless [units] says otherwise)",
+            above * HARTREE_IN_EV,
+            above * HARTREE_IN_WAVENUMBERS,
+            HIGH_START_ENERGY * HARTREE_IN_EV
+        )
+    })
 }
 
 impl MoleculeVisitor for Run<'_> {
     type Output = Result<RunReport, CliError>;
 
+    /// With the scene's `[potential.parameters]` the molecule runs with them (the run-time
+    /// path), else with its compiled-in constants.
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        match scene_parameters(&m, self.scene)? {
+            Some(values) => self.go(WithParameters { molecule: m, values }),
+            None => self.go(m),
+        }
+    }
+}
+
+impl Run<'_> {
+    fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, CliError> {
         let scene = self.scene;
-        let start = initial_state(&m, scene)?;
-        // Fail before writing anything if the initial state is not valid.
-        hamiltonian(&m, &start.state).map_err(|e| CliError::context("the initial state", e))?;
-        let (system, y0) = production_system(&m, scene, &start.state)?;
+        let mut warnings = Vec::new();
+        // Where the run starts: the scene's initial state, or the restart file's state.
+        let (system, y0, com, t0) = match self.resume {
+            None => {
+                let start = initial_state(&m, scene)?;
+                // Fails before anything is written if the initial state is not valid.
+                let (system, y0) = production_system(&m, scene, &start.body)?;
+                if let Some(q_ref) = m.reference_geometry() {
+                    let h0 = system.energy(&y0).map_err(|e| CliError::context("the initial state", e))?;
+                    warnings.extend(start_energy_warning(m.name(), h0, m.potential(&q_ref)));
+                }
+                (system, y0, (start.com_position, start.com_velocity), 0.0)
+            }
+            Some(r) => {
+                let (system, y0) = resumed_system(&m, scene, r)?;
+                (system, y0, (Vector3::from(r.com_position_bohr), Vector3::from(r.com_velocity_bohr_per_au)), r.t_au)
+            }
+        };
+        for w in &warnings {
+            eprintln!("warning: {w}");
+        }
         let layout = layout(system.reduction(), &m);
+        let stops = stop_conditions(&m, scene)?;
 
         // One run per directory, then no file of an earlier run may remain looking like this one's.
         let _lock = DirLock::acquire(self.out_dir)?;
         let mut keep = Vec::new();
         if scene.outputs.trajectory {
-            keep.push("trajectory.csv");
+            keep.extend(["trajectory.csv", TRAJECTORY_UNITS_FILE]);
         }
         if scene.outputs.lab {
             keep.push("lab.xyz");
         }
         remove_stale_outputs(self.out_dir, &keep)?;
 
-        let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
+        let coordinates = m.coordinates();
+        let elements: Vec<&'static str> = m.atoms().iter().map(|a| a.element).collect();
+        let masses: Vec<f64> = m.atoms().iter().map(|a| a.mass_da).collect();
+        let unit = scene.time_unit.name();
+        let records = self.resume.map_or(0, |r| r.outputs_done + 1);
+        let (trajectory, lab) = match self.resume {
+            None => (
+                scene
+                    .outputs
+                    .trajectory
+                    .then(|| TrajectoryCsv::create(self.out_dir, &coordinates, unit, scene.euler_unwrapped))
+                    .transpose()?,
+                scene.outputs.lab.then(|| LabXyz::create(self.out_dir, elements, masses, unit)).transpose()?,
+            ),
+            Some(r) => (
+                scene
+                    .outputs
+                    .trajectory
+                    .then(|| {
+                        TrajectoryCsv::append(self.out_dir, &coordinates, unit, r.euler_unwrapped, records as usize)
+                    })
+                    .transpose()?,
+                scene
+                    .outputs
+                    .lab
+                    .then(|| LabXyz::append(self.out_dir, elements, masses, unit, records as usize))
+                    .transpose()?,
+            ),
+        };
         let mut recorder = Recorder::<M, N, NA> {
             system,
-            trajectory: if scene.outputs.trajectory {
-                Some(TrajectoryCsv::create(self.out_dir, &names)?)
-            } else {
-                None
-            },
-            lab: if scene.outputs.lab {
-                Some(LabXyz::create(
-                    self.out_dir,
-                    m.atoms().iter().map(|a| a.element).collect(),
-                    scene.time_unit.name(),
-                )?)
-            } else {
-                None
-            },
-            diagnostics: scene.outputs.summary,
-            conservation: Conservation::default(),
-            initial_energy: None,
+            trajectory,
+            lab,
+            diagnostics: scene.outputs.summary || scene.outputs.restart,
+            conservation: self.resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
+            initial_energy: self.resume.and_then(|r| r.conservation.initial_energy),
             max_energy_error: scene.max_energy_error,
             layout: layout.clone(),
             time_scale: scene.time_unit.in_au(),
             time_unit: scene.time_unit.name(),
-            com: (start.com_position, start.com_velocity),
+            com,
             progress: self.progress.then(|| progress_bar(scene)),
             stop: crate::interrupt::flag(),
             interrupted: false,
             t_reached: None,
             error: None,
+            // A fixed-step continuation starts the solver at the last output time, which the
+            // first run already wrote.
+            skip_first: self.resume.is_some() && !dop853_continues(scene, self.resume),
+            records,
+            last_y: y0.clone(),
+            stops,
+            stopped: None,
         };
         let mut counted = Counted { inner: system, evaluations: 0 };
         let begin = Instant::now();
-        let result = solve(&mut counted, &scene.method, 0.0, &y0, scene.t_end, scene.output_interval, &mut recorder);
+        let result = integrate(&mut counted, scene, t0, &y0, self.resume, &mut recorder);
         let wall_time = begin.elapsed().as_secs_f64();
         if let Some(bar) = &recorder.progress {
             bar.finish_and_clear();
@@ -122,27 +267,40 @@ impl MoleculeVisitor for Run<'_> {
 
         // The first error is the one reported: a failed record (which stops the solver) comes
         // before the solver's own error, and both before a failure to flush at the end.
-        let (stats, failure) = match result {
-            Ok(stats) => (Some(stats), recorder.error.take().map(|e| format!("the run stopped: {e}"))),
-            Err(e) => (None, Some(format!("the run stopped: {}", describe_failure(&e, scene, &layout)))),
+        let (stats, point, failure) = match result {
+            Ok((stats, point)) => (Some(stats), point, recorder.error.take().map(|e| format!("the run stopped: {e}"))),
+            Err(e) => (None, None, Some(format!("the run stopped: {}", describe_failure(&e, scene, &layout)))),
         };
         let failure = failure.or_else(|| flushed.err().map(|e| format!("the run stopped: {e}")));
         let interrupted = recorder.interrupted && failure.is_none();
+        let stopped = recorder.stopped.take().filter(|_| failure.is_none());
         let t_reached = recorder.t_reached.map(|t| t / scene.time_unit.in_au());
         let mut files: Vec<PathBuf> = Vec::new();
         if scene.outputs.trajectory {
             files.push(self.out_dir.join("trajectory.csv"));
+            files.push(self.out_dir.join(TRAJECTORY_UNITS_FILE));
         }
         if scene.outputs.lab {
             files.push(self.out_dir.join("lab.xyz"));
         }
         let mut summary_error = None;
+        if scene.outputs.restart
+            && failure.is_none()
+            && let Some(t) = recorder.t_reached
+        {
+            let restart = recorder.restart(scene, t, point.as_ref(), &layout);
+            match restart.and_then(|r| r.write(self.out_dir)) {
+                Ok(path) => files.push(path),
+                Err(e) => summary_error = Some(e),
+            }
+        }
         if scene.outputs.summary {
             let summary = RunSummary {
                 scene,
                 molecule: m.name(),
                 failure: failure.as_deref(),
                 interrupted,
+                stopped: stopped.as_ref(),
                 t_reached,
                 state_layout: &layout,
                 zero_angular_momentum: system.reduction().rotation != RotationPart::Free,
@@ -150,12 +308,14 @@ impl MoleculeVisitor for Run<'_> {
                 rhs_evaluations: counted.evaluations,
                 wall_time,
                 conservation: &recorder.conservation,
-                com_position: start.com_position,
-                com_velocity: start.com_velocity,
+                com_position: com.0,
+                com_velocity: com.1,
+                resumed_from: self.resume.map(|r| r.t),
+                warnings: &warnings,
             };
             match write_summary(self.out_dir, &summary.to_json()) {
                 Ok(path) => files.push(path),
-                Err(e) => summary_error = Some(e),
+                Err(e) => summary_error = summary_error.or(Some(e)),
             }
         }
         let where_ = format!("output so far is in {}", self.out_dir.display());
@@ -163,10 +323,15 @@ impl MoleculeVisitor for Run<'_> {
             (Some(f), _, Some(s)) => Some(format!("{f}; also {s} (no summary.json); {where_}")),
             (Some(f), _, None) => Some(format!("{f}; {where_}")),
             (None, true, s) => Some(format!(
-                "interrupted at t = {} {}{}; {where_}",
+                "interrupted at t = {} {}{}; {where_}{}",
                 t_reached.unwrap_or(0.0),
                 scene.time_unit.name(),
-                s.map(|s| format!("; {s} (no summary.json)")).unwrap_or_default()
+                s.map(|s| format!("; {s} (no summary.json)")).unwrap_or_default(),
+                if scene.outputs.restart {
+                    format!("; continue with `rovib run --resume {}`", self.out_dir.display())
+                } else {
+                    String::new()
+                }
             )),
             (None, false, Some(s)) => Some(s),
             (None, false, None) => None,
@@ -175,8 +340,115 @@ impl MoleculeVisitor for Run<'_> {
             return Err(CliError::Message(message));
         }
         let stats = stats.unwrap_or_default();
-        Ok(RunReport { out_dir: self.out_dir.to_owned(), files, stats, conservation: recorder.conservation, wall_time })
+        Ok(RunReport {
+            out_dir: self.out_dir.to_owned(),
+            files,
+            stats,
+            conservation: recorder.conservation,
+            wall_time,
+            warnings,
+            stopped,
+        })
     }
+}
+
+/// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
+type StopCondition = (usize, &'static str, [f64; 2]);
+
+/// `run.stop_outside` bound to the molecule; an unknown name is an error at its place.
+fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+) -> Result<Vec<StopCondition>, CliError> {
+    let coords = m.coordinates();
+    let names: Vec<&str> = coords.iter().map(|c| c.name).collect();
+    scene
+        .stop_outside
+        .iter()
+        .map(|(name, [low, high])| {
+            let k = crate::start::find_name(
+                &scene.source(),
+                &names,
+                name,
+                || format!("{} has no coordinate `{}` (in run.stop_outside)", m.name(), name.get_ref()),
+                |known| format!("the coordinates of {} are {}", m.name(), known.join(", ")),
+            )?;
+            let to_au = |x: f64| scene.units.coordinate_to_au(coords[k].unit, x);
+            Ok((k, coords[k].name, [to_au(*low), to_au(*high)]))
+        })
+        .collect()
+}
+
+/// Whether a resumed run continues DOP853 from its own continuation point (else it restarts the
+/// solver at the last output time).
+fn dop853_continues(scene: &Scene, resume: Option<&Restart>) -> bool {
+    matches!(scene.method, Method::Dop853(_)) && resume.is_some_and(|r| r.dop853.is_some())
+}
+
+/// Runs the solver: fresh from `(t0, y0)`, or continuing `resume`. Returns the work and, for
+/// DOP853, where it stood at the end.
+fn integrate<S: OdeSystem, O: Observer>(
+    system: &mut S,
+    scene: &Scene,
+    t0: f64,
+    y0: &[f64],
+    resume: Option<&Restart>,
+    observer: &mut O,
+) -> Result<(Stats, Option<Dop853Resume>), SolveError<S::Error>> {
+    let (t_end, interval) = (scene.t_end, scene.output_interval);
+    match (&scene.method, resume) {
+        (Method::Dop853(o), None) => {
+            Dop853::new(system.dim(), *o)?.integrate_resumable(system, 0.0, y0, t_end, interval, observer)
+        }
+        (Method::Dop853(o), Some(r)) if dop853_continues(scene, resume) => {
+            let point = r.dop853.as_ref().expect("checked by dop853_continues").to_resume(r.outputs_done);
+            if point.y.len() != system.dim() {
+                return Err(SolveError::InvalidInput(format!(
+                    "the restart file's DOP853 state has {} components, the system {}",
+                    point.y.len(),
+                    system.dim()
+                )));
+            }
+            Dop853::new(system.dim(), *o)?.resume(system, 0.0, &point, t_end, interval, observer)
+        }
+        (method, _) => Ok((solve(system, method, t0, y0, t_end, interval, observer)?, None)),
+    }
+}
+
+/// The system and flat state a resumed run continues from: the scene's frozen coordinates, the
+/// `J = 0` reduction if the first run had it, the restart file's state as the template.
+fn resumed_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &'m M,
+    scene: &Scene,
+    r: &Restart,
+) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), CliError> {
+    let bad = |what: String| CliError::Message(format!("the restart file does not fit {}: {what}", m.name()));
+    if r.molecule != m.name() {
+        return Err(bad(format!("it is of {}", r.molecule)));
+    }
+    if r.state.q.len() != N || r.state.p.len() != N {
+        return Err(bad(format!("{} coordinates and {} momenta, expected {N}", r.state.q.len(), r.state.p.len())));
+    }
+    let [w, x, y, z] = r.state.orientation;
+    let orientation = UnitQuaternion::try_new(Quaternion::new(w, x, y, z), 0.0)
+        .ok_or_else(|| bad("the orientation quaternion is zero".into()))?;
+    let body = BodyState {
+        q: SVector::from_column_slice(&r.state.q),
+        p: SVector::from_column_slice(&r.state.p),
+        orientation,
+        j: Vector3::from(r.state.j),
+    };
+    let mut reduction = frozen_reduction(m, scene)?;
+    if r.zero_angular_momentum {
+        reduction.rotation = RotationPart::ZeroAngularMomentum {
+            orientation: scene.outputs.lab || scene.outputs.trajectory || reduction.active_count() == 0,
+        };
+    }
+    let system = ReducedSystem::from_body(m, reduction, &body).with_min_pivot(scene.min_metric_pivot);
+    if system.dim() != r.y.len() {
+        return Err(bad(format!("its state has {} components, the run's system {}", r.y.len(), system.dim())));
+    }
+    Ok((system, r.y.clone()))
 }
 
 fn progress_bar(scene: &Scene) -> ProgressBar {
@@ -281,6 +553,16 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     /// The last output time recorded, a.u.
     t_reached: Option<f64>,
     error: Option<String>,
+    /// Whether to pass over the first call (a continuation's start, already written).
+    skip_first: bool,
+    /// Output records in the files so far (the next one is number `records` of the grid).
+    records: u64,
+    /// The flat state at the last output recorded.
+    last_y: Vec<f64>,
+    /// `run.stop_outside`: coordinate index, name, bounds in atomic units.
+    stops: Vec<StopCondition>,
+    /// The stop condition met, for summary.json.
+    stopped: Option<serde_json::Value>,
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
@@ -299,34 +581,71 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         if self.diagnostics {
             self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
         }
-        let change = (energy - h0).abs();
-        let scale = energy_scale(h0);
-        let drift = change / scale;
-        // NaN fails too: a non-finite energy is a runaway as well.
-        if drift.is_nan() || drift > self.max_energy_error {
-            let e = format!(
-                "the energy changed by {change:.3e} hartree from H(0) = {h0} hartree, {drift:.1e} relative to \
-                 max(|H(0)|, {ENERGY_SCALE_FLOOR:e} hartree) = {scale:e} hartree, more than run.max_energy_error = \
-                 {:e} (the step is too large or the tolerances too loose for this motion; reduce them)",
-                self.max_energy_error
-            );
-            return Err(at(&e, y, &self.layout));
-        }
+        energy_guard(h0, energy, self.max_energy_error).map_err(|e| at(&e, y, &self.layout))?;
         if let Some(csv) = &mut self.trajectory {
-            let values = phase.q.iter().chain(phase.p.iter()).chain(phase.euler.iter()).chain(phase.pe.iter());
-            csv.row(t_out, values.copied().chain([energy]))?;
+            let (euler, pe) = (phase.euler.into(), phase.pe.into());
+            csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, energy)?;
         }
         if let Some(xyz) = &mut self.lab {
-            let mut r = SMatrix::<f64, 3, NA>::zeros();
-            self.system.molecule().positions(&body.q, &mut r);
-            let com = self.com.0 + self.com.1 * t;
-            let lab = rotation * r;
-            xyz.frame(t_out, energy, (0..NA).map(|i| (lab.column(i) + com).into()))?;
+            let com = CentreOfMass { position: self.com.0 + self.com.1 * t, velocity: self.com.1 };
+            let lab: LabState<NA> =
+                to_lab_body(self.system.molecule(), &body, &com).map_err(|e| at(&e, y, &self.layout))?;
+            let potential = self.system.molecule().potential(&body.q);
+            let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
+            xyz.frame(t_out, energy, potential, atoms)?;
+        }
+        self.last_y.copy_from_slice(y);
+        self.records += 1;
+        if let Some(&(k, name, [low, high])) =
+            self.stops.iter().find(|(k, _, [lo, hi])| !(*lo..=*hi).contains(&body.q[*k]))
+        {
+            self.stopped = Some(serde_json::json!({
+                "coordinate": name,
+                "value_au": body.q[k],
+                "bounds_au": [low, high],
+                "t": t_out,
+                "checked": "at output times",
+            }));
         }
         if let Some(bar) = &self.progress {
             bar.inc(1);
         }
         Ok(())
+    }
+
+    /// The restart file for a run that reached output time `t` (a.u.), with DOP853's
+    /// continuation point if it has one.
+    fn restart(&self, scene: &Scene, t: f64, point: Option<&Dop853Resume>, layout: &str) -> Result<Restart, String> {
+        let body = self.system.expand_body(&self.last_y).map_err(|e| format!("cannot write the restart file: {e}"))?;
+        let phase = body.to_phase();
+        let q = body.orientation.quaternion();
+        let m = self.system.molecule();
+        Ok(Restart {
+            format: crate::restart::FORMAT.to_owned(),
+            scene_path: scene.path.clone(),
+            scene_text: scene.text.clone(),
+            molecule: m.name().to_owned(),
+            t_au: t,
+            t: t / self.time_scale,
+            time_unit: self.time_unit.to_owned(),
+            outputs_done: self.records.saturating_sub(1),
+            state: FinalState {
+                q: body.q.as_slice().to_vec(),
+                p: body.p.as_slice().to_vec(),
+                orientation: [q.w, q.i, q.j, q.k],
+                j: body.j.into(),
+                euler: phase.euler.into(),
+                pe: phase.pe.into(),
+            },
+            y: self.last_y.clone(),
+            state_layout: layout.to_owned(),
+            zero_angular_momentum: self.system.reduction().rotation != RotationPart::Free,
+            dop853: point.map(Dop853Point::from_resume),
+            com_position_bohr: self.com.0.into(),
+            com_velocity_bohr_per_au: self.com.1.into(),
+            conservation: self.conservation.clone(),
+            euler_unwrapped: self.trajectory.as_ref().and_then(TrajectoryCsv::last_unwrapped),
+        })
     }
 
     fn flush(&mut self) -> Result<(), String> {
@@ -342,9 +661,15 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Recorder<'_, M, N, NA> {
     fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
+        if std::mem::take(&mut self.skip_first) {
+            return ControlFlow::Continue(());
+        }
         match self.record(t, y) {
             Ok(()) => {
                 self.t_reached = Some(t);
+                if self.stopped.is_some() {
+                    return ControlFlow::Break(());
+                }
                 // After a complete record: the files end on a whole row and a whole frame.
                 if self.stop.load(Ordering::SeqCst) {
                     self.interrupted = true;

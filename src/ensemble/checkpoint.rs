@@ -1,11 +1,18 @@
 //! Checkpoint file of an ensemble: one JSON line per finished block, so a killed run resumes.
 //!
-//! The first line is a [`Header`] (format, scene hash, seed, trajectory count, block size); each
-//! further line is one block's index and [`Outcome`]. Every line is written whole, flushed and
-//! `fsync`ed before the next block is recorded, so a run killed at any moment leaves at most one
-//! torn last line, which [`Checkpoint::resume`] drops (and truncates away). Floats go through
+//! The first line is a [`Header`] (format, scene hash, seed, trajectory count, block size). Then
+//! optionally one `merged` line, the outcome of blocks `0..merged` already merged in block order
+//! (what an uninterrupted run holds at that point), then one line per further finished block
+//! (index and [`Outcome`]), in the order they finished. Every batch of lines is written whole,
+//! flushed and `fsync`ed before the next is recorded, so a run killed at any moment leaves at most
+//! one torn last line, which [`Checkpoint::resume`] drops (and truncates away). Floats go through
 //! serde_json with `float_roundtrip`, so a resumed run merges exactly the numbers the killed run
 //! computed and its outputs are byte-identical to an uninterrupted run's.
+//!
+//! [`Checkpoint::compact`] rewrites the file (a temporary file, synced, then renamed over the old
+//! one, so either the old or the new file is there after a crash) as the header, the merged
+//! prefix and the blocks still out of order: the file stays a few blocks long however many
+//! trajectories the ensemble has.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -46,11 +53,27 @@ impl Header {
     }
 }
 
-/// One recorded block.
+/// One recorded block, or the merged outcome of the first blocks.
 #[derive(Serialize, Deserialize)]
-struct Line {
-    block: u64,
-    outcome: Outcome,
+#[serde(untagged, deny_unknown_fields)]
+enum Line {
+    Block { block: u64, outcome: Outcome },
+    Merged { merged: u64, outcome: Outcome },
+}
+
+/// What a checkpoint holds: the merged outcome of blocks `0..merged.0` (if any were merged) and
+/// the outcomes of further finished blocks by index.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Resumed {
+    /// Blocks `0..n` merged in block order, and their outcome.
+    pub merged: Option<(u64, Outcome)>,
+    /// Other finished blocks (all at or past the merged ones).
+    pub blocks: BTreeMap<u64, Outcome>,
+}
+
+fn line(bytes: &mut Vec<u8>, line: &Line) {
+    serde_json::to_writer(&mut *bytes, line).expect("an outcome serialises");
+    bytes.push(b'\n');
 }
 
 /// FNV-1a (64 bit) of `bytes`: stable across platforms and Rust versions, unlike `DefaultHasher`.
@@ -103,8 +126,8 @@ impl Checkpoint {
     }
 
     /// Opens the checkpoint at `path` to continue it: checks its header against `header` and
-    /// returns the blocks already recorded. A torn last line (a run killed mid-write) is dropped.
-    pub fn resume(path: &Path, header: &Header) -> Result<(Self, BTreeMap<u64, Outcome>), CheckpointError> {
+    /// returns what it holds. A torn last line (a run killed mid-write) is dropped.
+    pub fn resume(path: &Path, header: &Header) -> Result<(Self, Resumed), CheckpointError> {
         let fail = |line: Option<usize>, message: String| CheckpointError { path: path.to_owned(), line, message };
         let text = std::fs::read_to_string(path)
             .map_err(|e| fail(None, format!("cannot read the checkpoint to resume ({e}); run without --resume")))?;
@@ -123,19 +146,34 @@ impl Checkpoint {
                 ),
             ));
         }
-        let mut done = BTreeMap::new();
+        let mut resumed = Resumed::default();
         for (i, l) in lines.enumerate() {
             let n = i + 2;
             let line: Line = serde_json::from_str(l)
                 .map_err(|e| fail(Some(n), format!("not a block record ({e}); delete this line")))?;
-            if line.block >= header.blocks() {
-                return Err(fail(
-                    Some(n),
-                    format!("block {} is past the last block {}", line.block, header.blocks() - 1),
-                ));
-            }
-            if done.insert(line.block, line.outcome).is_some() {
-                return Err(fail(Some(n), format!("block {} recorded twice; delete this line", line.block)));
+            match line {
+                Line::Merged { merged, outcome } if n == 2 && merged <= header.blocks() => {
+                    resumed.merged = Some((merged, outcome));
+                }
+                Line::Merged { .. } => {
+                    return Err(fail(
+                        Some(n),
+                        "a merged record must be the second line and within the ensemble".into(),
+                    ));
+                }
+                Line::Block { block, outcome } => {
+                    if block >= header.blocks() {
+                        return Err(fail(
+                            Some(n),
+                            format!("block {block} is past the last block {}", header.blocks() - 1),
+                        ));
+                    }
+                    if resumed.merged.as_ref().is_some_and(|(m, _)| block < *m)
+                        || resumed.blocks.insert(block, outcome).is_some()
+                    {
+                        return Err(fail(Some(n), format!("block {block} recorded twice; delete this line")));
+                    }
+                }
             }
         }
         let mut file = OpenOptions::new()
@@ -146,20 +184,76 @@ impl Checkpoint {
         file.set_len(end)
             .and_then(|()| file.seek(SeekFrom::Start(end)).map(drop))
             .map_err(|e| fail(None, format!("cannot drop the torn last line: {e}")))?;
-        Ok((Self { file, path: path.to_owned() }, done))
+        Ok((Self { file, path: path.to_owned() }, resumed))
     }
 
     /// Records `block`'s outcome, durably (written, flushed and synced) before returning.
     pub fn append(&mut self, block: u64, outcome: &Outcome) -> Result<(), CheckpointError> {
-        let text = serde_json::to_string(&Line { block, outcome: outcome.clone() }).expect("an outcome serialises");
-        self.write_line(&text)
+        self.append_all(&[(block, outcome)])
+    }
+
+    /// Records several blocks with one write and one sync.
+    pub fn append_all(&mut self, blocks: &[(u64, &Outcome)]) -> Result<(), CheckpointError> {
+        let mut bytes = Vec::new();
+        for &(block, outcome) in blocks {
+            line(&mut bytes, &Line::Block { block, outcome: outcome.clone() });
+        }
+        self.write_bytes(&bytes)
+    }
+
+    /// Rewrites the checkpoint as `header`, the outcome `merged` of blocks `0..next` and the
+    /// further finished blocks `pending`, atomically (temporary file, sync, rename, sync of the
+    /// folder), and goes on appending to the new file.
+    pub fn compact(
+        &mut self,
+        header: &Header,
+        next: u64,
+        merged: &Outcome,
+        pending: &BTreeMap<u64, Outcome>,
+    ) -> Result<(), CheckpointError> {
+        let err = |e: std::io::Error| CheckpointError {
+            path: self.path.clone(),
+            line: None,
+            message: format!("cannot rewrite the checkpoint: {e}"),
+        };
+        let mut bytes = serde_json::to_vec(header).expect("a header serialises");
+        bytes.push(b'\n');
+        if next > 0 {
+            line(&mut bytes, &Line::Merged { merged: next, outcome: merged.clone() });
+        }
+        for (&block, outcome) in pending {
+            line(&mut bytes, &Line::Block { block, outcome: outcome.clone() });
+        }
+        let mut name = self.path.file_name().unwrap_or_default().to_owned();
+        name.push(".tmp");
+        let tmp = self.path.with_file_name(name);
+        let mut file = File::create(&tmp).map_err(err)?;
+        file.write_all(&bytes).and_then(|()| file.sync_all()).map_err(err)?;
+        std::fs::rename(&tmp, &self.path).map_err(err)?;
+        // The rename is durable once the folder is synced (where folders can be opened).
+        if let Some(dir) =
+            self.path.parent().and_then(|d| File::open(if d.as_os_str().is_empty() { Path::new(".") } else { d }).ok())
+        {
+            let _ = dir.sync_all();
+        }
+        self.file = OpenOptions::new().append(true).open(&self.path).map_err(err)?;
+        Ok(())
+    }
+
+    /// The checkpoint file.
+    pub fn path(&self) -> &Path {
+        &self.path
     }
 
     fn write_line(&mut self, text: &str) -> Result<(), CheckpointError> {
         let mut bytes = Vec::with_capacity(text.len() + 1);
         bytes.extend_from_slice(text.as_bytes());
         bytes.push(b'\n');
-        self.file.write_all(&bytes).and_then(|()| self.file.flush()).and_then(|()| self.file.sync_data()).map_err(|e| {
+        self.write_bytes(&bytes)
+    }
+
+    fn write_bytes(&mut self, bytes: &[u8]) -> Result<(), CheckpointError> {
+        self.file.write_all(bytes).and_then(|()| self.file.flush()).and_then(|()| self.file.sync_data()).map_err(|e| {
             CheckpointError {
                 path: self.path.clone(),
                 line: None,
@@ -207,16 +301,46 @@ mod tests {
         let mut f = OpenOptions::new().append(true).open(&path).unwrap();
         f.write_all(b"{\"block\":1,\"outco").unwrap();
         drop(f);
-        let (mut c, done) = Checkpoint::resume(&path, &header).unwrap();
+        let (mut c, resumed) = Checkpoint::resume(&path, &header).unwrap();
+        let done = resumed.blocks;
+        assert_eq!(resumed.merged, None);
         assert_eq!(done.keys().copied().collect::<Vec<_>>(), vec![0, 2]);
         // Bit-exact floats, not merely close ones.
         assert_eq!(done[&0], outcome(0));
         assert_eq!(done[&2], outcome(2));
         c.append(1, &outcome(1)).unwrap();
         drop(c);
-        let (_, done) = Checkpoint::resume(&path, &header).unwrap();
-        assert_eq!(done.len(), 3);
-        assert_eq!(done[&1], outcome(1));
+        let (_, resumed) = Checkpoint::resume(&path, &header).unwrap();
+        assert_eq!(resumed.blocks.len(), 3);
+        assert_eq!(resumed.blocks[&1], outcome(1));
+    }
+
+    #[test]
+    fn compaction_keeps_the_merged_prefix_and_the_blocks_out_of_order_exactly() {
+        let path = dir("compact");
+        let header = Header::new(b"scene", 7, 640, 64);
+        let mut c = Checkpoint::create(&path, &header).unwrap();
+        c.append_all(&[(0, &outcome(0)), (1, &outcome(1)), (4, &outcome(4))]).unwrap();
+        let mut merged = outcome(0);
+        merged.merge(&outcome(1));
+        let pending = BTreeMap::from([(4, outcome(4))]);
+        c.compact(&header, 2, &merged, &pending).unwrap();
+        c.append(3, &outcome(3)).unwrap();
+        drop(c);
+        assert_eq!(std::fs::read_to_string(&path).unwrap().lines().count(), 4);
+        assert!(!path.with_file_name("checkpoint.jsonl.tmp").exists());
+        let (_, resumed) = Checkpoint::resume(&path, &header).unwrap();
+        assert_eq!(resumed.merged, Some((2, merged)));
+        assert_eq!(resumed.blocks.keys().copied().collect::<Vec<_>>(), vec![3, 4]);
+        assert_eq!(resumed.blocks[&3], outcome(3));
+        // A block below the merged prefix is a duplicate.
+        let mut f = OpenOptions::new().append(true).open(&path).unwrap();
+        f.write_all(serde_json::to_string(&Line::Block { block: 1, outcome: outcome(1) }).unwrap().as_bytes()).unwrap();
+        f.write_all(b"\n").unwrap();
+        drop(f);
+        let e = Checkpoint::resume(&path, &header).err().unwrap();
+        assert_eq!(e.line, Some(5));
+        assert!(e.to_string().contains("recorded twice"), "{e}");
     }
 
     #[test]

@@ -70,6 +70,8 @@ struct Feeder<'a, 'm, M, const N: usize, const NA: usize> {
     slots: Vec<Option<Slot<'m, M, N, NA>>>,
     results: Vec<Option<Fate>>,
     first: u64,
+    /// [`super::runner::PANIC_HOOK`], as the scalar path honours it.
+    panic_at: Option<u64>,
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, '_, M, N, NA> {
@@ -86,6 +88,9 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             if self.stop.load(Ordering::Relaxed) {
                 self.set(index, Fate::Interrupted);
                 continue;
+            }
+            if self.panic_at == Some(index) {
+                panic!("{}={index}: a deliberate panic (test hook)", super::runner::PANIC_HOOK);
             }
             let failure = |reason: &str, time: Option<f64>, detail: String| Failure {
                 index,
@@ -187,6 +192,7 @@ where
         slots: (0..LANES).map(|_| None).collect(),
         results: (0..count).map(|_| None).collect(),
         first: indices.start,
+        panic_at: super::runner::panic_hook(),
     };
     let mut system = ProductionLanes::new(plan.molecule, plan.min_pivot);
     if solver.integrate(&mut system, 0.0, plan.t_end, plan.interval, &mut feeder).is_err() {

@@ -12,15 +12,26 @@
 //! blocks of [`runner::BLOCK`] consecutive indices, each block's accumulators are built in index
 //! order and blocks are merged in index order. The statistics (and so `ensemble.csv`,
 //! `histograms.csv`, `correlations.csv` and the plots) are therefore bit-identical whatever the
-//! number of threads; only the wall time, throughput and thread count in `summary.json` differ.
+//! number of threads or MPI ranks ([`schedule`] hands out the blocks and merges them in order);
+//! only the wall time, throughput, thread and rank counts in `summary.json` differ.
+//!
+//! # Checkpoints
+//!
+//! Every finished block is recorded in `OUT/checkpoint.jsonl` ([`checkpoint`]); a run killed at
+//! any point continues with [`EnsembleOptions::resume`] (`rovib ensemble --resume`) from the
+//! blocks already recorded, with the same final outputs as an uninterrupted run. The checkpoint
+//! is removed when the ensemble completes.
 
 pub mod checkpoint;
 pub mod lanes;
+#[cfg(feature = "mpi")]
+pub mod mpi;
 pub mod output;
 mod plot;
 pub mod quantity;
 pub mod runner;
 pub mod scene;
+pub mod schedule;
 mod states_file;
 pub mod states_xyz;
 
@@ -30,10 +41,11 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use rayon::prelude::*;
 
+use self::checkpoint::{Checkpoint, Header, Resumed};
 use self::runner::{Accumulators, BLOCK, Outcome, Plan, Progress, run_block};
-use self::scene::{Bound, EnsembleScene, parse_ensemble};
+use self::scene::{Bound, EnsembleScene, MethodSpec, parse_ensemble};
+use self::schedule::{BlockResult, Collector, Remote, Work, block_range, caught, coordinate};
 use crate::cli::{CliError, unknown_molecule};
 use crate::molecules;
 use crate::runtime::sample::{self, Sampler};
@@ -57,10 +69,17 @@ pub struct EnsembleOptions {
     /// Run trajectories on SIMD lanes where possible (default; the results are the same bit
     /// for bit, see `lanes`); `false` runs one trajectory at a time.
     pub lanes: bool,
+    /// Record finished blocks in `out_dir/checkpoint.jsonl` (removed when the ensemble
+    /// completes). A run without `resume` refuses to start over an existing checkpoint.
+    pub checkpoint: bool,
+    /// Continue from `out_dir/checkpoint.jsonl` (a run that was killed or interrupted): only the
+    /// blocks not recorded there run, and the outputs are those of an uninterrupted run.
+    pub resume: bool,
 }
 
 impl EnsembleOptions {
-    /// Outputs into `out_dir`, threads from the scene, no progress bar, a stop flag of its own.
+    /// Outputs into `out_dir`, threads from the scene, no progress bar, a stop flag of its own,
+    /// a checkpoint, no resume.
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
         Self {
             out_dir: out_dir.into(),
@@ -68,6 +87,41 @@ impl EnsembleOptions {
             progress: false,
             stop: Arc::new(AtomicBool::new(false)),
             lanes: true,
+            checkpoint: true,
+            resume: false,
+        }
+    }
+}
+
+/// The checkpoint file's name in the output folder.
+pub const CHECKPOINT_FILE: &str = "checkpoint.jsonl";
+
+/// How this process takes part in the run.
+pub enum Link<'a> {
+    /// Alone: it runs every block and writes the outputs.
+    Alone,
+    /// MPI rank 0: it hands out the blocks, runs some, merges all and writes the outputs.
+    Root(&'a mut dyn Remote),
+    /// Another MPI rank: it runs the blocks rank 0 gives it and writes nothing.
+    Worker(&'a mut dyn Serve),
+}
+
+/// A process that runs blocks for rank 0 (see [`mpi`](self)).
+pub trait Serve {
+    /// Asks rank 0 for blocks, runs them with `work` and sends their outcomes back, until rank 0
+    /// has no more.
+    fn serve(&mut self, work: &Work<'_>) -> Result<(), CliError>;
+
+    /// Processes in all.
+    fn ranks(&self) -> usize;
+}
+
+impl Link<'_> {
+    fn ranks(&self) -> usize {
+        match self {
+            Link::Alone => 1,
+            Link::Root(r) => r.ranks(),
+            Link::Worker(w) => w.ranks(),
         }
     }
 }
@@ -108,8 +162,14 @@ pub struct EnsembleReport {
     pub units: Vec<&'static str>,
     /// Wall time of the trajectories (sampling, integration, statistics), s.
     pub wall_time: f64,
-    /// Worker threads used.
+    /// Worker threads used (by each process).
     pub threads: usize,
+    /// Processes (MPI ranks; 1 without MPI).
+    pub ranks: usize,
+    /// Blocks each process ran in this run (rank 0 first).
+    pub blocks_by_rank: Vec<u64>,
+    /// Trajectories (completed or failed) taken from the checkpoint of an earlier run.
+    pub resumed: u64,
     /// The seed.
     pub seed: u64,
     /// How the initial states were drawn.
@@ -127,9 +187,10 @@ impl EnsembleReport {
         Some((m.mean(), m.standard_error()))
     }
 
-    /// Trajectories that finished (completed or failed) per second of wall time.
+    /// Trajectories that finished (completed or failed) in this run, per second of wall time
+    /// (those taken from a checkpoint are not counted).
     pub fn throughput(&self) -> f64 {
-        (self.outcome.completed + self.outcome.failed_count()) as f64 / self.wall_time
+        (self.outcome.completed + self.outcome.failed_count()).saturating_sub(self.resumed) as f64 / self.wall_time
     }
 
     /// The accumulated statistics.
@@ -140,8 +201,8 @@ impl EnsembleReport {
 
 /// Reads and parses a scene file (which may have `[ensemble]`).
 pub fn load_scene(path: &Path) -> Result<Scene, CliError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| CliError::context(format!("cannot read {}", path.display()), e))?;
+    let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)
+        .map_err(CliError::Message)?;
     Ok(parse_scene(&path.display().to_string(), &text)?)
 }
 
@@ -149,22 +210,33 @@ pub fn load_scene(path: &Path) -> Result<Scene, CliError> {
 /// ensemble.csv, histograms.csv, correlations.csv, summary.json, ensemble.svg and
 /// histograms.svg into `options.out_dir`.
 pub fn run_ensemble(scene: &Scene, options: &EnsembleOptions) -> Result<EnsembleReport, CliError> {
+    run_linked(scene, options, Link::Alone).map(|r| r.expect("a process alone writes a report"))
+}
+
+/// [`run_ensemble`] as one process of several: the report on rank 0 (and alone), `None` on the
+/// other ranks.
+pub fn run_linked(
+    scene: &Scene,
+    options: &EnsembleOptions,
+    link: Link<'_>,
+) -> Result<Option<EnsembleReport>, CliError> {
     let ensemble = parse_ensemble(scene)?;
     let name = scene.molecule.get_ref().clone();
-    molecules::visit(&name, Visit { scene, ensemble: &ensemble, options }).ok_or_else(|| {
+    molecules::visit(&name, Visit { scene, ensemble: &ensemble, options, link }).ok_or_else(|| {
         let e = unknown_molecule(&name);
         CliError::File(scene.source().error(scene.molecule.span(), e.to_string(), "use a name from `rovib list`"))
     })?
 }
 
-struct Visit<'a> {
+struct Visit<'a, 'l> {
     scene: &'a Scene,
     ensemble: &'a EnsembleScene,
     options: &'a EnsembleOptions,
+    link: Link<'l>,
 }
 
-impl MoleculeVisitor for Visit<'_> {
-    type Output = Result<EnsembleReport, CliError>;
+impl MoleculeVisitor for Visit<'_, '_> {
+    type Output = Result<Option<EnsembleReport>, CliError>;
 
     fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
     where
@@ -180,7 +252,7 @@ impl MoleculeVisitor for Visit<'_> {
             )
         })?;
         let description = bound.description.clone();
-        execute(&m, self.scene, self.ensemble, bound, &*sampler, &description, self.options)
+        execute(&m, self.scene, self.ensemble, bound, &*sampler, &description, self.options, self.link)
     }
 }
 
@@ -200,7 +272,8 @@ where
     let ensemble = parse_ensemble(scene)?;
     let times = output_times(scene.t_end, scene.output_interval);
     let bound = ensemble.bind(m, scene, &times)?;
-    execute(m, scene, &ensemble, bound, sampler, description, options)
+    execute(m, scene, &ensemble, bound, sampler, description, options, Link::Alone)
+        .map(|r| r.expect("a process alone writes a report"))
 }
 
 /// The output times of a run from 0 to `t_end` every `interval` (a.u.): the grid
@@ -226,13 +299,25 @@ fn execute<M, const N: usize, const NA: usize>(
     sampler: &dyn Sampler<N>,
     description: &str,
     options: &EnsembleOptions,
-) -> Result<EnsembleReport, CliError>
+    link: Link<'_>,
+) -> Result<Option<EnsembleReport>, CliError>
 where
     M: Molecule<N, NA> + Sync,
 {
     let reduction = crate::start::frozen_reduction(m, scene)?;
-    std::fs::create_dir_all(&options.out_dir)
-        .map_err(|e| CliError::context(format!("cannot create {}", options.out_dir.display()), e))?;
+    let ranks = link.ranks();
+    if ranks > 1 && ensemble.keep_trajectories.is_some() {
+        return Err(CliError::Message(
+            "`ensemble.keep_trajectories` is not available with more than one MPI rank (only rank 0 writes files); \
+             remove it, or run the ensemble in one process"
+                .into(),
+        ));
+    }
+    let worker = matches!(link, Link::Worker(_));
+    if !worker {
+        std::fs::create_dir_all(&options.out_dir)
+            .map_err(|e| CliError::context(format!("cannot create {}", options.out_dir.display()), e))?;
+    }
     let plan = Plan {
         molecule: m,
         reduction,
@@ -260,32 +345,46 @@ where
         .build()
         .map_err(|e| CliError::context("cannot start the worker threads", e))?;
     let n = ensemble.trajectories;
-    let progress = Progress { bar: options.progress.then(|| progress_bar(n)), failures: AtomicU64::new(0) };
+    let progress =
+        Progress { bar: (options.progress && !worker).then(|| progress_bar(n)), failures: AtomicU64::new(0) };
+    let run = |b: u64| -> BlockResult {
+        caught(b, n, || run_block(&plan, sampler, block_range(b, n), &options.stop, &progress))
+    };
+    let work = Work { threads, pool: &pool, run: &run, stop: &options.stop, progress: &progress };
 
-    let begin = Instant::now();
-    let mut total = Outcome::new(Accumulators::new(&plan));
-    let n_blocks = n.div_ceil(BLOCK);
-    // Blocks run in chunks; each chunk's outcomes are merged in block order before the next
-    // starts, which bounds memory (a few accumulators per thread) at any ensemble size.
-    let chunk = 16 * threads as u64;
-    pool.install(|| {
-        let mut first = 0;
-        while first < n_blocks {
-            let last = (first + chunk).min(n_blocks);
-            let outcomes: Vec<Outcome> = (first..last)
-                .into_par_iter()
-                .map(|b| run_block(&plan, sampler, b * BLOCK..((b + 1) * BLOCK).min(n), &options.stop, &progress))
-                .collect();
-            for o in &outcomes {
-                total.merge(o);
-            }
-            first = last;
+    let remote = match link {
+        Link::Worker(w) => {
+            w.serve(&work)?;
+            return Ok(None);
         }
-    });
+        Link::Root(r) => Some(r),
+        Link::Alone => None,
+    };
+    let empty = Outcome::new(Accumulators::new(&plan));
+    let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options)?;
+    let mut collector = Collector::new(n, empty, resumed, checkpoint, ranks);
+    if let Some(bar) = &progress.bar {
+        bar.inc(collector.resumed());
+    }
+    let begin = Instant::now();
+    let result = coordinate(&work, &mut collector, remote);
     let wall_time = begin.elapsed().as_secs_f64();
     if let Some(bar) = &progress.bar {
         bar.finish_and_clear();
     }
+    if let Err(e) = result {
+        let kept = if options.checkpoint {
+            format!(
+                "; the blocks that finished are in {} (fix the cause, then run again with --resume)",
+                options.out_dir.join(CHECKPOINT_FILE).display()
+            )
+        } else {
+            String::new()
+        };
+        return Err(CliError::Message(format!("the ensemble stopped: {e}{kept}")));
+    }
+    let resumed = collector.resumed();
+    let (total, blocks_by_rank, checkpoint) = collector.finish();
     let status = if options.stop.load(Ordering::Relaxed) && total.interrupted > 0 {
         Status::Interrupted
     } else {
@@ -300,12 +399,59 @@ where
         units: plan.quantities[..plan.n_means].iter().map(|q| q.unit(m)).collect(),
         wall_time,
         threads,
+        ranks,
+        blocks_by_rank,
+        resumed,
         seed: ensemble.seed,
         sampler: description.to_owned(),
         files: Vec::new(),
     };
     report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)?;
-    Ok(report)
+    if let Some(c) = checkpoint
+        && status == Status::Completed
+    {
+        // The outputs are written: the checkpoint has served.
+        std::fs::remove_file(c.path())
+            .map_err(|e| CliError::context(format!("cannot remove {}", c.path().display()), e))?;
+    }
+    Ok(Some(report))
+}
+
+/// The checkpoint of this run (new, or continued with `options.resume`) and what it held.
+fn open_checkpoint(
+    scene: &Scene,
+    ensemble: &EnsembleScene,
+    options: &EnsembleOptions,
+) -> Result<(Option<(Checkpoint, Header)>, Resumed), CliError> {
+    let path = options.out_dir.join(CHECKPOINT_FILE);
+    if !options.checkpoint {
+        if options.resume {
+            return Err(CliError::Message("--resume needs the checkpoint, which is turned off".into()));
+        }
+        return Ok((None, Resumed::default()));
+    }
+    // The scene's bytes and, for a states file, the file's: a resume with either changed is refused.
+    let mut bytes = scene.text.clone().into_bytes();
+    if let MethodSpec::File { path: states, .. } = &ensemble.method
+        && let Ok(b) = std::fs::read(states)
+    {
+        bytes.push(0);
+        bytes.extend_from_slice(&b);
+    }
+    let header = Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK);
+    if options.resume {
+        let (c, resumed) = Checkpoint::resume(&path, &header).map_err(|e| CliError::Message(e.to_string()))?;
+        return Ok((Some((c, header)), resumed));
+    }
+    if path.exists() {
+        return Err(CliError::Message(format!(
+            "{} holds the finished blocks of an earlier run of this folder that did not complete; \
+             continue it with --resume, or delete the file to start again",
+            path.display()
+        )));
+    }
+    let c = Checkpoint::create(&path, &header).map_err(|e| CliError::Message(e.to_string()))?;
+    Ok((Some((c, header)), Resumed::default()))
 }
 
 fn progress_bar(n: u64) -> ProgressBar {

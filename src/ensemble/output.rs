@@ -155,6 +155,9 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         "seed_given": ensemble.seed_given,
         "sampler": report.sampler,
         "threads": report.threads,
+        "ranks": report.ranks,
+        "blocks_by_rank": report.blocks_by_rank,
+        "resumed_trajectories": report.resumed,
         "block_size": super::runner::BLOCK,
         "wall_time_s": report.wall_time,
         "throughput_trajectories_per_s": report.throughput(),
@@ -167,6 +170,10 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         "time_unit": tu,
         "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
         "max_energy_error": scene.max_energy_error,
+        "max_energy_error_relative_to": format!(
+            "max(|H(0)|, {:e} hartree) of each trajectory",
+            crate::output::ENERGY_SCALE_FLOOR
+        ),
         "kept_trajectories_every": ensemble.keep_trajectories,
         "means": report.quantities.iter().zip(&report.units).map(|(q, u)| json!({"quantity": q, "unit": u})).collect::<Vec<_>>(),
         "histograms_outside_range": plan.histograms.iter().enumerate().map(|(i, (qi, _, _, _))| {

@@ -54,7 +54,8 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     pub histograms: Vec<(usize, usize, [f64; 2], Vec<usize>)>,
     /// Correlated quantities (indices into `quantities`).
     pub correlations: Vec<usize>,
-    /// The largest relative energy change at an output time before a trajectory fails.
+    /// The largest energy change at an output time, relative to max(|H(0)|,
+    /// `output::ENERGY_SCALE_FLOOR`), before a trajectory fails.
     pub max_energy_error: f64,
     /// The smallest relative pivot of the metric.
     pub min_pivot: f64,
@@ -218,6 +219,25 @@ impl Progress {
             b.set_message(format!("{n} failed"));
         }
     }
+
+    /// A block another process ran: its trajectories and failures.
+    pub fn remote_block(&self, o: &Outcome) {
+        let failed = o.failed_count();
+        let n = self.failures.fetch_add(failed, Ordering::Relaxed) + failed;
+        if let Some(b) = &self.bar {
+            b.inc(o.completed + failed + o.interrupted);
+            b.set_message(format!("{n} failed"));
+        }
+    }
+}
+
+/// Test hook: with `ROVIB_TEST_PANIC_AT=i` in the environment, trajectory `i` panics, so the
+/// tests can show that a panicking trajectory ends the run with a clear error, its checkpoint
+/// intact, in one process and under MPI. Never set it otherwise.
+pub const PANIC_HOOK: &str = "ROVIB_TEST_PANIC_AT";
+
+pub(super) fn panic_hook() -> Option<u64> {
+    std::env::var(PANIC_HOOK).ok()?.trim().parse().ok()
 }
 
 /// One integrator, created once per block and reused for its trajectories.
@@ -309,16 +329,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
             self.initial_energy = h;
         }
         let h0 = self.initial_energy;
-        let drift = if h0 == 0.0 { (h - h0).abs() } else { ((h - h0) / h0).abs() };
-        if drift.is_nan() || drift > self.plan.max_energy_error {
-            self.failure = Some((
-                "energy guard",
-                t,
-                format!(
-                    "the energy changed by {drift:.1e} relative to H(0) = {h0} hartree, more than run.max_energy_error = {:e}",
-                    self.plan.max_energy_error
-                ),
-            ));
+        // The same guard as `rovib run`'s, with the same absolute floor (`output::energy_guard`).
+        if let Err(e) = crate::output::energy_guard(h0, h, self.plan.max_energy_error) {
+            self.failure = Some(("energy guard", t, e));
             return ControlFlow::Break(());
         }
         let u = if self.needs_potential { self.plan.molecule.potential(&body.q) } else { f64::NAN };
@@ -329,8 +342,10 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
         }
         if let Some(csv) = &mut self.csv {
             let phase = body.to_phase();
-            let values = phase.q.iter().chain(phase.p.iter()).chain(phase.euler.iter()).chain(phase.pe.iter());
-            if let Err(e) = csv.row(t / self.plan.time_scale, values.copied().chain([h])) {
+            let (euler, pe) = (phase.euler.into(), phase.pe.into());
+            if let Err(e) =
+                csv.state_row(t / self.plan.time_scale, phase.q.as_slice(), phase.p.as_slice(), euler, pe, h)
+            {
                 self.failure = Some(("output", t, e));
                 return ControlFlow::Break(());
             }
@@ -394,11 +409,15 @@ where
     let mut workspace = (!plan.correlations.is_empty()).then(|| CorrelationWorkspace::new(n_times));
     let mut series = vec![0.0; n_times];
     let mut correlation = vec![0.0; n_times];
+    let panic_at = panic_hook();
 
     for index in indices {
         if stop.load(Ordering::Relaxed) {
             outcome.interrupted += 1;
             continue;
+        }
+        if panic_at == Some(index) {
+            panic!("{PANIC_HOOK}={index}: a deliberate panic (test hook)");
         }
         let failure =
             |reason: &str, time: Option<f64>, detail: String| Failure { index, reason: reason.into(), time, detail };
@@ -428,10 +447,10 @@ where
         let csv = match &plan.keep {
             Some((k, dir)) if index % k == 0 => {
                 let dir = dir.join(index.to_string());
-                let names: Vec<&str> = plan.molecule.coordinates().iter().map(|c| c.name).collect();
+                let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
                 match std::fs::create_dir_all(&dir)
                     .map_err(|e| e.to_string())
-                    .and_then(|()| TrajectoryCsv::create(&dir, &names))
+                    .and_then(|()| TrajectoryCsv::create(&dir, &plan.molecule.coordinates(), unit, false))
                 {
                     Ok(c) => Some(c),
                     Err(e) => {

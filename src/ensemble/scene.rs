@@ -16,7 +16,7 @@ use crate::runtime::Molecule;
 use crate::runtime::diagnostic::{FileError, Source};
 use crate::runtime::nalgebra::Vector3;
 use crate::runtime::sample::{ModeEnergies, Region, RotationSampling, Spec};
-use crate::runtime::units::{CoordinateUnit, EnergyUnit};
+use crate::runtime::units::EnergyUnit;
 use crate::scene::Scene;
 
 /// The seed of an ensemble whose scene gives none.
@@ -190,24 +190,13 @@ struct RawHistogram {
     times: Option<Spanned<Vec<f64>>>,
 }
 
-/// The closest of `candidates` to `word` by edit distance, if it is close enough to be a typo.
+/// The closest of `candidates` to `word` by edit distance (Levenshtein, `strsim`, ignoring
+/// case), if it is close enough to be a typo.
 pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
-    fn distance(a: &str, b: &str) -> usize {
-        let b: Vec<char> = b.chars().collect();
-        let mut row: Vec<usize> = (0..=b.len()).collect();
-        for (i, ca) in a.chars().enumerate() {
-            let mut prev = row[0];
-            row[0] = i + 1;
-            for j in 0..b.len() {
-                let cur = row[j + 1];
-                row[j + 1] = (prev + usize::from(ca != b[j])).min(row[j] + 1).min(cur + 1);
-                prev = cur;
-            }
-        }
-        row[b.len()]
-    }
-    let (best, d) =
-        candidates.into_iter().map(|c| (c, distance(&word.to_lowercase(), &c.to_lowercase()))).min_by_key(|x| x.1)?;
+    let (best, d) = candidates
+        .into_iter()
+        .map(|c| (c, strsim::levenshtein(&word.to_lowercase(), &c.to_lowercase())))
+        .min_by_key(|x| x.1)?;
     (d <= 2.max(word.len() / 3)).then_some(best)
 }
 
@@ -581,10 +570,7 @@ impl EnsembleScene {
                 let k = coords.iter().position(|c| c.name == name.get_ref()).ok_or_else(|| {
                     unknown_name(&src, name, &format!("{} has no coordinate", m.name()), coords.iter().map(|c| c.name))
                 })?;
-                let s = match coords[k].unit {
-                    CoordinateUnit::Length(_) => scene.units.length,
-                    CoordinateUnit::Angle(_) => scene.units.angle,
-                };
+                let s = scene.units.coordinate_to_au(coords[k].unit, 1.0);
                 limits[k] = Some((lo * s, hi * s));
             }
             Ok(Region { energy_cap: r.energy_cap.as_ref().map(|c| c.0), limits })

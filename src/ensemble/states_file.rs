@@ -1,11 +1,14 @@
 //! Initial states from a CSV file (`method = "file"`): one state per row, in atomic units
 //! (a `.xyz`/`.extxyz` path is read as extended XYZ by [`super::states_xyz`]).
 //!
-//! Header: every internal coordinate by name (bohr, rad), optionally `p_NAME` (ħ/bohr, ħ;
-//! missing ones are 0), optionally the Euler angles `phi, theta, psi` (rad, z-x-z; default
-//! `0, π/2, 0`) and either `p_phi, p_theta, p_psi` or the body-frame `Jx, Jy, Jz` (ħ; default
-//! 0). Other columns (`t`, `H`) are ignored, so a `trajectory.csv` written by `rovib run` is a
-//! valid states file. Errors name the CSV file, line and column.
+//! Header: every internal coordinate as `q_NAME` (or plain `NAME`; bohr, rad), optionally
+//! `p_NAME` (ħ/bohr, ħ; missing ones are 0), optionally the Euler angles `euler_phi,
+//! euler_theta, euler_psi` (or `phi, theta, psi`; rad, z-x-z; default `0, π/2, 0`) and either
+//! their momenta `pe_phi, pe_theta, pe_psi` (or `p_phi, p_theta, p_psi`) or the body-frame `Jx,
+//! Jy, Jz` (ħ; default 0). The prefixed names are the ones `trajectory.csv` uses (they cannot
+//! collide with a coordinate's name) and win when both are present. Other columns (`t`, `H`,
+//! the unwrapped angles) are ignored, so a `trajectory.csv` written by `rovib run` is a valid
+//! states file. Errors name the CSV file, line and column.
 
 use std::path::Path;
 
@@ -16,6 +19,10 @@ use crate::runtime::hamiltonian::fast::{BodyState, quaternion_of_euler};
 use crate::runtime::nalgebra::{SVector, Vector3};
 use crate::scene::Scene;
 
+/// The largest states file read: 1 GiB (a million water states in extended XYZ are about
+/// 0.3 GB), so that `/dev/zero` or a wrong path is an error rather than memory without bound.
+pub const MAX_STATES_FILE_BYTES: u64 = 1 << 30;
+
 /// Reads the states in `path`. `Err(Ok(e))` is an error located in the file, `Err(Err(m))` a
 /// file that cannot be read at all.
 pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
@@ -23,8 +30,8 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     path: &Path,
     _scene: &Scene,
 ) -> Result<Vec<BodyState<N>>, Result<FileError, String>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Err(format!("cannot read the states file {}: {e}", path.display())))?;
+    let text = crate::runtime::diagnostic::read_text_capped(path, MAX_STATES_FILE_BYTES)
+        .map_err(|e| Err(e.replacen("cannot read ", "cannot read the states file ", 1)))?;
     let name = path.display().to_string();
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xyz") || e.eq_ignore_ascii_case("extxyz")) {
         return super::states_xyz::read_xyz(m, &name, &text).map_err(Ok);
@@ -45,14 +52,14 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let coords = m.coordinates();
     let mut q_col = [0usize; N];
     for k in 0..N {
-        q_col[k] = find(coords[k].name).ok_or_else(|| {
+        q_col[k] = find(&format!("q_{}", coords[k].name)).or_else(|| find(coords[k].name)).ok_or_else(|| {
             Ok(src.error(
                 0..header.len(),
-                format!("the states file has no column `{}`", coords[k].name),
+                format!("the states file has no column `q_{}` (or `{}`)", coords[k].name, coords[k].name),
                 format!(
-                    "the header must name every coordinate of {}: {}",
+                    "the header must name every coordinate of {} as q_NAME: {}",
                     m.name(),
-                    coords.iter().map(|c| c.name).collect::<Vec<_>>().join(", ")
+                    coords.iter().map(|c| format!("q_{}", c.name)).collect::<Vec<_>>().join(", ")
                 ),
             ))
         })?;
@@ -70,13 +77,15 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             ))),
         }
     };
-    let euler_col = triple(["phi", "theta", "psi"])?;
-    let pe_col = triple(["p_phi", "p_theta", "p_psi"])?;
+    let euler_col = triple(["euler_phi", "euler_theta", "euler_psi"])?
+        .map_or_else(|| triple(["phi", "theta", "psi"]), |c| Ok(Some(c)))?;
+    let pe_col = triple(["pe_phi", "pe_theta", "pe_psi"])?
+        .map_or_else(|| triple(["p_phi", "p_theta", "p_psi"]), |c| Ok(Some(c)))?;
     let j_col = triple(["Jx", "Jy", "Jz"])?;
     if pe_col.is_some() && j_col.is_some() {
         return Err(Ok(src.error(
             0..header.len(),
-            "the states file gives both p_phi, p_theta, p_psi and Jx, Jy, Jz",
+            "the states file gives both the Euler momenta (pe_phi, pe_theta, pe_psi) and Jx, Jy, Jz",
             "keep one of them",
         )));
     }

@@ -207,3 +207,22 @@ pub fn ch4<T: Real>(x: &[V3<T>]) -> Vec<T> {
         angle(x[2], c, x[4]),
     ]
 }
+
+/// Ethane: (r_C1C2, then for each H its r, its H–C–C angle and, for all but H1a, the dihedral
+/// H1a–C1–C2–H mapped to [0, 2π) (the definition's staggered reference has azimuths 60°–300°,
+/// away from that cut)), atoms in the order C1, C2, H1a, H1b, H1c, H2a, H2b, H2c, coordinates in
+/// the definition's order (r, a, d per hydrogen).
+pub fn ethane<T: Real>(x: &[V3<T>]) -> Vec<T> {
+    let (c1, c2, h1a) = (x[0], x[1], x[2]);
+    let mut q = vec![distance(c2, c1)];
+    for (k, &h) in x[2..].iter().enumerate() {
+        let (c, other) = if k < 3 { (c1, c2) } else { (c2, c1) };
+        q.push(distance(h, c));
+        q.push(angle(h, c, other));
+        if k > 0 {
+            let d = dihedral(h1a, c1, c2, h);
+            q.push(if d.value() < 0.0 { d + T::from_f64(2.0 * std::f64::consts::PI) } else { d });
+        }
+    }
+    q
+}

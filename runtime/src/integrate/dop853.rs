@@ -9,6 +9,7 @@
 //! Stiffness detection is not implemented.
 
 use super::{InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_run};
+use crate::diagnostic::Compact;
 
 mod lanes;
 pub use lanes::{Dop853Lanes, LaneFailure, LaneFeeder, LaneSystem};
@@ -281,7 +282,7 @@ pub struct Dop853Options {
     /// whatever this is. The final step, shortened to land on `t_end`, is exempt.
     pub min_step: f64,
     /// Most steps (accepted and rejected) before [`SolveError::TooManySteps`].
-    /// Default 100 000 000 (`dop853.f` defaults to 100 000, too few for long molecular runs).
+    /// Default [`super::DEFAULT_MAX_STEPS`].
     pub max_steps: u64,
     /// Lund stabilization exponent β of the step-size controller, in `[0, 0.2]`. Default 0
     /// (plain controller; `dop853.f` uses 0 as well).
@@ -296,7 +297,7 @@ impl Default for Dop853Options {
             initial_step: None,
             max_step: f64::INFINITY,
             min_step: 0.0,
-            max_steps: 100_000_000,
+            max_steps: super::DEFAULT_MAX_STEPS,
             beta: 0.0,
         }
     }
@@ -306,26 +307,33 @@ impl Dop853Options {
     /// Checks that the options can be run with.
     pub fn validate(&self) -> Result<(), InvalidInput> {
         if !(self.rtol > 10.0 * f64::EPSILON && self.rtol.is_finite()) {
-            return Err(InvalidInput(format!("rtol must be finite and larger than 10·ε ≈ 2.2e-15, not {}", self.rtol)));
+            return Err(InvalidInput(format!(
+                "rtol must be finite and larger than 10·ε ≈ 2.2e-15, not {}",
+                Compact(self.rtol)
+            )));
         }
         if !(self.atol > 0.0 && self.atol.is_finite()) {
-            return Err(InvalidInput(format!("atol must be positive and finite, not {}", self.atol)));
+            return Err(InvalidInput(format!("atol must be positive and finite, not {}", Compact(self.atol))));
         }
         if let Some(h) = self.initial_step
             && !(h > 0.0 && h.is_finite())
         {
-            return Err(InvalidInput(format!("the initial step must be positive and finite, not {h}")));
+            return Err(InvalidInput(format!("the initial step must be positive and finite, not {}", Compact(h))));
         }
         if self.max_step.is_nan() || self.max_step <= 0.0 {
-            return Err(InvalidInput(format!("max_step must be positive, not {}", self.max_step)));
+            return Err(InvalidInput(format!("max_step must be positive, not {}", Compact(self.max_step))));
         }
         if !(self.min_step >= 0.0 && self.min_step.is_finite()) {
-            return Err(InvalidInput(format!("min_step must be zero or positive and finite, not {}", self.min_step)));
+            return Err(InvalidInput(format!(
+                "min_step must be zero or positive and finite, not {}",
+                Compact(self.min_step)
+            )));
         }
         if self.min_step > self.max_step {
             return Err(InvalidInput(format!(
                 "min_step ({}) is larger than max_step ({})",
-                self.min_step, self.max_step
+                Compact(self.min_step),
+                Compact(self.max_step)
             )));
         }
         if self.max_steps == 0 {
@@ -356,6 +364,38 @@ pub struct Dop853 {
     cont: Vec<f64>,
     /// The interpolated state handed to the observer.
     y_out: Vec<f64>,
+    /// The state where a run stopped being the run to a later end time (see [`Dop853Resume`]).
+    y_resume: Vec<f64>,
+}
+
+/// Where a DOP853 run stood when it returned, to continue it later exactly (bit for bit) as if
+/// it had never stopped: `rovib run --resume`.
+///
+/// A run to `t_end` shortens its last step to land on `t_end`; a run to a later end time would
+/// not have. So the continuation point is the start of the step that was first shortened (or,
+/// for a run stopped by its observer, the start of the step in which it stopped): `t`, the
+/// state `y` there, the step `h` the controller proposed (before shortening), and the
+/// controller's memory (`fac_old`, whether the previous step was rejected). Continuing from it
+/// ([`Dop853::resume`]) repeats exactly the steps an uninterrupted run to the later end time
+/// takes, so every output after `outputs_done` equals that run's bit for bit (outputs between
+/// `t` and the first run's end were served by the first run from its shortened steps; they
+/// differ from the uninterrupted run's by the local error, within the tolerances, and are
+/// not repeated).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dop853Resume {
+    /// Where the next step starts.
+    pub t: f64,
+    /// The state there.
+    pub y: Vec<f64>,
+    /// The step to try there.
+    pub h: f64,
+    /// The controller's `fac_old` (Lund stabilization memory) there.
+    pub fac_old: f64,
+    /// Whether the step before was rejected (then the next step may not grow).
+    pub reject: bool,
+    /// How many output times after `t0` the run served (its last output is number
+    /// `outputs_done` of the grid `t0 + k·output_interval`).
+    pub outputs_done: u64,
 }
 
 impl Dop853 {
@@ -372,6 +412,7 @@ impl Dop853 {
             weighted: vec![0.0; dim],
             cont: vec![0.0; 8 * dim],
             y_out: vec![0.0; dim],
+            y_resume: vec![0.0; dim],
         })
     }
 
@@ -418,30 +459,117 @@ impl Dop853 {
         S: OdeSystem + ?Sized,
         O: Observer + ?Sized,
     {
+        self.run(system, t0, y0, None, t_end, output_interval, observer, None)
+    }
+
+    /// [`Dop853::integrate`], also returning where the run stood when it returned
+    /// ([`Dop853Resume`]) so that [`Dop853::resume`] can continue it exactly. `None` if the run
+    /// ended before its first step (an observer that stopped at `t0`, or `t_end == t0`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn integrate_resumable<S, O>(
+        &mut self,
+        system: &mut S,
+        t0: f64,
+        y0: &[f64],
+        t_end: f64,
+        output_interval: f64,
+        observer: &mut O,
+    ) -> Result<(Stats, Option<Dop853Resume>), SolveError<S::Error>>
+    where
+        S: OdeSystem + ?Sized,
+        O: Observer + ?Sized,
+    {
+        let mut resume = None;
+        let stats = self.run(system, t0, y0, None, t_end, output_interval, observer, Some(&mut resume))?;
+        Ok((stats, resume))
+    }
+
+    /// Continues a run from `from` (what [`Dop853::integrate_resumable`] returned) to `t_end`
+    /// on the same output grid (`t0`, `output_interval` as the first run had them): the observer
+    /// sees the output times after number `from.outputs_done` (not `t0`). Returns the work of
+    /// this part and where it stood at its end, to continue again.
+    #[allow(clippy::too_many_arguments)]
+    pub fn resume<S, O>(
+        &mut self,
+        system: &mut S,
+        t0: f64,
+        from: &Dop853Resume,
+        t_end: f64,
+        output_interval: f64,
+        observer: &mut O,
+    ) -> Result<(Stats, Option<Dop853Resume>), SolveError<S::Error>>
+    where
+        S: OdeSystem + ?Sized,
+        O: Observer + ?Sized,
+    {
+        let mut resume = None;
+        let stats = self.run(system, t0, &from.y, Some(from), t_end, output_interval, observer, Some(&mut resume))?;
+        Ok((stats, resume))
+    }
+
+    /// The integration loop of [`Dop853::integrate`], started fresh at `(t0, y0)` or continued
+    /// from `from`, recording where it stood into `snapshot` if given.
+    #[allow(clippy::too_many_arguments)]
+    fn run<S, O>(
+        &mut self,
+        system: &mut S,
+        t0: f64,
+        y0: &[f64],
+        from: Option<&Dop853Resume>,
+        t_end: f64,
+        output_interval: f64,
+        observer: &mut O,
+        mut snapshot: Option<&mut Option<Dop853Resume>>,
+    ) -> Result<Stats, SolveError<S::Error>>
+    where
+        S: OdeSystem + ?Sized,
+        O: Observer + ?Sized,
+    {
         let grid = check_run(self.dim(), system.dim(), t0, y0, t_end, output_interval)?;
         let opts = self.options;
         let n = self.dim();
         let mut stats = Stats::default();
         self.y.copy_from_slice(y0);
-        if observer.observe(t0, &self.y).is_break() || grid.count == 0 {
-            return Ok(stats);
+        let mut next_output = match from {
+            Some(r) => r.outputs_done + 1,
+            None => {
+                if observer.observe(t0, &self.y).is_break() || grid.count == 0 {
+                    return Ok(stats);
+                }
+                1
+            }
+        };
+        if let Some(r) = from
+            && !(r.t >= t0 && r.t < t_end && r.h > 0.0 && r.h.is_finite() && r.fac_old.is_finite())
+        {
+            return Err(SolveError::InvalidInput(format!(
+                "cannot continue from t = {} with step {} towards t_end = {t_end}",
+                r.t, r.h
+            )));
         }
-        let mut next_output = 1;
 
-        let mut x = t0;
+        let mut x = from.map_or(t0, |r| r.t);
         eval_into(system, x, &self.y, &mut self.k[..n], &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?;
         if !self.k[..n].iter().all(|v| v.is_finite()) {
             return Err(self.non_finite(x));
         }
+        // From the run's origin t0, also when continuing, so that a continued run caps its steps
+        // as the uninterrupted one does.
         let h_max = opts.max_step.min(t_end - t0);
-        let mut h = match opts.initial_step {
-            Some(h) => h.min(h_max),
-            None => self.initial_step(system, x, h_max, &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?,
+        let mut h = match (from, opts.initial_step) {
+            (Some(r), _) => r.h,
+            (None, Some(h)) => h.min(h_max),
+            (None, None) => {
+                self.initial_step(system, x, h_max, &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?
+            }
         };
 
         let expo1 = 1.0 / 8.0 - opts.beta * 0.2;
-        let mut fac_old: f64 = 1e-4;
-        let mut reject = false;
+        let mut fac_old: f64 = from.map_or(1e-4, |r| r.fac_old);
+        let mut reject = from.is_some_and(|r| r.reject);
+        // The continuation point once the last step has first been shortened: (t, h, fac_old,
+        // reject), its state in `y_resume`.
+        let mut shortened: Option<(f64, f64, f64, bool)> = None;
         loop {
             if stats.steps >= opts.max_steps {
                 return Err(SolveError::TooManySteps { t: x, max_steps: opts.max_steps, y: self.y.clone() });
@@ -449,10 +577,16 @@ impl Dop853 {
             if 0.1 * h.abs() <= x.abs() * UROUND || h < opts.min_step || h.is_nan() {
                 return Err(SolveError::StepSizeTooSmall { t: x, h, y: self.y.clone() });
             }
+            // Where this step starts, for a continuation from it.
+            let step_start = (x, h, fac_old, reject);
             // Stretch a step that would end just short of t_end (as dop853.f does), so no
             // sliver step follows.
             let last = x + 1.01 * h > t_end;
             if last {
+                if shortened.is_none() && snapshot.is_some() {
+                    shortened = Some(step_start);
+                    self.y_resume.copy_from_slice(&self.y);
+                }
                 h = t_end - x;
             }
             stats.steps += 1;
@@ -499,6 +633,18 @@ impl Dop853 {
                     };
                     next_output += 1;
                     if observer.observe(t_out, state).is_break() {
+                        if let Some(out) = snapshot.as_deref_mut() {
+                            // Continue from the shortened step if there was one, else redo this one.
+                            let (t, h, fac_old, reject) = match shortened {
+                                Some(s) => s,
+                                None => {
+                                    self.y_resume.copy_from_slice(&self.y);
+                                    step_start
+                                }
+                            };
+                            let y = self.y_resume.clone();
+                            *out = Some(Dop853Resume { t, y, h, fac_old, reject, outputs_done: next_output - 1 });
+                        }
                         return Ok(stats);
                     }
                 }
@@ -507,6 +653,10 @@ impl Dop853 {
                 self.k.copy_within(FSAL * n..(FSAL + 1) * n, 0);
                 x = x_new;
                 if last {
+                    if let (Some(out), Some((t, h, fac_old, reject))) = (snapshot.as_deref_mut(), shortened) {
+                        let y = self.y_resume.clone();
+                        *out = Some(Dop853Resume { t, y, h, fac_old, reject, outputs_done: next_output - 1 });
+                    }
                     return Ok(stats);
                 }
                 h_new = h_new.min(h_max);

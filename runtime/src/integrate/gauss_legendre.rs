@@ -38,13 +38,14 @@ pub struct GaussLegendreOptions {
     /// [`SolveError::NotConverged`]. Default 100 (a well-resolved step needs about 5–20).
     pub max_iterations: u32,
     /// Most steps a run may take before it fails with [`SolveError::TooManySteps`].
-    /// Default `u64::MAX` (no limit: a fixed-step run's length is known in advance).
+    /// Default [`super::DEFAULT_MAX_STEPS`] (a run's count is known in advance: `rovib run`
+    /// refuses a scene that needs more before it starts).
     pub max_steps: u64,
 }
 
 impl Default for GaussLegendreOptions {
     fn default() -> Self {
-        Self { stages: 3, step: 1.0, compensated: true, max_iterations: 100, max_steps: u64::MAX }
+        Self { stages: 3, step: 1.0, compensated: true, max_iterations: 100, max_steps: super::DEFAULT_MAX_STEPS }
     }
 }
 

@@ -5,6 +5,7 @@
 //! A method writes the state at each output time to an [`Observer`]. Every method allocates its
 //! workspace once, when it is created; a step never allocates.
 
+use crate::diagnostic::Compact;
 use core::fmt;
 use core::ops::ControlFlow;
 
@@ -100,7 +101,13 @@ mod gauss_legendre;
 pub mod problems;
 mod rk4;
 
-pub use dop853::{Dop853, Dop853Lanes, Dop853Options, LaneFailure, LaneFeeder, LaneSystem};
+pub use dop853::{Dop853, Dop853Lanes, Dop853Options, Dop853Resume, LaneFailure, LaneFeeder, LaneSystem};
+
+/// The default most steps of a run, the same for every method: 10⁸ (about 12 minutes of
+/// Gauss–Legendre for water on one core; `dop853.f`'s own default of 10⁵ is too few for long
+/// molecular runs). A fixed-step run's count is known in advance, so a scene asking for more is
+/// refused before it starts; an adaptive run stops with [`SolveError::TooManySteps`].
+pub const DEFAULT_MAX_STEPS: u64 = 100_000_000;
 pub use gauss_legendre::{GaussLegendre, GaussLegendreOptions};
 pub use rk4::{Rk4, Rk4Options};
 
@@ -276,6 +283,29 @@ fn ceil_snapped(ratio: f64) -> u64 {
     n as u64
 }
 
+/// The number of steps a fixed-step method ([`GaussLegendre`], [`Rk4`]) takes from `t0` to
+/// `t_end` with outputs every `output_interval` and steps no longer than `step`: each output
+/// interval is cut into `ceil(L / step)` equal steps (see `run_fixed`), so the count is known
+/// before the run; what a caller compares with `max_steps` to refuse a run that could not
+/// finish. Saturates at `u64::MAX`; 0 for invalid times.
+pub fn fixed_step_count(t0: f64, t_end: f64, output_interval: f64, step: f64) -> u64 {
+    let valid = |x: f64| x.is_finite() && x > 0.0;
+    if !(t0.is_finite() && t_end.is_finite() && valid(output_interval) && valid(step)) {
+        return 0;
+    }
+    let grid = OutputGrid::new(t0, t_end, output_interval);
+    if grid.count == 0 {
+        return 0;
+    }
+    let nominal = ceil_snapped(grid.interval / step).max(1);
+    // Every interval but the last is full; the last one is full or shorter.
+    let last_start = grid.time(grid.count - 1);
+    let last = t_end - last_start;
+    let last_full = (last - grid.interval).abs() <= SNAP * t_end.abs().max(grid.interval);
+    let last_steps = if last_full { nominal } else { ceil_snapped(last / step).max(1) };
+    (grid.count - 1).saturating_mul(nominal).saturating_add(last_steps)
+}
+
 /// The output times of one run (see [`solve`] for the rule).
 #[derive(Copy, Clone, Debug)]
 pub(crate) struct OutputGrid {
@@ -344,7 +374,7 @@ fn check_positive(name: &str, value: f64) -> Result<(), InvalidInput> {
     if value > 0.0 && value.is_finite() {
         Ok(())
     } else {
-        Err(InvalidInput(format!("{name} must be positive and finite, not {value}")))
+        Err(InvalidInput(format!("{name} must be positive and finite, not {}", Compact(value))))
     }
 }
 

@@ -14,13 +14,14 @@ pub struct Rk4Options {
     /// the period of the fastest molecular vibration (an O–H stretch, ≈ 9 fs ≈ 370 ħ/E_h).
     pub step: f64,
     /// Most steps a run may take before it fails with [`SolveError::TooManySteps`].
-    /// Default `u64::MAX` (no limit: a fixed-step run's length is known in advance).
+    /// Default [`super::DEFAULT_MAX_STEPS`] (a run's count is known in advance: `rovib run`
+    /// refuses a scene that needs more before it starts).
     pub max_steps: u64,
 }
 
 impl Default for Rk4Options {
     fn default() -> Self {
-        Self { step: 1.0, max_steps: u64::MAX }
+        Self { step: 1.0, max_steps: super::DEFAULT_MAX_STEPS }
     }
 }
 

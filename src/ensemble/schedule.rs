@@ -1,0 +1,413 @@
+//! Who runs which block, and how finished blocks become the ensemble's outcome.
+//!
+//! The blocks still to run are handed out in index order by one [`Dispatcher`], on demand: to
+//! this process's worker threads one block at a time, and to other processes (MPI ranks, through
+//! a [`Remote`]) a few at a time as they ask. Blocks finish in any order; the [`Collector`]
+//! records each in the checkpoint, keeps it until every block before it has arrived, and merges
+//! the outcomes strictly in block order (0, 1, 2, …) into one running total. The merge order, and
+//! so every bit of the statistics, is therefore independent of the number of threads and
+//! processes and of which of them ran which block.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::ops::Range;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
+
+use super::checkpoint::{Checkpoint, CheckpointError, Header, Resumed};
+use super::runner::{BLOCK, Outcome, Progress};
+
+/// A block's outcome, or the message of the panic that ended it.
+pub type BlockResult = Result<Outcome, String>;
+
+/// Blocks recorded in the checkpoint between two compactions of it.
+pub const COMPACT_EVERY: usize = 256;
+
+/// The trajectory indices of block `b` of an ensemble of `n` trajectories.
+pub fn block_range(b: u64, n: u64) -> Range<u64> {
+    b * BLOCK..((b + 1) * BLOCK).min(n)
+}
+
+/// Runs block `block` with `run`, turning a panic into a message naming the block.
+pub fn caught(block: u64, n: u64, run: impl FnOnce() -> Outcome) -> BlockResult {
+    catch_unwind(AssertUnwindSafe(run)).map_err(|payload| {
+        let what = payload
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".to_owned());
+        let r = block_range(block, n);
+        format!("a trajectory of block {block} (trajectories {}..{}) panicked: {what}", r.start, r.end)
+    })
+}
+
+/// The blocks still to run, handed out in index order.
+#[derive(Debug)]
+pub struct Dispatcher {
+    todo: VecDeque<u64>,
+    closed: bool,
+}
+
+impl Dispatcher {
+    /// Hands out `todo` in the order given.
+    pub fn new(todo: impl IntoIterator<Item = u64>) -> Self {
+        Self { todo: todo.into_iter().collect(), closed: false }
+    }
+
+    /// Up to `n` blocks; none once closed, once `stop` is set, or when all were handed out.
+    pub fn take(&mut self, n: usize, stop: &AtomicBool) -> Vec<u64> {
+        if self.closed || stop.load(Ordering::Relaxed) {
+            return Vec::new();
+        }
+        let k = n.min(self.todo.len());
+        self.todo.drain(..k).collect()
+    }
+
+    /// No more blocks are handed out (an error: the blocks running finish and are recorded).
+    pub fn close(&mut self) {
+        self.closed = true;
+    }
+}
+
+/// Other processes that run blocks (MPI ranks 1 … K−1); the coordinator polls them.
+pub trait Remote {
+    /// Handles what the other processes sent, without waiting: every finished block goes to
+    /// `sink(rank, block, result)`, every request for work is answered from `dispatcher` (an
+    /// empty answer, as once `stop` is set, tells that process to end). Returns whether anything arrived; an error is a
+    /// failure of the run (the link stays usable so the other processes can be released).
+    fn poll(
+        &mut self,
+        dispatcher: &Mutex<Dispatcher>,
+        stop: &AtomicBool,
+        sink: &mut dyn FnMut(usize, u64, BlockResult),
+    ) -> Result<bool, String>;
+
+    /// Whether every other process has been told to end.
+    fn finished(&self) -> bool;
+
+    /// Processes in all, this one included.
+    fn ranks(&self) -> usize;
+}
+
+/// The receiving end of the blocks: checkpoint, reorder buffer and the running total.
+pub struct Collector {
+    n: u64,
+    n_blocks: u64,
+    next: u64,
+    total: Outcome,
+    pending: BTreeMap<u64, Outcome>,
+    batch: Vec<(u64, Outcome)>,
+    checkpoint: Option<(Checkpoint, Header)>,
+    since_compaction: usize,
+    tainted: bool,
+    error: Option<String>,
+    by_rank: Vec<u64>,
+    resumed: u64,
+}
+
+impl Collector {
+    /// Collects the `n` trajectories' blocks into `empty` (the statistics of no trajectory),
+    /// starting from what a checkpoint held, recording new blocks in `checkpoint`; `ranks`
+    /// processes report blocks.
+    pub fn new(
+        n: u64,
+        empty: Outcome,
+        resumed: Resumed,
+        checkpoint: Option<(Checkpoint, Header)>,
+        ranks: usize,
+    ) -> Self {
+        let (next, total) = resumed.merged.unwrap_or((0, empty));
+        let finished = |o: &Outcome| o.completed + o.failed_count();
+        let done = finished(&total) + resumed.blocks.values().map(finished).sum::<u64>();
+        let mut c = Self {
+            n,
+            n_blocks: n.div_ceil(BLOCK),
+            next,
+            total,
+            pending: resumed.blocks,
+            batch: Vec::new(),
+            checkpoint,
+            since_compaction: 0,
+            tainted: false,
+            error: None,
+            by_rank: vec![0; ranks.max(1)],
+            resumed: done,
+        };
+        c.advance();
+        c
+    }
+
+    /// The blocks that still have to run, in index order.
+    pub fn todo(&self) -> Vec<u64> {
+        (self.next..self.n_blocks).filter(|b| !self.pending.contains_key(b)).collect()
+    }
+
+    /// Trajectories (completed or failed) taken from the checkpoint.
+    pub fn resumed(&self) -> u64 {
+        self.resumed
+    }
+
+    /// Block `block` arrived from process `rank`.
+    pub fn add(&mut self, rank: usize, block: u64, result: BlockResult) {
+        match result {
+            Ok(o) => {
+                if let Some(c) = self.by_rank.get_mut(rank) {
+                    *c += 1;
+                }
+                self.batch.push((block, o));
+            }
+            Err(message) => self.fail(message),
+        }
+    }
+
+    /// Records a failure of the run (the first one is reported).
+    pub fn fail(&mut self, message: String) {
+        self.error.get_or_insert(message);
+    }
+
+    /// The failure of the run, if any.
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
+    }
+
+    /// Whether a block cut short by an interrupt arrived.
+    pub fn interrupted(&self) -> bool {
+        self.tainted
+    }
+
+    /// Records the blocks that arrived since the last call in the checkpoint (one write, one
+    /// sync; blocks cut short by an interrupt are not recorded, they run again on resume), then
+    /// merges every block whose predecessors are all in, and compacts the checkpoint every
+    /// [`COMPACT_EVERY`] blocks.
+    pub fn flush(&mut self) -> Result<(), CheckpointError> {
+        if self.batch.is_empty() {
+            return Ok(());
+        }
+        if let Some((c, _)) = &mut self.checkpoint {
+            let records: Vec<(u64, &Outcome)> =
+                self.batch.iter().filter(|(_, o)| o.interrupted == 0).map(|(b, o)| (*b, o)).collect();
+            if !records.is_empty() {
+                c.append_all(&records)?;
+                self.since_compaction += records.len();
+            }
+        }
+        for (b, o) in self.batch.drain(..) {
+            self.tainted |= o.interrupted > 0;
+            self.pending.insert(b, o);
+        }
+        self.advance();
+        if let Some((c, header)) = &mut self.checkpoint
+            && self.since_compaction >= COMPACT_EVERY
+            && !self.tainted
+        {
+            c.compact(header, self.next, &self.total, &self.pending)?;
+            self.since_compaction = 0;
+        }
+        Ok(())
+    }
+
+    fn advance(&mut self) {
+        while let Some(o) = self.pending.remove(&self.next) {
+            self.total.merge(&o);
+            self.next += 1;
+        }
+    }
+
+    /// The ensemble's outcome: every block in block order; blocks that never ran (an
+    /// interrupt) count as interrupted. Also the blocks each process ran, and the checkpoint.
+    pub fn finish(mut self) -> (Outcome, Vec<u64>, Option<Checkpoint>) {
+        for b in self.next..self.n_blocks {
+            match self.pending.remove(&b) {
+                Some(o) => self.total.merge(&o),
+                None => {
+                    let r = block_range(b, self.n);
+                    self.total.interrupted += r.end - r.start;
+                }
+            }
+        }
+        (self.total, self.by_rank, self.checkpoint.map(|(c, _)| c))
+    }
+}
+
+/// What this process's worker threads run.
+pub struct Work<'a> {
+    /// Worker threads.
+    pub threads: usize,
+    /// Their pool.
+    pub pool: &'a rayon::ThreadPool,
+    /// Runs one block (never panics: a panic becomes an error).
+    pub run: &'a (dyn Fn(u64) -> BlockResult + Sync),
+    /// Set by Ctrl-C or SIGTERM (or by a block that came back interrupted): no block starts.
+    pub stop: &'a AtomicBool,
+    /// The progress bar, advanced for blocks other processes ran.
+    pub progress: &'a Progress,
+}
+
+/// Runs the collector's remaining blocks on this process's threads and on `remote`'s processes
+/// until all are in (or the stop flag or an error ends the run), flushing the collector as
+/// blocks arrive. On an error (a panicking trajectory, a checkpoint that cannot be written, a
+/// process that could not start) no new block starts, the running ones finish and are recorded,
+/// and the first error is returned.
+pub fn coordinate(
+    work: &Work<'_>,
+    collector: &mut Collector,
+    mut remote: Option<&mut dyn Remote>,
+) -> Result<(), String> {
+    let dispatcher = Mutex::new(Dispatcher::new(collector.todo()));
+    let lock = || dispatcher.lock().unwrap_or_else(PoisonError::into_inner);
+    let (tx, rx) = mpsc::channel::<(u64, BlockResult)>();
+    std::thread::scope(|scope| {
+        let d = &dispatcher;
+        scope.spawn(move || {
+            work.pool.scope(|s| {
+                for _ in 0..work.threads {
+                    let tx = tx.clone();
+                    s.spawn(move |_| {
+                        loop {
+                            let next = d.lock().unwrap_or_else(PoisonError::into_inner).take(1, work.stop).pop();
+                            let Some(b) = next else { break };
+                            if tx.send((b, (work.run)(b))).is_err() {
+                                break;
+                            }
+                        }
+                    });
+                }
+            });
+            drop(tx);
+        });
+        let mut local_done = false;
+        loop {
+            let mut busy = false;
+            if let Some(r) = remote.as_deref_mut() {
+                let mut sink = |rank: usize, b: u64, result: BlockResult| {
+                    if let Ok(o) = &result {
+                        work.progress.remote_block(o);
+                    }
+                    collector.add(rank, b, result);
+                };
+                match r.poll(d, work.stop, &mut sink) {
+                    Ok(any) => busy |= any,
+                    Err(e) => collector.fail(e),
+                }
+            }
+            if !local_done {
+                let first = if remote.is_some() {
+                    rx.recv_timeout(Duration::from_millis(1))
+                } else {
+                    rx.recv().map_err(|_| RecvTimeoutError::Disconnected)
+                };
+                match first {
+                    Ok((b, result)) => {
+                        collector.add(0, b, result);
+                        while let Ok((b, result)) = rx.try_recv() {
+                            collector.add(0, b, result);
+                        }
+                    }
+                    Err(RecvTimeoutError::Timeout) => {}
+                    Err(RecvTimeoutError::Disconnected) => local_done = true,
+                }
+            } else if !busy {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            if let Err(e) = collector.flush() {
+                collector.fail(e.to_string());
+            }
+            if collector.interrupted() {
+                // A process was stopped (SIGTERM on its node): the whole run stops.
+                work.stop.store(true, Ordering::Relaxed);
+            }
+            if collector.error().is_some() {
+                lock().close();
+            }
+            if local_done && remote.as_deref().is_none_or(|r| r.finished()) {
+                break;
+            }
+        }
+    });
+    match collector.error() {
+        Some(e) => Err(e.to_owned()),
+        None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ensemble::runner::Accumulators;
+    use crate::runtime::ensemble::Moments;
+
+    fn outcome(b: u64) -> Outcome {
+        let mut m = Moments::new();
+        for k in 0..3 {
+            m.add(((b * 13 + k) as f64).sqrt() * 0.1);
+        }
+        let statistics =
+            Accumulators { n_times: 1, n_means: 1, means: vec![m], histograms: Vec::new(), correlations: Vec::new() };
+        let mut o = Outcome::new(statistics);
+        o.completed = 3;
+        o
+    }
+
+    fn empty() -> Outcome {
+        let statistics = Accumulators {
+            n_times: 1,
+            n_means: 1,
+            means: vec![Moments::new()],
+            histograms: Vec::new(),
+            correlations: Vec::new(),
+        };
+        Outcome::new(statistics)
+    }
+
+    #[test]
+    fn blocks_arriving_in_any_order_merge_in_block_order() {
+        let n = 10 * BLOCK;
+        let mut in_order = empty();
+        for b in 0..10 {
+            in_order.merge(&outcome(b));
+        }
+        let mut c = Collector::new(n, empty(), Resumed::default(), None, 3);
+        for (i, b) in [3, 1, 0, 9, 2, 4, 8, 5, 7, 6].into_iter().enumerate() {
+            c.add(i % 3, b, Ok(outcome(b)));
+            c.flush().unwrap();
+        }
+        let (total, by_rank, _) = c.finish();
+        assert_eq!(by_rank, vec![4, 3, 3]);
+        // Bit for bit: the merge order is the block order, not the arrival order.
+        assert_eq!(total, in_order);
+        // A different order of merging does change the last bits (so the check above can fail).
+        let mut reversed = empty();
+        for b in (0..10).rev() {
+            reversed.merge(&outcome(b));
+        }
+        assert_ne!(reversed.statistics, in_order.statistics);
+    }
+
+    #[test]
+    fn a_missing_block_counts_as_interrupted_and_a_panic_is_named() {
+        let n = 3 * BLOCK - 5;
+        let mut c = Collector::new(n, empty(), Resumed::default(), None, 1);
+        c.add(0, 0, Ok(outcome(0)));
+        let e = caught(1, n, || panic!("boom"));
+        c.add(0, 1, e);
+        c.flush().unwrap();
+        assert_eq!(c.error(), Some("a trajectory of block 1 (trajectories 64..128) panicked: boom"));
+        let (total, _, _) = c.finish();
+        assert_eq!(total.completed, 3);
+        assert_eq!(total.interrupted, n - 64);
+    }
+
+    #[test]
+    fn the_dispatcher_hands_out_in_order_until_closed_or_stopped() {
+        let stop = AtomicBool::new(false);
+        let mut d = Dispatcher::new([1, 2, 5, 6]);
+        assert_eq!(d.take(3, &stop), vec![1, 2, 5]);
+        stop.store(true, Ordering::Relaxed);
+        assert!(d.take(1, &stop).is_empty());
+        stop.store(false, Ordering::Relaxed);
+        d.close();
+        assert!(d.take(1, &stop).is_empty());
+    }
+}

@@ -1,0 +1,145 @@
+//! Potential parameters at run time: a scene's `[potential.parameters]` overrides the values a
+//! molecule was compiled with, without rebuilding. [`WithParameters`] is the molecule with its
+//! potential evaluated by the generated `potential_with`/`potential_gradient_with` (the
+//! parameters as inputs); everything else is the molecule's own code. Runs without overrides
+//! keep the compiled-in constants (folded into the generated code), see BENCHMARKS.md for what
+//! the run-time path costs.
+
+use crate::ensemble::scene::did_you_mean;
+use crate::runtime::diagnostic::FileError;
+use crate::runtime::lanes::{KineticLanes, Real};
+use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
+use crate::runtime::{Atom, Coordinate, KineticMatrices, Molecule};
+use crate::scene::Scene;
+
+/// Molecule `M` with its potential's parameters set to `values` (one per
+/// `M::parameters()`, in that order).
+#[derive(Clone, Debug, PartialEq)]
+pub struct WithParameters<M> {
+    /// The molecule.
+    pub molecule: M,
+    /// The parameters' values, in the units the definition writes them in.
+    pub values: Vec<f64>,
+}
+
+/// The parameter values of `m` with the scene's overrides, or `None` if the scene overrides
+/// none; an unknown name is an error at its place with the closest known name.
+pub fn scene_parameters<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+) -> Result<Option<Vec<f64>>, FileError> {
+    if scene.parameters.is_empty() {
+        return Ok(None);
+    }
+    let known = m.parameters();
+    let mut values: Vec<f64> = known.iter().map(|(_, v)| *v).collect();
+    for (name, value) in &scene.parameters {
+        let Some(i) = known.iter().position(|(k, _)| k == name.get_ref()) else {
+            let names: Vec<&str> = known.iter().map(|(k, _)| *k).collect();
+            let help = match (did_you_mean(name.get_ref(), names.iter().copied()), names.is_empty()) {
+                (_, true) => format!("{}'s potential has no parameters", m.name()),
+                (Some(s), false) => format!("did you mean `{s}`? the parameters are {}", names.join(", ")),
+                (None, false) => format!("the parameters of {} are {}", m.name(), names.join(", ")),
+            };
+            return Err(scene.source().error(
+                name.span(),
+                format!("{} has no potential parameter `{}`", m.name(), name.get_ref()),
+                help,
+            ));
+        };
+        values[i] = *value;
+    }
+    Ok(Some(values))
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for WithParameters<M> {
+    fn name(&self) -> &'static str {
+        self.molecule.name()
+    }
+
+    fn source(&self) -> &'static str {
+        self.molecule.source()
+    }
+
+    fn atoms(&self) -> [Atom; NA] {
+        self.molecule.atoms()
+    }
+
+    fn coordinates(&self) -> [Coordinate; N] {
+        self.molecule.coordinates()
+    }
+
+    fn positions(&self, q: &SVector<f64, N>, r: &mut SMatrix<f64, 3, NA>) {
+        self.molecule.positions(q, r)
+    }
+
+    fn positions_jacobian(&self, q: &SVector<f64, N>, dr: &mut [SMatrix<f64, 3, NA>; N]) {
+        self.molecule.positions_jacobian(q, dr)
+    }
+
+    fn kinetic(&self, q: &SVector<f64, N>, k: &mut KineticMatrices<N>) {
+        self.molecule.kinetic(q, k)
+    }
+
+    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]) {
+        self.molecule.kinetic_jacobian(q, dk)
+    }
+
+    fn kinetic_energy_gradient(
+        &self,
+        q: &SVector<f64, N>,
+        omega: &Vector3<f64>,
+        qdot: &SVector<f64, N>,
+        grad: &mut SVector<f64, N>,
+    ) -> f64 {
+        self.molecule.kinetic_energy_gradient(q, omega, qdot, grad)
+    }
+
+    fn kinetic_and_gradient<E>(
+        &self,
+        q: &SVector<f64, N>,
+        k: &mut KineticMatrices<N>,
+        velocities: impl FnOnce(&KineticMatrices<N>) -> Result<(Vector3<f64>, SVector<f64, N>), E>,
+        grad: &mut SVector<f64, N>,
+    ) -> Result<(Vector3<f64>, SVector<f64, N>, f64), E> {
+        self.molecule.kinetic_and_gradient(q, k, velocities, grad)
+    }
+
+    fn kinetic_and_gradient_lanes<T: Real>(
+        &self,
+        q: &[T; N],
+        k: &mut KineticLanes<T, N>,
+        velocities: impl FnOnce(&KineticLanes<T, N>) -> ([T; 3], [T; N]),
+        grad: &mut [T; N],
+    ) -> ([T; 3], [T; N], T) {
+        self.molecule.kinetic_and_gradient_lanes(q, k, velocities, grad)
+    }
+
+    // `potential_gradient_lanes` is deliberately not forwarded: the molecule's lane-generic
+    // potential has the compiled-in parameters folded in, so the trait's default (lane by lane
+    // through `potential_gradient` above, i.e. `potential_gradient_with`) is the right one.
+
+    fn potential(&self, q: &SVector<f64, N>) -> f64 {
+        self.molecule.potential_with(q, &self.values)
+    }
+
+    fn potential_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64 {
+        self.molecule.potential_gradient_with(q, &self.values, grad)
+    }
+
+    fn parameters(&self) -> &'static [(&'static str, f64)] {
+        self.molecule.parameters()
+    }
+
+    fn potential_with(&self, q: &SVector<f64, N>, params: &[f64]) -> f64 {
+        self.molecule.potential_with(q, params)
+    }
+
+    fn potential_gradient_with(&self, q: &SVector<f64, N>, params: &[f64], grad: &mut SVector<f64, N>) -> f64 {
+        self.molecule.potential_gradient_with(q, params, grad)
+    }
+
+    fn reference_geometry(&self) -> Option<SVector<f64, N>> {
+        self.molecule.reference_geometry()
+    }
+}

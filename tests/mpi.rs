@@ -1,0 +1,166 @@
+//! `mpirun -np K rovib ensemble` (the `mpi` feature; this file is only built with
+//! `cargo test --features mpi --test mpi`, see Cargo.toml's `required-features`): K = 1, 2, 3
+//! ranks write the statistics of the single-process run byte for byte; a panicking trajectory and
+//! a rank killed with SIGKILL end the job without a hang, with the checkpoint intact, and the
+//! resumed run again gives the same bytes. Needs Open MPI's `mpirun` on PATH (Debian:
+//! `apt-get install openmpi-bin libopenmpi-dev`).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+use common::ensemble::{assert_same_statistics, lines, summary, thermal_scene, wait_at_most, wait_for_lines};
+
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("rovib-mpi-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// `mpirun -np K rovib ensemble SCENE --out OUT --threads 1 ARGS`, oversubscribed (more ranks
+/// than cores) and allowed as root (CI runs as root).
+fn mpirun(k: usize, scene: &Path, out: &Path, args: &[&str]) -> Command {
+    let mut c = Command::new("mpirun");
+    c.args(["--oversubscribe", "--allow-run-as-root", "-np", &k.to_string()])
+        .args([env!("CARGO_BIN_EXE_rovib"), "ensemble", scene.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args(["--threads", "1"])
+        .args(args)
+        .env_remove(rovib::ensemble::runner::PANIC_HOOK)
+        .stdin(Stdio::null());
+    c
+}
+
+/// The single-process run (no mpirun) the MPI runs are compared with.
+fn single(scene: &Path, out: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["ensemble", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet", "--threads", "2"])
+        .args(args)
+        .env_remove(rovib::ensemble::runner::PANIC_HOOK)
+        .output()
+        .unwrap()
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+}
+
+fn spawn(mut c: Command) -> Child {
+    c.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("mpirun runs (apt-get install openmpi-bin)")
+}
+
+/// Waits for an mpirun at most `limit` (failing on a hang) and returns its status and stderr.
+fn finish(mut child: Child, limit: Duration) -> (std::process::ExitStatus, String) {
+    let status = wait_at_most(&mut child, limit);
+    let mut err = String::new();
+    use std::io::Read as _;
+    child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    (status, err)
+}
+
+#[test]
+fn one_two_and_three_ranks_write_the_single_process_statistics_byte_for_byte() {
+    let d = dir("ranks");
+    let n = 640;
+    let scene = thermal_scene(&d, n, 500.0);
+    let reference = d.join("single");
+    ok(&single(&scene, &reference, &[]));
+    for k in 1..=3 {
+        let out = d.join(format!("np{k}"));
+        let o = mpirun(k, &scene, &out, &[]).output().unwrap();
+        ok(&o);
+        // Rank 0 alone reports (and writes).
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert_eq!(stdout.matches("trajectories completed").count(), 1, "{stdout}");
+        assert_same_statistics(&reference, &out);
+        let s = summary(&out);
+        assert_eq!(s["ranks"], k);
+        let by_rank: Vec<u64> = s["blocks_by_rank"].as_array().unwrap().iter().map(|b| b.as_u64().unwrap()).collect();
+        assert_eq!(by_rank.len(), k);
+        assert_eq!(by_rank.iter().sum::<u64>(), n / 64, "{by_rank:?}");
+        // Every rank took part (10 blocks of a few tenths of a second each; every rank asks as
+        // soon as it has read the scene).
+        assert!(by_rank.iter().all(|&b| b > 0), "{by_rank:?}");
+        assert!(!out.join("checkpoint.jsonl").exists());
+    }
+}
+
+#[test]
+fn a_panicking_trajectory_ends_every_rank_and_the_resumed_run_is_identical() {
+    let d = dir("panic");
+    let scene = thermal_scene(&d, 640, 500.0);
+    let reference = d.join("single");
+    ok(&single(&scene, &reference, &[]));
+    let out = d.join("out");
+    // -x: Open MPI sets the variable in every rank, whichever runs trajectory 400.
+    let mut c = Command::new("mpirun");
+    c.args(["-x", &format!("{}=400", rovib::ensemble::runner::PANIC_HOOK)]);
+    c.args(["--oversubscribe", "--allow-run-as-root", "-np", "3", env!("CARGO_BIN_EXE_rovib"), "ensemble"])
+        .args([scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "--threads", "1", "--quiet"])
+        .stdin(Stdio::null());
+    let (status, err) = finish(spawn(c), Duration::from_secs(180));
+    assert!(!status.success());
+    assert!(
+        err.contains("the ensemble stopped: a trajectory of block 6 (trajectories 384..448) panicked")
+            && err.contains("ROVIB_TEST_PANIC_AT=400"),
+        "{err}"
+    );
+    assert!(!out.join("ensemble.csv").exists());
+    let recorded = lines(&out.join("checkpoint.jsonl")) - 1;
+    assert!(recorded >= 1, "{recorded}");
+    ok(&mpirun(2, &scene, &out, &["--resume", "--quiet"]).output().unwrap());
+    assert_same_statistics(&reference, &out);
+    assert_eq!(summary(&out)["resumed_trajectories"].as_u64().unwrap(), 64 * recorded as u64);
+}
+
+/// The processes whose parent is `parent`, with their MPI rank.
+fn ranks_of(parent: u32) -> Vec<(u32, u32)> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else { continue };
+        // pid (comm) state ppid ...: comm may hold spaces, so split after the last ')'.
+        let Some(ppid) = stat.rsplit_once(')').and_then(|(_, rest)| rest.split_whitespace().nth(1)) else {
+            continue;
+        };
+        if ppid.parse::<u32>().ok() != Some(parent) {
+            continue;
+        }
+        let environ = std::fs::read(format!("/proc/{pid}/environ")).unwrap_or_default();
+        for var in environ.split(|&b| b == 0) {
+            if let Some(rank) = var.strip_prefix(b"OMPI_COMM_WORLD_RANK=") {
+                found.push((pid, String::from_utf8_lossy(rank).parse().unwrap()));
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn a_rank_killed_with_sigkill_ends_the_job_and_the_run_resumes_to_the_same_bytes() {
+    let d = dir("dead");
+    let n = 1280;
+    let scene = thermal_scene(&d, n, 500.0);
+    let reference = d.join("single");
+    ok(&single(&scene, &reference, &[]));
+    let out = d.join("out");
+    let checkpoint = out.join("checkpoint.jsonl");
+    let child = spawn(mpirun(3, &scene, &out, &["--quiet"]));
+    wait_for_lines(&checkpoint, 4, Duration::from_secs(120));
+    let ranks = ranks_of(child.id());
+    let &(pid, _) = ranks.iter().find(|(_, r)| *r == 1).unwrap_or_else(|| panic!("no rank 1 among {ranks:?}"));
+    let killed = Command::new("kill").args(["-KILL", &pid.to_string()]).status().unwrap();
+    assert!(killed.success());
+    // Open MPI's mpirun notices the lost rank and ends the job: rank 0 must not wait forever.
+    let (status, err) = finish(child, Duration::from_secs(60));
+    assert!(!status.success(), "{err}");
+    assert!(!out.join("ensemble.csv").exists(), "the job must not have completed");
+    let recorded = lines(&checkpoint) - 1;
+    assert!((3..(n / 64) as usize).contains(&recorded), "{recorded}");
+    // Resumed in one process: the checkpoint does not depend on the ranks that wrote it.
+    ok(&single(&scene, &out, &["--resume"]));
+    assert_same_statistics(&reference, &out);
+    assert!(summary(&out)["resumed_trajectories"].as_u64().unwrap() >= 3 * 64);
+}

@@ -1,0 +1,105 @@
+//! Potential parameters at run time (`[potential.parameters]` in a scene): the run-time path
+//! against water's potential written out by hand, against finite differences, and through
+//! `rovib run`.
+
+use std::process::Command;
+
+use rovib::molecules::H2o;
+use rovib::parameters::WithParameters;
+use rovib::runtime::Molecule;
+use rovib::runtime::nalgebra::SVector;
+use rovib::runtime::units::{BOHR_IN_ANGSTROM, HARTREE_IN_WAVENUMBERS};
+
+/// molecules/h2o.toml's potential, transcribed: q in bohr and rad, the parameters by name.
+fn water(q: &SVector<f64, 3>, p: &dyn Fn(&str) -> f64) -> f64 {
+    let (r1, r2, alpha) = (q[0] * BOHR_IN_ANGSTROM, q[1] * BOHR_IN_ANGSTROM, q[2]);
+    let (de, a, re, ae) = (p("De"), p("a"), p("re"), p("alpha_e"));
+    let morse = |r: f64| de * (1.0 - (-a * (r - re)).exp()).powi(2);
+    let cm = morse(r1)
+        + morse(r2)
+        + 0.5 * p("faa") * (alpha - ae).powi(2)
+        + p("frr2") * (r1 - re) * (r2 - re)
+        + p("fra") * (r1 - re + r2 - re) * (alpha - ae);
+    cm / HARTREE_IN_WAVENUMBERS
+}
+
+fn with(overrides: &[(&str, f64)]) -> (WithParameters<H2o>, impl Fn(&str) -> f64) {
+    let names = H2o.parameters();
+    let values: Vec<f64> =
+        names.iter().map(|(n, v)| overrides.iter().find(|(o, _)| o == n).map_or(*v, |(_, x)| *x)).collect();
+    let lookup = values.clone();
+    let get = move |name: &str| lookup[names.iter().position(|(n, _)| *n == name).unwrap()];
+    (WithParameters { molecule: H2o, values }, get)
+}
+
+const GEOMETRIES: [[f64; 3]; 3] = [[1.9, 1.75, 1.7], [1.6, 2.3, 2.1], [2.8, 1.81, 1.3]];
+
+#[test]
+fn overridden_parameters_give_the_hand_written_potential() {
+    assert_eq!(H2o.parameters().len(), 7);
+    let (m, p) = with(&[("De", 50_000.0), ("a", 2.0), ("fra", -3000.0)]);
+    let (compiled, p0) = with(&[]);
+    for q in GEOMETRIES.map(SVector::from) {
+        let expected = water(&q, &p);
+        assert!((m.potential(&q) - expected).abs() <= 1e-14 * expected.abs(), "{} vs {expected}", m.potential(&q));
+        // The compiled-in values through the run-time path equal the compiled constants.
+        let u0 = H2o.potential(&q);
+        assert!((compiled.potential(&q) - u0).abs() <= 1e-14 * u0.abs());
+        assert!((u0 - water(&q, &p0)).abs() <= 1e-14 * u0.abs());
+        assert!((m.potential(&q) - u0).abs() > 1e-3 * u0.abs(), "the override changes U");
+    }
+}
+
+#[test]
+fn the_run_time_gradient_is_the_derivative_of_the_run_time_potential() {
+    let (m, _) = with(&[("De", 50_000.0), ("re", 1.0)]);
+    for q in GEOMETRIES.map(SVector::from) {
+        let mut g = SVector::<f64, 3>::zeros();
+        let u = m.potential_gradient(&q, &mut g);
+        assert_eq!(u, m.potential(&q));
+        for k in 0..3 {
+            let h = 1e-6;
+            let (mut a, mut b) = (q, q);
+            a[k] += h;
+            b[k] -= h;
+            let fd = (m.potential(&a) - m.potential(&b)) / (2.0 * h);
+            assert!((g[k] - fd).abs() <= 1e-7 * g[k].abs().max(1e-3), "k = {k}: {} vs {fd}", g[k]);
+        }
+    }
+}
+
+#[test]
+fn a_scene_overrides_parameters_and_names_an_unknown_one() {
+    let dir = std::env::temp_dir().join(format!("rovib-parameters-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = "molecule = \"h2o\"\n[initial]\nq = { r1 = 1.2, r2 = 0.9, alpha = 1.7 }\n\
+                [potential.parameters]\nDe = 50000.0\nfra = -3000.0\n[run]\nend = 50.0\noutput_interval = 5.0\n";
+    let path = dir.join("s.toml");
+    std::fs::write(&path, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["run", path.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).unwrap()).unwrap();
+    // At rest H(0) = U(q0) with the overridden parameters (q in Å: h2o declares Å).
+    let q0 = SVector::from([1.2 / BOHR_IN_ANGSTROM, 0.9 / BOHR_IN_ANGSTROM, 1.7]);
+    let (_, p) = with(&[("De", 50_000.0), ("fra", -3000.0)]);
+    let h0 = summary["conservation"]["initial_energy_hartree"].as_f64().unwrap();
+    assert!((h0 - water(&q0, &p)).abs() <= 1e-13 * h0.abs(), "{h0} vs {}", water(&q0, &p));
+    assert!(summary["conservation"]["max_relative_energy_error"].as_f64().unwrap() < 1e-8);
+    assert_eq!(summary["potential_parameters"]["De"], 50000.0);
+
+    std::fs::write(&path, text.replace("De = 50000.0", "DE = 50000.0")).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["run", path.to_str().unwrap(), "--out", dir.join("bad").to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(!out.status.success());
+    assert!(err.contains("h2o has no potential parameter `DE`") && err.contains("did you mean `De`?"), "{err}");
+    assert!(err.contains("s.toml:5:"), "located: {err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
