@@ -15,6 +15,9 @@
 //! cargo run --release --example lanes_bench -- 15      # more rounds
 //! ```
 //!
+//! `lanes_bench profile-scalar` and `lanes_bench profile-x2` run only one ensemble pass of that
+//! contender (64 trajectories), to be profiled (`valgrind --tool=callgrind`).
+//!
 //! Built for the default target (baseline x86-64: SSE2, no AVX, no FMA) unless RUSTFLAGS say
 //! otherwise; the program prints which vector features the build has.
 
@@ -175,7 +178,20 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn main() {
-    let rounds: usize = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(7);
+    let arg = std::env::args().nth(1);
+    match arg.as_deref() {
+        Some("profile-scalar") => {
+            let (ms, _) = ensemble_scalar(&states(64, 1));
+            println!("scalar ensemble: {ms:.3} ms per trajectory");
+            return;
+        }
+        Some("profile-x2") => {
+            println!("F64x2 ensemble: {:.3} ms per trajectory", ensemble_lanes::<F64x2>(&states(64, 1)));
+            return;
+        }
+        _ => {}
+    }
+    let rounds: usize = arg.and_then(|a| a.parse().ok()).unwrap_or(7);
     println!(
         "target features: sse2 {}, avx {}, avx2 {}, fma {}, avx512f {}",
         cfg!(target_feature = "sse2"),
