@@ -47,10 +47,13 @@ fn main() {
             for e in &errors {
                 eprintln!("{e}\n");
             }
+            // Each file may have several errors; count the files.
+            let files = errors.iter().map(|e| e.path.as_str()).collect::<std::collections::BTreeSet<_>>().len();
             eprintln!(
-                "rovib: {} molecule definition{} could not be generated; fix the above and run cargo build again",
+                "rovib: {} error{} in {files} molecule definition{}; fix the above and run cargo build again",
                 errors.len(),
-                if errors.len() == 1 { "" } else { "s" }
+                if errors.len() == 1 { "" } else { "s" },
+                if files == 1 { "" } else { "s" }
             );
             std::process::exit(1);
         }

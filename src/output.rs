@@ -253,6 +253,49 @@ impl TrajectoryCsv {
     }
 }
 
+/// `dipole.csv`: the lab-frame dipole moment μ_lab = S μ(q), one row per output time.
+///
+/// Columns: `t` (in the scene's time unit), `mu_x`, `mu_y`, `mu_z` (e·bohr, in the lab frame
+/// of `lab.xyz`; the centre of mass's motion does not change it for a neutral molecule).
+pub struct DipoleCsv {
+    file: OutputFile,
+    row: String,
+}
+
+/// The header of `dipole.csv`.
+const DIPOLE_HEADER: &str = "t,mu_x,mu_y,mu_z";
+
+impl DipoleCsv {
+    /// Creates the file and writes the header.
+    pub fn create(dir: &Path) -> Result<Self, String> {
+        let mut file = OutputFile::create(dir, "dipole.csv")?;
+        file.line(DIPOLE_HEADER)?;
+        Ok(DipoleCsv { file, row: String::new() })
+    }
+
+    /// Opens an existing `dipole.csv` holding `rows` rows to append to it (a resumed run).
+    pub fn append(dir: &Path, rows: usize) -> Result<Self, String> {
+        let file = OutputFile::append(dir, "dipole.csv", DIPOLE_HEADER, rows + 1)?;
+        Ok(DipoleCsv { file, row: String::new() })
+    }
+
+    /// Writes one row: time and μ_lab in e·bohr, with full round-trip precision.
+    pub fn row(&mut self, t: f64, mu: &Vector3<f64>) -> Result<(), String> {
+        use std::fmt::Write as _;
+        self.row.clear();
+        let _ = write!(self.row, "{t:?},{:?},{:?},{:?}", mu[0], mu[1], mu[2]);
+        let row = std::mem::take(&mut self.row);
+        let result = self.file.line(&row);
+        self.row = row;
+        result
+    }
+
+    /// Flushes to disk.
+    pub fn flush(&mut self) -> Result<(), String> {
+        self.file.flush()
+    }
+}
+
 /// One ASE time unit in femtoseconds (Å·√(u/eV) with ASE's CODATA 2014 constants), the unit of
 /// the `momenta` column ASE reads.
 pub use crate::ensemble::states_xyz::ASE_TIME_IN_FS;
@@ -443,8 +486,8 @@ impl Conservation {
 }
 
 /// Every file `rovib run` may write into its output directory.
-pub const RUN_FILES: [&str; 5] =
-    ["trajectory.csv", TRAJECTORY_UNITS_FILE, "lab.xyz", "summary.json", crate::restart::RESTART_FILE];
+pub const RUN_FILES: [&str; 6] =
+    ["trajectory.csv", TRAJECTORY_UNITS_FILE, "lab.xyz", "dipole.csv", "summary.json", crate::restart::RESTART_FILE];
 
 /// Removes the files of [`RUN_FILES`] in `dir` that this run will not write (not in `keep`),
 /// and `summary.json` and `restart.json` in any case (they are written at the end, atomically,

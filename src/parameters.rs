@@ -142,4 +142,16 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Wi
     fn reference_geometry(&self) -> Option<SVector<f64, N>> {
         self.molecule.reference_geometry()
     }
+
+    fn has_dipole(&self) -> bool {
+        self.molecule.has_dipole()
+    }
+
+    fn dipole(&self, q: &SVector<f64, N>, mu: &mut Vector3<f64>) {
+        self.molecule.dipole(q, mu)
+    }
+
+    fn dipole_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>) {
+        self.molecule.dipole_jacobian(q, dmu)
+    }
 }

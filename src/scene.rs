@@ -94,6 +94,8 @@ pub struct Outputs {
     pub summary: bool,
     /// `restart.json`: the final state, to continue the run (`rovib run --resume`).
     pub restart: bool,
+    /// `dipole.csv`: the lab-frame dipole moment at every output time (only when asked for).
+    pub dipole: bool,
 }
 
 /// A name in the file with its place.
@@ -399,21 +401,22 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         ));
     }
     let outputs = match &run.outputs {
-        None => Outputs { trajectory: true, lab: true, summary: true, restart: true },
+        None => Outputs { trajectory: true, lab: true, summary: true, restart: true, dipole: false },
         Some(list) => {
-            let mut o = Outputs { trajectory: false, lab: false, summary: false, restart: false };
+            let mut o = Outputs { trajectory: false, lab: false, summary: false, restart: false, dipole: false };
             for name in list.get_ref() {
                 match name.get_ref().as_str() {
                     "trajectory" => o.trajectory = true,
                     "lab" => o.lab = true,
                     "summary" => o.summary = true,
                     "restart" => o.restart = true,
+                    "dipole" => o.dipole = true,
                     other => {
                         return Err(src.error(
                             name.span(),
                             format!("unknown output `{other}`"),
-                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz), \"summary\" (summary.json) \
-                             and \"restart\" (restart.json)",
+                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz), \"summary\" (summary.json), \
+                             \"restart\" (restart.json) and \"dipole\" (dipole.csv)",
                         ));
                     }
                 }

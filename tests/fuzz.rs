@@ -172,6 +172,15 @@ fn well_formed(e: &FileError, text: &str) {
     let _ = e.to_string();
 }
 
+/// Every error of a definition is usable, there is at least one, and they come in file order.
+fn all_well_formed(errors: &[FileError], text: &str) {
+    assert!(!errors.is_empty(), "a refused definition has at least one error");
+    for e in errors {
+        well_formed(e, text);
+    }
+    assert!(errors.windows(2).all(|w| (w[0].line, w[0].column) <= (w[1].line, w[1].column)), "{errors:#?}");
+}
+
 proptest! {
     #![proptest_config(config(cases(1500), 7))]
 
@@ -186,7 +195,7 @@ proptest! {
         }
         match generate_molecule(path, &text) {
             Ok(m) => prop_assert!(m.source.starts_with("// @generated")),
-            Err(e) => well_formed(&e, &text),
+            Err(e) => all_well_formed(&e, &text),
         }
     }
 }
@@ -398,7 +407,7 @@ proptest! {
                     }
                 }
             }
-            Err(e) => well_formed(&e, &text),
+            Err(e) => all_well_formed(&e, &text),
         }
     }
 }

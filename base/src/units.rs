@@ -188,6 +188,40 @@ impl CoordinateUnit {
     }
 }
 
+/// One debye in atomic units of dipole moment, e·bohr (1 D = 10⁻²¹/c C·m; e a₀ from CODATA 2018).
+pub const DEBYE_IN_E_BOHR: f64 = 0.393_430_269_519_899_5;
+
+/// A unit of electric dipole moment accepted in a definition's `[dipole]` table.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum DipoleUnit {
+    /// Debye, 10⁻²¹/c C·m.
+    Debye,
+    /// The atomic unit, e·bohr.
+    EBohr,
+    /// e·Å.
+    EAngstrom,
+}
+
+impl DipoleUnit {
+    /// Spellings accepted in files.
+    pub const SPELLINGS: &'static [(&'static str, DipoleUnit)] =
+        &[("debye", DipoleUnit::Debye), ("e*bohr", DipoleUnit::EBohr), ("e*angstrom", DipoleUnit::EAngstrom)];
+
+    /// Parses a unit as written in a file.
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::SPELLINGS.iter().find(|(name, _)| *name == s).map(|&(_, u)| u)
+    }
+
+    /// How many e·bohr one of this unit is.
+    pub fn in_e_bohr(self) -> f64 {
+        match self {
+            DipoleUnit::Debye => DEBYE_IN_E_BOHR,
+            DipoleUnit::EBohr => 1.0,
+            DipoleUnit::EAngstrom => 1.0 / BOHR_IN_ANGSTROM,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -204,5 +238,8 @@ mod tests {
         }
         assert_eq!(CoordinateUnit::parse("deg"), Some(CoordinateUnit::Angle(AngleUnit::Deg)));
         assert_eq!(CoordinateUnit::parse("parsec"), None);
+        // 1 D = 3.335 640 95e-30 C m and e a0 = 8.478 353 6255e-30 C m: 0.393 430 e a0.
+        assert!((DipoleUnit::Debye.in_e_bohr() - 3.335_640_952e-30 / 8.478_353_625_5e-30).abs() < 1e-9);
+        assert_eq!(DipoleUnit::parse("e*angstrom"), Some(DipoleUnit::EAngstrom));
     }
 }

@@ -51,8 +51,10 @@ fn main() -> ExitCode {
                         best = Some((m, t));
                     }
                 }
-                Err(e) => {
-                    eprintln!("{e}");
+                Err(errors) => {
+                    for e in errors {
+                        eprintln!("{e}\n");
+                    }
                     return ExitCode::FAILURE;
                 }
             }

@@ -28,6 +28,14 @@
 //! energy_unit = "cm-1"             # hartree | cm-1 | eV | kcal/mol
 //! expression = "D * pow(1 - exp(-a * (r1 - re)), 2)"
 //! parameters = { D = 44000, a = 2.2, re = 0.9578 }
+//!
+//! [dipole]                         # optional: the body-frame dipole moment μ(q), either
+//! unit = "debye"                   # debye | e*bohr | e*angstrom
+//! components = ["0", "0", "mu0 + d1 * (r1 - re)"]
+//! parameters = { mu0 = 1.85, d1 = 0.5 }
+//! # or, the short form, charges in e per atom label (numbers or expressions of q), with
+//! # μ = Σ q_i R_i about the centre of mass:
+//! # charges = { O = "-2 * qh", H1 = "qh", H2 = "qh" }
 //! ```
 //!
 //! In every expression a coordinate's name stands for its value in the coordinate's declared
@@ -36,7 +44,8 @@
 //! code takes q in bohr and radians, and returns positions in bohr and energies in hartree.
 //!
 //! Every problem is reported as a [`DefinitionError`] naming the file, line and column, what is
-//! wrong and what to change.
+//! wrong and what to change; [`parse_definition`] reports every independent problem of a file at
+//! once, in file order.
 
 use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
@@ -48,7 +57,7 @@ use crate::diagnostic::{FileError, Source};
 use crate::elements;
 use crate::expr::{ExprId, Func, Graph, Node};
 use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
-use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, EnergyUnit, LengthUnit};
+use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, DipoleUnit, EnergyUnit, LengthUnit};
 
 /// A problem in a definition file, with its place and a suggested fix (file, line, column,
 /// message, help), displayed like a rustc error.
@@ -111,6 +120,17 @@ pub struct Definition {
     pub potential_scope: HashMap<String, ExprId>,
     /// See `potential_scope`.
     pub potential_text: String,
+    /// The dipole moment surface, if the file has a `[dipole]` table.
+    pub dipole: Option<DipoleDef>,
+}
+
+/// A validated `[dipole]` table, in atomic units.
+#[derive(Clone, Debug)]
+pub enum DipoleDef {
+    /// The body-frame components `[μx, μy, μz]` in e·bohr.
+    Components([ExprId; 3]),
+    /// One charge per atom (in atom order) in e: μ = Σ q_i R_i with the centred positions.
+    Charges(Vec<ExprId>),
 }
 
 #[derive(Deserialize)]
@@ -127,6 +147,21 @@ struct RawDefinition {
     coordinates: Vec<RawCoordinate>,
     atoms: Vec<RawAtom>,
     potential: Spanned<RawPotential>,
+    #[serde(default)]
+    dipole: Option<Spanned<RawDipole>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDipole {
+    #[serde(default)]
+    unit: Option<Spanned<String>>,
+    #[serde(default)]
+    components: Option<Spanned<Vec<Spanned<RawValue>>>>,
+    #[serde(default)]
+    charges: Option<BTreeMap<Spanned<String>, Spanned<RawValue>>>,
+    #[serde(default)]
+    parameters: BTreeMap<Spanned<String>, Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -197,6 +232,10 @@ impl ExpressionPlace for Source<'_> {
     }
 }
 
+/// The value that stands in for a constant or parameter with a problem, so that the rest of the
+/// definition can still be checked (never emitted: a definition with a problem generates nothing).
+const PLACEHOLDER: f64 = 1.0;
+
 /// The punctuation an atom label may contain besides letters and digits.
 const LABEL_PUNCTUATION: &str = "_-+'.*()";
 
@@ -222,9 +261,13 @@ fn unit_help<T>(spellings: &[(&str, T)]) -> String {
 }
 
 /// Reads and validates one definition. `path` is used in messages only.
-pub fn parse_definition(path: &str, text: &str) -> Result<Definition, DefinitionError> {
+///
+/// Every problem is reported, not only the first: the errors come in file order. A TOML syntax
+/// error or an unknown or missing key stops the reading at that place (the rest of the file
+/// cannot be read reliably); after that, every independent mistake gets its own error.
+pub fn parse_definition(path: &str, text: &str) -> Result<Definition, Vec<DefinitionError>> {
     let src = Source { path, text };
-    let raw: RawDefinition = toml::from_str(text).map_err(|e| {
+    let raw = toml::from_str::<RawDefinition>(text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
         let help = if message.starts_with("unknown field") {
             "check the spelling; the README lists every key of a molecule definition".to_owned()
@@ -240,8 +283,10 @@ pub fn parse_definition(path: &str, text: &str) -> Result<Definition, Definition
             Some(span) => src.error(span, message, help),
             None => src.whole_file(message, help),
         }
-    })?;
-    Validator { src: &src, graph: Graph::new(), names: HashMap::new(), declared: HashMap::new() }.run(raw)
+    });
+    let raw = raw.map_err(|e| vec![e])?;
+    Validator { src: &src, graph: Graph::new(), names: HashMap::new(), declared: HashMap::new(), errors: Vec::new() }
+        .run(raw)
 }
 
 /// State of one validation: the graph being built and the names declared so far.
@@ -252,6 +297,85 @@ struct Validator<'s> {
     names: HashMap<String, ExprId>,
     /// Name → (what it is, where it was declared), to report duplicates.
     declared: HashMap<String, (&'static str, Range<usize>)>,
+    /// Every problem found so far.
+    errors: Vec<DefinitionError>,
+}
+
+/// The molecule's name becomes a module and a type, and `--molecule NAME` finds it by file
+/// name: the first thing wrong with it.
+fn check_molecule_name(src: &Source, name: &Spanned<String>, stem: &str) -> Result<(), DefinitionError> {
+    let span = name.span();
+    let name = name.get_ref();
+    let valid_name = name.chars().next().is_some_and(|c| c.is_ascii_lowercase())
+        && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+    if !valid_name {
+        return Err(src.error(
+            span,
+            format!("molecule name `{name}` is not a lowercase identifier"),
+            "use lowercase letters, digits and `_`, starting with a letter, e.g. \"h2o\"",
+        ));
+    }
+    if crate::names::is_keyword(name) {
+        return Err(src.error(
+            span,
+            format!("molecule name `{name}` is a Rust keyword"),
+            "the name becomes a Rust module; choose another, e.g. \"h2o\" or \"water\"",
+        ));
+    }
+    let ty = crate::names::type_name(name);
+    if crate::names::RESERVED_TYPE_NAMES.contains(&ty.as_str()) {
+        return Err(src.error(
+            span,
+            format!("molecule name `{name}` gives the type name `{ty}`, which generated code already uses"),
+            "choose another name (the type name is the name in CamelCase)",
+        ));
+    }
+    if name != stem {
+        return Err(src.error(
+            span,
+            format!("molecule name `{name}` does not match the file name `{stem}.toml`"),
+            format!("rename the file to `{name}.toml` or set name = \"{stem}\""),
+        ));
+    }
+    Ok(())
+}
+
+/// The first thing wrong with an atom's label, given the labels of the atoms before it.
+fn check_label(
+    src: &Source,
+    label: &Spanned<String>,
+    earlier: &HashMap<String, Range<usize>>,
+) -> Result<(), DefinitionError> {
+    let span = label.span();
+    let label = label.get_ref();
+    if label.trim().is_empty() {
+        return Err(src.error(span, "empty atom label", "give every atom a label such as \"H1\""));
+    }
+    // Labels are printed in lists (`rovib list`, messages) and are keys of scenes and states
+    // files: one short word.
+    if let Some(c) = label.chars().find(|&c| !label_char(c)) {
+        return Err(src.error(
+            span,
+            format!("atom label {label:?} contains {c:?}"),
+            format!("labels are one word of letters, digits and {LABEL_PUNCTUATION}, e.g. \"H1\""),
+        ));
+    }
+    if label.chars().count() > MAX_LABEL_CHARS {
+        return Err(src.error(
+            span,
+            format!("atom label `{label}` has {} characters, more than {MAX_LABEL_CHARS}", label.chars().count()),
+            "use a short label such as \"H1\"",
+        ));
+    }
+    if let Some(first) = earlier.get(label) {
+        let (line, _) = src.place(first.start);
+        return Err(src.error(
+            span,
+            format!("duplicate atom `{label}`: another atom on line {line} has the same label"),
+            "give each atom its own label, e.g. \"H1\" and \"H2\"",
+        ));
+    }
+    Ok(())
 }
 
 impl Validator<'_> {
@@ -302,55 +426,44 @@ impl Validator<'_> {
         }
     }
 
-    fn run(mut self, raw: RawDefinition) -> Result<Definition, DefinitionError> {
+    /// Records a problem and carries on, so that every independent mistake in the file is
+    /// reported at once; the value is `None` where the problem was.
+    fn check<T>(&mut self, result: Result<T, DefinitionError>) -> Option<T> {
+        result.map_err(|e| self.errors.push(e)).ok()
+    }
+
+    /// Validates everything, collecting every problem. A part with a problem is replaced by a
+    /// stand-in (a default unit, a placeholder constant) so that later parts are still checked
+    /// without reporting consequences of the first mistake as mistakes of their own; checks that
+    /// evaluate expressions run only on parts that had no problem.
+    fn run(mut self, raw: RawDefinition) -> Result<Definition, Vec<DefinitionError>> {
         let src = self.src;
-        // The name becomes a module and a type, and `--molecule NAME` finds it by file name.
         let name = raw.name.get_ref().clone();
         let stem = std::path::Path::new(src.path).file_stem().and_then(|s| s.to_str()).unwrap_or_default();
-        let valid_name = name.chars().next().is_some_and(|c| c.is_ascii_lowercase())
-            && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
-        if !valid_name {
-            return Err(src.error(
-                raw.name.span(),
-                format!("molecule name `{name}` is not a lowercase identifier"),
-                "use lowercase letters, digits and `_`, starting with a letter, e.g. \"h2o\"",
-            ));
-        }
-        if crate::names::is_keyword(&name) {
-            return Err(src.error(
-                raw.name.span(),
-                format!("molecule name `{name}` is a Rust keyword"),
-                "the name becomes a Rust module; choose another, e.g. \"h2o\" or \"water\"",
-            ));
-        }
-        let ty = crate::names::type_name(&name);
-        if crate::names::RESERVED_TYPE_NAMES.contains(&ty.as_str()) {
-            return Err(src.error(
-                raw.name.span(),
-                format!("molecule name `{name}` gives the type name `{ty}`, which generated code already uses"),
-                "choose another name (the type name is the name in CamelCase)",
-            ));
-        }
-        if name != stem {
-            return Err(src.error(
-                raw.name.span(),
-                format!("molecule name `{name}` does not match the file name `{stem}.toml`"),
-                format!("rename the file to `{name}.toml` or set name = \"{stem}\""),
-            ));
-        }
+        let named = check_molecule_name(src, &raw.name, stem);
+        self.check(named);
 
         let length_unit = match &raw.length_unit {
             None => LengthUnit::Bohr,
-            Some(u) => LengthUnit::parse(u.get_ref()).ok_or_else(|| {
-                src.error(u.span(), format!("unknown length unit `{}`", u.get_ref()), unit_help(LengthUnit::SPELLINGS))
-            })?,
+            Some(u) => {
+                let unit = LengthUnit::parse(u.get_ref()).ok_or_else(|| {
+                    src.error(
+                        u.span(),
+                        format!("unknown length unit `{}`", u.get_ref()),
+                        unit_help(LengthUnit::SPELLINGS),
+                    )
+                });
+                self.check(unit).unwrap_or(LengthUnit::Bohr)
+            }
         };
 
-        // Coordinates first: graph variable k is coordinate k, in atomic units.
+        // Coordinates first: graph variable k is coordinate k, in atomic units. A coordinate
+        // with a problem still gets its variable and its name, so expressions using it parse.
         let mut coordinates = Vec::new();
         let mut coordinate_spans = Vec::new();
         for c in &raw.coordinates {
-            self.declare(&c.name, "coordinate")?;
+            let declared = self.declare(&c.name, "coordinate");
+            self.check(declared);
             let unit = CoordinateUnit::parse(c.unit.get_ref()).ok_or_else(|| {
                 let mut spellings: Vec<(&str, ())> = LengthUnit::SPELLINGS.iter().map(|(n, _)| (*n, ())).collect();
                 spellings.extend(crate::units::AngleUnit::SPELLINGS.iter().map(|(n, _)| (*n, ())));
@@ -359,17 +472,20 @@ impl Validator<'_> {
                     format!("unknown unit `{}` for coordinate `{}`", c.unit.get_ref(), c.name.get_ref()),
                     unit_help(&spellings),
                 )
-            })?;
+            });
+            let unit = self.check(unit).unwrap_or(CoordinateUnit::Length(LengthUnit::Bohr));
             let reference = match &c.reference {
                 Some(r) if !r.get_ref().is_finite() => {
-                    return Err(src.error(r.span(), "non-finite reference value", "write a finite number"));
+                    self.errors.push(src.error(r.span(), "non-finite reference value", "write a finite number"));
+                    None
                 }
                 Some(r) if !(r.get_ref() * unit.in_atomic_units()).is_finite() => {
-                    return Err(src.error(
+                    self.errors.push(src.error(
                         r.span(),
                         format!("reference value {:?} {} overflows in atomic units", r.get_ref(), c.unit.get_ref()),
                         "write the reference geometry's value of this coordinate, a number of ordinary size",
                     ));
+                    None
                 }
                 r => r.as_ref().map(|r| *r.get_ref()),
             };
@@ -382,11 +498,12 @@ impl Validator<'_> {
                 self.graph.mul(factor, var)
             };
             self.names.insert(c.name.get_ref().clone(), symbol);
-            let range = self.range(c, unit)?;
-            if let (Some(r), Some(value)) = (&c.reference, reference)
+            let range = self.range(c, unit);
+            let range = self.check(range);
+            if let (Some(r), Some(value), Some(range)) = (&c.reference, reference, range)
                 && !(range.0 <= value && value <= range.1)
             {
-                return Err(src.error(
+                self.errors.push(src.error(
                     r.span(),
                     format!(
                         "reference value {value:?} of `{}` is outside its range [{:?}, {:?}] {}",
@@ -398,111 +515,119 @@ impl Validator<'_> {
                     "correct the reference, or declare the range of valid values with range = [low, high]",
                 ));
             }
+            let range = range.unwrap_or(default_range(unit));
             coordinates.push(CoordinateDef { name: c.name.get_ref().clone(), unit, reference, range });
             coordinate_spans.push(c.name.span());
         }
 
         // Constants may refer to each other (in any order) but not to coordinates.
+        let before_constants = self.errors.len();
         let constants: Vec<(Spanned<String>, Spanned<RawValue>)> =
             raw.constants.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
         for (k, _) in &constants {
-            self.declare(k, "constant")?;
+            let declared = self.declare(k, "constant");
+            self.check(declared);
         }
         let coordinate_names: HashMap<String, ExprId> = std::mem::take(&mut self.names);
-        self.resolve_constants(&constants)?;
+        self.resolve_constants(&constants);
         self.names.extend(coordinate_names);
+        let constants_ok = self.errors.len() == before_constants;
 
-        // Atoms and their positions.
+        // Atoms and their positions (`None` where a position has a problem).
         if raw.atoms.len() < 2 {
-            return Err(src.whole_file(
+            self.errors.push(src.whole_file(
                 format!("a molecule needs at least 2 atoms, this one has {}", raw.atoms.len()),
                 "add [[atoms]] entries, each with a label and a position",
             ));
         }
         let mut atoms = Vec::new();
-        let mut positions = Vec::new();
+        let mut positions: Vec<Option<[ExprId; 3]>> = Vec::new();
         let mut labels: HashMap<String, Range<usize>> = HashMap::new();
         let mut position_spans: Vec<Vec<Range<usize>>> = Vec::new();
+        let mut masses_ok = true;
         for a in &raw.atoms {
             let label = a.label.get_ref();
-            if label.trim().is_empty() {
-                return Err(src.error(a.label.span(), "empty atom label", "give every atom a label such as \"H1\""));
+            match check_label(src, &a.label, &labels) {
+                Ok(()) => {
+                    labels.insert(label.clone(), a.label.span());
+                }
+                Err(e) => self.errors.push(e),
             }
-            // Labels are printed in lists (`rovib list`, messages) and are keys of scenes and
-            // states files: one short word.
-            if let Some(c) = label.chars().find(|&c| !label_char(c)) {
-                return Err(src.error(
-                    a.label.span(),
-                    format!("atom label {label:?} contains {c:?}"),
-                    format!("labels are one word of letters, digits and {LABEL_PUNCTUATION}, e.g. \"H1\""),
-                ));
-            }
-            if label.chars().count() > MAX_LABEL_CHARS {
-                return Err(src.error(
-                    a.label.span(),
-                    format!(
-                        "atom label `{label}` has {} characters, more than {MAX_LABEL_CHARS}",
-                        label.chars().count()
-                    ),
-                    "use a short label such as \"H1\"",
-                ));
-            }
-            if let Some(first) = labels.get(label) {
-                let (line, _) = src.place(first.start);
-                return Err(src.error(
-                    a.label.span(),
-                    format!("duplicate atom `{label}`: another atom on line {line} has the same label"),
-                    "give each atom its own label, e.g. \"H1\" and \"H2\"",
-                ));
-            }
-            labels.insert(label.clone(), a.label.span());
-            let (element, mass_da) = self.atom_mass(a)?;
+            let mass = self.atom_mass(a);
+            let (element, mass_da) = self.check(mass).unwrap_or_else(|| {
+                masses_ok = false;
+                ("X".to_owned(), PLACEHOLDER)
+            });
             let context = format!("the position of atom {label}");
-            let Some(position) = &a.position else {
-                return Err(src.error(
-                    a.label.span(),
-                    format!("missing position for atom `{label}`"),
-                    "add position = [x, y, z], each a number or an expression in quotes",
-                ));
+            let position = match &a.position {
+                None => {
+                    self.errors.push(src.error(
+                        a.label.span(),
+                        format!("missing position for atom `{label}`"),
+                        "add position = [x, y, z], each a number or an expression in quotes",
+                    ));
+                    None
+                }
+                Some(position) if position.get_ref().len() != 3 => {
+                    self.errors.push(src.error(
+                        position.span(),
+                        format!(
+                            "the position of atom `{label}` has {} components instead of 3",
+                            position.get_ref().len()
+                        ),
+                        "write position = [x, y, z]",
+                    ));
+                    None
+                }
+                Some(position) => Some(position),
             };
-            if position.get_ref().len() != 3 {
-                return Err(src.error(
-                    position.span(),
-                    format!("the position of atom `{label}` has {} components instead of 3", position.get_ref().len()),
-                    "write position = [x, y, z]",
-                ));
-            }
-            let mut xyz = [self.graph.zero(); 3];
-            for (axis, component) in position.get_ref().iter().enumerate() {
-                let e = self.value(component, &context)?;
-                let scale = self.graph.constant(length_unit.in_bohr());
-                xyz[axis] = self.graph.mul(scale, e);
+            let mut xyz = Some([self.graph.zero(); 3]);
+            for (axis, component) in position.into_iter().flat_map(|p| p.get_ref().iter().enumerate()) {
+                let e = self.value(component, &context);
+                match self.check(e) {
+                    Some(e) => {
+                        let scale = self.graph.constant(length_unit.in_bohr());
+                        let scaled = self.graph.mul(scale, e);
+                        if let Some(xyz) = xyz.as_mut() {
+                            xyz[axis] = scaled;
+                        }
+                    }
+                    None => xyz = None,
+                }
             }
             atoms.push(AtomDef { label: label.clone(), element, mass_da });
-            positions.push(xyz);
-            position_spans.push(position.get_ref().iter().map(|c| c.span()).collect::<Vec<_>>());
+            positions.push(position.and(xyz));
+            position_spans.push(match position {
+                Some(p) => p.get_ref().iter().map(|c| c.span()).collect::<Vec<_>>(),
+                None => vec![a.label.span(); 3],
+            });
         }
 
         // The total mass divides every position (the centre-of-mass shift): it must be finite.
         let total: f64 = atoms.iter().map(|a| a.mass_da * DALTON_IN_ELECTRON_MASSES).sum();
-        if !total.is_finite() {
-            return Err(src.whole_file(
+        if masses_ok && !total.is_finite() {
+            self.errors.push(src.whole_file(
                 format!("the total mass overflows in electron masses ({} atoms)", atoms.len()),
                 "give every mass in daltons, e.g. mass = 1.00782503223",
             ));
         }
 
-        // Every coordinate must move some atom, or the kinetic metric is singular.
-        let roots: Vec<ExprId> = positions.iter().flatten().copied().collect();
-        let reachable = self.graph.reachable(&roots);
-        for (k, c) in coordinates.iter().enumerate() {
-            let used = self.graph.nodes().iter().enumerate().any(|(i, n)| reachable[i] && *n == Node::Var(k as u32));
-            if !used {
-                return Err(src.error(
-                    coordinate_spans[k].clone(),
-                    format!("no atom position depends on coordinate `{}`", c.name),
-                    "use the coordinate in some atom's position, or remove it (a coordinate that moves no atom makes the kinetic metric singular)",
-                ));
+        // Every coordinate must move some atom, or the kinetic metric is singular (checked when
+        // every position was read, so a broken position does not make its coordinates unused).
+        let all_positions: Option<Vec<[ExprId; 3]>> = positions.iter().copied().collect();
+        if let Some(all) = all_positions.as_ref().filter(|_| atoms.len() >= 2) {
+            let roots: Vec<ExprId> = all.iter().flatten().copied().collect();
+            let reachable = self.graph.reachable(&roots);
+            for (k, c) in coordinates.iter().enumerate() {
+                let used =
+                    self.graph.nodes().iter().enumerate().any(|(i, n)| reachable[i] && *n == Node::Var(k as u32));
+                if !used {
+                    self.errors.push(src.error(
+                        coordinate_spans[k].clone(),
+                        format!("no atom position depends on coordinate `{}`", c.name),
+                        "use the coordinate in some atom's position, or remove it (a coordinate that moves no atom makes the kinetic metric singular)",
+                    ));
+                }
             }
         }
 
@@ -514,26 +639,36 @@ impl Validator<'_> {
                 format!("unknown energy unit `{}`", pot.energy_unit.get_ref()),
                 unit_help(EnergyUnit::SPELLINGS),
             )
-        })?;
+        });
+        let energy_unit = self.check(energy_unit).unwrap_or(EnergyUnit::Hartree);
+        let mut parameters_ok = true;
         for (k, v) in &pot.parameters {
-            self.declare(k, "parameter")?;
-            if !v.get_ref().is_finite() {
-                return Err(src.error(
+            let declared = self.declare(k, "parameter");
+            parameters_ok &= self.check(declared).is_some();
+            let value = if v.get_ref().is_finite() {
+                *v.get_ref()
+            } else {
+                parameters_ok = false;
+                self.errors.push(src.error(
                     v.span(),
                     format!("non-finite value of parameter `{}`", k.get_ref()),
                     "write a finite number",
                 ));
-            }
-            let c = self.graph.constant(*v.get_ref());
+                PLACEHOLDER
+            };
+            let c = self.graph.constant(value);
             self.names.insert(k.get_ref().clone(), c);
         }
         let potential_scope = self.names.clone();
-        let u = self.expression(&pot.expression, "the potential")?;
-        let scale = self.graph.constant(energy_unit.in_hartree());
-        let potential = self.graph.mul(scale, u);
+        let u = self.expression(&pot.expression, "the potential");
+        let potential = self.check(u).map(|u| {
+            let scale = self.graph.constant(energy_unit.in_hartree());
+            self.graph.mul(scale, u)
+        });
 
         // Nothing non-finite where it can be known now: constant positions and a constant
-        // potential everywhere, and everything at the reference geometry if the file gives one.
+        // potential everywhere, and everything at the reference geometry if the file gives one
+        // (only for parts that had no problem, whose values mean what the file says).
         let reference: Option<Vec<f64>> =
             coordinates.iter().map(|c| c.reference.map(|r| r * c.unit.in_atomic_units())).collect();
         // The value of `e` where it is known now, and where that is (for the message).
@@ -545,10 +680,10 @@ impl Validator<'_> {
                 (None, true) => None,
             }
         };
-        for (i, xyz) in positions.iter().enumerate() {
-            for (axis, &e) in xyz.iter().enumerate() {
+        for (i, xyz) in positions.iter().enumerate().filter(|_| constants_ok) {
+            for (axis, &e) in xyz.iter().flatten().enumerate() {
                 if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
-                    return Err(src.error(
+                    self.errors.push(src.error(
                         position_spans[i][axis].clone(),
                         format!("the {} coordinate of atom `{}` is {v} {place}", ["x", "y", "z"][axis], atoms[i].label),
                         "check for a division by zero, the square root or logarithm of a negative number, or a number too large in bohr",
@@ -556,14 +691,44 @@ impl Validator<'_> {
                 }
             }
         }
-        if let Some((v, place)) = known(&self.graph, potential).filter(|(v, _)| !v.is_finite()) {
-            return Err(src.error(
+        if let Some(potential) = potential.filter(|_| constants_ok && parameters_ok)
+            && let Some((v, place)) = known(&self.graph, potential).filter(|(v, _)| !v.is_finite())
+        {
+            self.errors.push(src.error(
                 pot.expression.span(),
                 format!("the potential is {v} hartree {place}"),
                 "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
             ));
         }
+        let dipole = match &raw.dipole {
+            None => None,
+            Some(d) => {
+                let checked = self.dipole(d, &atoms);
+                let (dipole, spans) = self.check(checked).unzip();
+                let what = match &dipole {
+                    Some(DipoleDef::Components(c)) => c.to_vec(),
+                    Some(DipoleDef::Charges(c)) => c.clone(),
+                    None => Vec::new(),
+                };
+                for (e, span) in what.into_iter().zip(spans.unwrap_or_default()) {
+                    if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
+                        self.errors.push(src.error(
+                            span,
+                            format!("this part of the dipole is {v} {place}"),
+                            "check for a division by zero, the logarithm or square root of a negative number, or values too large",
+                        ));
+                    }
+                }
+                dipole
+            }
+        };
 
+        let (Some(positions), Some(potential), true) = (all_positions, potential, self.errors.is_empty()) else {
+            let mut errors = self.errors;
+            // In file order; problems of the whole file first.
+            errors.sort_by_key(|e| (e.line, e.column));
+            return Err(errors);
+        };
         Ok(Definition {
             path: src.path.to_owned(),
             name,
@@ -577,7 +742,109 @@ impl Validator<'_> {
             parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
             potential_scope,
             potential_text: pot.expression.get_ref().clone(),
+            dipole,
         })
+    }
+
+    /// The `[dipole]` table: three components with a unit, or one charge per atom. Returns the
+    /// expressions (e·bohr, or e) and the place of each in the file.
+    fn dipole(
+        &mut self,
+        raw: &Spanned<RawDipole>,
+        atoms: &[AtomDef],
+    ) -> Result<(DipoleDef, Vec<Range<usize>>), DefinitionError> {
+        let src = self.src;
+        let d = raw.get_ref();
+        let forms = "write either components = [\"mu_x\", \"mu_y\", \"mu_z\"] with unit = \"debye\" \
+                     (or \"e*bohr\", \"e*angstrom\"), or charges = { LABEL = charge, ... } in e";
+        for (k, v) in &d.parameters {
+            self.declare(k, "dipole parameter")?;
+            if !v.get_ref().is_finite() {
+                return Err(src.error(
+                    v.span(),
+                    format!("non-finite value of dipole parameter `{}`", k.get_ref()),
+                    "write a finite number",
+                ));
+            }
+            let c = self.graph.constant(*v.get_ref());
+            self.names.insert(k.get_ref().clone(), c);
+        }
+        match (&d.components, &d.charges) {
+            (Some(_), Some(_)) => {
+                Err(src.error(raw.span(), "the [dipole] table gives both `components` and `charges`", forms))
+            }
+            (None, None) => {
+                Err(src.error(raw.span(), "the [dipole] table gives neither `components` nor `charges`", forms))
+            }
+            (Some(components), None) => {
+                let Some(unit) = &d.unit else {
+                    return Err(src.error(
+                        components.span(),
+                        "the dipole components have no unit",
+                        format!("add unit = \"debye\" to the [dipole] table ({})", unit_help(DipoleUnit::SPELLINGS)),
+                    ));
+                };
+                let unit = DipoleUnit::parse(unit.get_ref()).ok_or_else(|| {
+                    src.error(
+                        unit.span(),
+                        format!("unknown dipole unit `{}`", unit.get_ref()),
+                        unit_help(DipoleUnit::SPELLINGS),
+                    )
+                })?;
+                let values = components.get_ref();
+                if values.len() != 3 {
+                    return Err(src.error(
+                        components.span(),
+                        format!("the dipole has {} components instead of 3", values.len()),
+                        "write components = [mu_x, mu_y, mu_z] in the body frame of the positions",
+                    ));
+                }
+                let mut mu = [self.graph.zero(); 3];
+                for (axis, v) in values.iter().enumerate() {
+                    let context = format!("the dipole's {} component", ["x", "y", "z"][axis]);
+                    let e = self.value(v, &context)?;
+                    let scale = self.graph.constant(unit.in_e_bohr());
+                    mu[axis] = self.graph.mul(scale, e);
+                }
+                Ok((DipoleDef::Components(mu), values.iter().map(|v| v.span()).collect()))
+            }
+            (None, Some(charges)) => {
+                if let Some(unit) = &d.unit {
+                    return Err(src.error(
+                        unit.span(),
+                        "`unit` is not used with `charges`",
+                        "remove it: charges are in units of e, and the positions' length unit is the file's",
+                    ));
+                }
+                let labels: Vec<&str> = atoms.iter().map(|a| a.label.as_str()).collect();
+                let mut found: Vec<Option<(ExprId, Range<usize>)>> = vec![None; atoms.len()];
+                for (label, v) in charges {
+                    let Some(i) = labels.iter().position(|l| *l == label.get_ref()) else {
+                        let hint = parse::closest(label.get_ref(), &labels)
+                            .map(|s| format!("did you mean `{s}`? "))
+                            .unwrap_or_default();
+                        return Err(src.error(
+                            label.span(),
+                            format!("`{}` in the dipole's charges is not an atom", label.get_ref()),
+                            format!("{hint}the atoms are: {}", labels.join(", ")),
+                        ));
+                    };
+                    let e = self.value(v, &format!("the charge of atom {}", label.get_ref()))?;
+                    found[i] = Some((e, v.span()));
+                }
+                let missing: Vec<&str> =
+                    labels.iter().zip(&found).filter(|(_, f)| f.is_none()).map(|(l, _)| *l).collect();
+                if !missing.is_empty() {
+                    return Err(src.error(
+                        raw.span(),
+                        format!("the dipole's charges leave out atom(s) {}", missing.join(", ")),
+                        "give every atom a charge in e (0 for an atom that carries none)",
+                    ));
+                }
+                let (charges, spans) = found.into_iter().flatten().unzip();
+                Ok((DipoleDef::Charges(charges), spans))
+            }
+        }
     }
 
     /// The declared range of a coordinate in its unit, or the default; checked to be an interval
@@ -629,8 +896,9 @@ impl Validator<'_> {
         Ok((low, high))
     }
 
-    /// Evaluates the constants, each of which may use `pi` and other constants.
-    fn resolve_constants(&mut self, constants: &[(Spanned<String>, Spanned<RawValue>)]) -> Result<(), DefinitionError> {
+    /// Evaluates the constants, each of which may use `pi` and other constants. A constant with
+    /// a problem is recorded and bound to a placeholder, so the expressions using it still parse.
+    fn resolve_constants(&mut self, constants: &[(Spanned<String>, Spanned<RawValue>)]) {
         let mut pending: Vec<&(Spanned<String>, Spanned<RawValue>)> = constants.iter().collect();
         while !pending.is_empty() {
             let before = pending.len();
@@ -649,28 +917,37 @@ impl Validator<'_> {
                     still.push(entry);
                     continue;
                 }
-                let e = self.value(v, &format!("constant `{}`", k.get_ref()))?;
-                let Some(value) = self.graph.as_const(e) else {
-                    return Err(self.src.error(
-                        v.span(),
-                        format!("constant `{}` is not a finite number", k.get_ref()),
-                        "a constant must evaluate to a finite number from numbers, pi and other constants",
-                    ));
+                let e = self.value(v, &format!("constant `{}`", k.get_ref()));
+                let value = match self.check(e).map(|e| self.graph.as_const(e)) {
+                    Some(Some(value)) => value,
+                    Some(None) => {
+                        self.errors.push(self.src.error(
+                            v.span(),
+                            format!("constant `{}` is not a finite number", k.get_ref()),
+                            "a constant must evaluate to a finite number from numbers, pi and other constants",
+                        ));
+                        PLACEHOLDER
+                    }
+                    None => PLACEHOLDER,
                 };
                 let c = self.graph.constant(value);
                 self.names.insert(k.get_ref().clone(), c);
             }
             if still.len() == before {
                 let (k, v) = still[0];
-                return Err(self.src.error(
+                self.errors.push(self.src.error(
                     v.span(),
                     format!("constant `{}` is defined in terms of itself (a cycle of constants)", k.get_ref()),
                     "define each constant from numbers, pi and constants that do not refer back to it",
                 ));
+                for (k, _) in still {
+                    let c = self.graph.constant(PLACEHOLDER);
+                    self.names.insert(k.get_ref().clone(), c);
+                }
+                break;
             }
             pending = still;
         }
-        Ok(())
     }
 
     fn atom_mass(&self, a: &RawAtom) -> Result<(String, f64), DefinitionError> {

@@ -10,6 +10,7 @@ use quote::quote;
 
 use crate::GeneratedMolecule;
 use crate::definition::Definition;
+use crate::dipole::DipoleExprs;
 use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_lines, index};
 use crate::expr;
 use crate::kinetic::{KineticExprs, KineticSet, OMEGA_NAMES};
@@ -102,6 +103,7 @@ pub(crate) fn molecule_items(
     def: &Definition,
     e: &KineticExprs,
     parametric: Option<&ParametricExprs>,
+    dipole: Option<&DipoleExprs>,
 ) -> (TokenStream, Vec<FunctionStats>) {
     let (n, na) = (index(e.n), index(def.atoms.len()));
     let ty = Ident::new(&type_name(&def.name), Span::call_site());
@@ -286,12 +288,52 @@ pub(crate) fn molecule_items(
             name: "kinetic_jacobian",
             doc: "`dk[l]` holds ∂a/∂q_l, ∂A/∂q_l and ∂I/∂q_l.".into(),
             signature: quote!(fn kinetic_jacobian(&self, q: #q_ty, dk: &mut [KineticMatrices<#n>; #n])),
-            inputs: q_inputs,
+            inputs: q_inputs.clone(),
             groups: kinetic_jacobian
                 .iter()
                 .enumerate()
                 .flat_map(|(l, set)| kinetic_groups(&ix(quote!(dk), l), set))
                 .collect(),
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+    }
+    // The dipole surface only where the definition has one: nothing else changes without it.
+    // The dipole functions come last (after the lane-generic ones too).
+    let before_dipole = specs.len();
+    let mut has_dipole = quote!();
+    if let Some(d) = dipole {
+        has_dipole = quote! {
+            fn has_dipole(&self) -> bool {
+                true
+            }
+        };
+        specs.push(FunctionSpec {
+            name: "dipole",
+            doc: "The body-frame dipole moment μ(q) in e·bohr.".into(),
+            signature: quote!(fn dipole(&self, q: #q_ty, mu: &mut Vector3<f64>)),
+            inputs: q_inputs.clone(),
+            groups: vec![OutputGroup {
+                target: quote!(mu),
+                entries: d.mu.iter().enumerate().map(|(axis, &c)| (ix(quote!(), axis), c)).collect(),
+            }],
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+        let mut entries = Vec::new();
+        for (k, column) in d.jacobian.iter().enumerate() {
+            for (axis, &c) in column.iter().enumerate() {
+                entries.push((pair(axis, k), c));
+            }
+        }
+        specs.push(FunctionSpec {
+            name: "dipole_jacobian",
+            doc: "`dmu[(axis, k)]` = ∂μ_axis/∂q_k, e·bohr per unit of q_k.".into(),
+            signature: quote!(fn dipole_jacobian(&self, q: #q_ty, dmu: &mut SMatrix<f64, 3, #n>)),
+            inputs: q_inputs.clone(),
+            groups: vec![OutputGroup { target: quote!(dmu), entries }],
             ret: None,
             ret_wrap: None,
             barrier: None,
@@ -305,9 +347,9 @@ pub(crate) fn molecule_items(
         stats.push(s);
     }
     // The lane-generic production functions (the same operations as their f64 counterparts,
-    // so their statistics are not counted again).
+    // so their statistics are not counted again), before the dipole functions.
     let (lane_functions, _) = crate::emit_lanes::lane_functions(&def.graph, e, &idents);
-    functions.extend(lane_functions);
+    functions.splice(before_dipole..before_dipole, lane_functions);
 
     let atoms = def.atoms.iter().map(|a| {
         let (label, element) = (&a.label, &a.element);
@@ -390,6 +432,8 @@ pub(crate) fn molecule_items(
             #parameter_items
 
             #(#functions)*
+
+            #has_dipole
         }
     };
     (items, stats)

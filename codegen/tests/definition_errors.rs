@@ -37,10 +37,25 @@ expression = "k * (pow(r1 - 1.8, 2) + pow(r2 - 1.8, 2))"
 parameters = { k = 0.2 }
 "#;
 
+/// Every error of a definition, in file order.
+fn errors(text: &str) -> Vec<DefinitionError> {
+    match generate_molecule("molecules/xy2.toml", text) {
+        Ok(_) => panic!("expected errors for:\n{text}"),
+        Err(errors) => errors,
+    }
+}
+
+fn messages(errors: &[DefinitionError]) -> Vec<&str> {
+    errors.iter().map(|e| e.message.as_str()).collect()
+}
+
+/// The one error of a definition with one mistake (a mistake must not be reported again as its
+/// consequences).
 fn error(text: &str) -> DefinitionError {
     match generate_molecule("molecules/xy2.toml", text) {
         Ok(_) => panic!("expected an error for:\n{text}"),
-        Err(e) => e,
+        Err(mut errors) if errors.len() == 1 => errors.remove(0),
+        Err(errors) => panic!("expected one error, got {}: {errors:#?}\nfor:\n{text}", errors.len()),
     }
 }
 
@@ -117,20 +132,75 @@ fn duplicate_atom() {
 
 #[test]
 fn duplicate_coordinate() {
-    let e = error(&with("name = \"r2\"", "name = \"r1\""));
-    assert_error(&e, 9, 8, "duplicate name `r1`: already declared as a coordinate on line 5", "rename");
+    // The uses of the old name `r2` are reported too: nothing declares it any more.
+    let all = errors(&with("name = \"r2\"", "name = \"r1\""));
+    assert_error(&all[0], 9, 8, "duplicate name `r1`: already declared as a coordinate on line 5", "rename");
+    assert_eq!(
+        messages(&all[1..]),
+        [
+            "unknown name `r2` in the position of atom H2",
+            "unknown name `r2` in the position of atom H2",
+            "unknown name `r2` in the potential"
+        ]
+    );
+    assert_eq!(all.iter().map(|e| e.line).collect::<Vec<_>>(), [9, 26, 26, 30]);
 }
 
 #[test]
 fn parameter_clashing_with_a_coordinate() {
-    let e = error(&with("parameters = { k = 0.2 }", "parameters = { r1 = 0.2 }"));
+    let all = errors(&with("parameters = { k = 0.2 }", "parameters = { r1 = 0.2 }"));
+    // The potential's `k` is no longer declared (line 30), and the clash is on line 31.
+    assert_eq!(messages(&all[..1]), ["unknown name `k` in the potential"]);
+    assert_eq!(all.len(), 2, "{all:#?}");
     assert_error(
-        &e,
+        &all[1],
         31,
         16,
         "duplicate name `r1`: already declared as a coordinate on line 5",
         "rename this parameter",
     );
+}
+
+/// Independent mistakes in one file are all reported, each where it is, in file order, with the
+/// same text as when it is the only one.
+#[test]
+fn every_error_of_a_definition_is_reported() {
+    let text = with("length_unit = \"bohr\"", "length_unit = \"nm\"")
+        .replace("\"r1 * sin(alpha / 2)\"", "\"r1 * sine(alpha / 2)\"")
+        .replace("energy_unit = \"hartree\"", "energy_unit = \"kJ/mol\"");
+    let all = errors(&text);
+    assert_eq!(all.len(), 3, "{all:#?}");
+    assert_error(&all[0], 2, 15, "unknown length unit `nm`", "\"bohr\", \"angstrom\"");
+    assert_error(&all[1], 22, 19, "unknown function `sine` in the position of atom H1", "the functions are sin, cos");
+    assert_error(&all[2], 29, 15, "unknown energy unit `kJ/mol`", "\"cm-1\", \"eV\"");
+
+    // Mistakes in a coordinate, an atom's label, another atom's position and the potential.
+    let text = with("unit = \"rad\"", "unit = \"radian\"")
+        .replace("label = \"O\"", "label = \"Q1\"")
+        .replace("position = [\"-r2 * sin(alpha / 2)\", 0, \"r2 * cos(alpha / 2)\"]", "position = [0, 0]")
+        .replace("pow(r1 - 1.8, 2)", "(r1 - 1.8)^2");
+    let all = errors(&text);
+    assert_eq!(all.len(), 4, "{all:#?}");
+    assert_error(&all[0], 14, 8, "unknown unit `radian` for coordinate `alpha`", "\"rad\", \"deg\"");
+    assert_error(&all[1], 17, 9, "cannot tell the element of atom `Q1` from its label", "element = \"X\"");
+    assert_error(&all[2], 26, 12, "the position of atom `H2` has 2 components instead of 3", "[x, y, z]");
+    assert_error(&all[3], 30, 30, "`^` is not a power in the potential", "pow(base, exponent)");
+}
+
+/// A constant with a problem is reported once: the positions using it are not reported as using
+/// an unknown name, nor as non-finite.
+#[test]
+fn a_broken_constant_is_reported_once() {
+    let text = with("length_unit = \"bohr\"", "length_unit = \"bohr\"\n[constants]\nc = \"1 / 0\"")
+        .replace("\"r1 * sin(alpha / 2)\"", "\"c * r1 * sin(alpha / 2)\"");
+    let e = error(&text);
+    assert_error(&e, 4, 5, "constant `c` is not a finite number", "finite number");
+    // A cycle, used in a position and in the potential.
+    let text = with("length_unit = \"bohr\"", "length_unit = \"bohr\"\n[constants]\na = \"b\"\nb = \"a\"")
+        .replace("\"r1 * sin(alpha / 2)\"", "\"a * r1 * sin(alpha / 2)\"")
+        .replace("k * (", "b * k * (");
+    let e = error(&text);
+    assert!(e.message.contains("defined in terms of itself"), "{e}");
 }
 
 #[test]
@@ -203,10 +273,12 @@ fn name_must_match_the_file() {
 
 #[test]
 fn reserved_and_invalid_names() {
-    let e = error(&with("name = \"alpha\"", "name = \"sin\""));
-    assert_error(&e, 13, 8, "the coordinate name `sin` is reserved", "cannot be redefined");
-    let e = error(&with("name = \"alpha\"", "name = \"2a\""));
-    assert_error(&e, 13, 8, "`2a` is not a valid coordinate name", "start with a letter");
+    let all = errors(&with("name = \"alpha\"", "name = \"sin\""));
+    assert_error(&all[0], 13, 8, "the coordinate name `sin` is reserved", "cannot be redefined");
+    assert!(all[1..].iter().all(|e| e.message.starts_with("unknown name `alpha`")), "{all:#?}");
+    let all = errors(&with("name = \"alpha\"", "name = \"2a\""));
+    assert_error(&all[0], 13, 8, "`2a` is not a valid coordinate name", "start with a letter");
+    assert!(all[1..].iter().all(|e| e.message.starts_with("unknown name `alpha`")), "{all:#?}");
 }
 
 #[test]
@@ -268,13 +340,13 @@ fn values_that_overflow_in_atomic_units() {
 fn molecule_names_that_cannot_be_rust() {
     for name in ["fn", "type", "self", "gen", "async"] {
         let text = with("name = \"xy2\"", &format!("name = \"{name}\""));
-        let e = generate_molecule(&format!("molecules/{name}.toml"), &text).unwrap_err();
+        let e = generate_molecule(&format!("molecules/{name}.toml"), &text).unwrap_err().remove(0);
         assert_eq!(e.message, format!("molecule name `{name}` is a Rust keyword"), "{e}");
         assert_eq!((e.line, e.column), (1, 8));
     }
     for (name, ty) in [("result", "Result"), ("atom", "Atom"), ("kinetic_matrices", "KineticMatrices"), ("e", "E")] {
         let text = with("name = \"xy2\"", &format!("name = \"{name}\""));
-        let e = generate_molecule(&format!("molecules/{name}.toml"), &text).unwrap_err();
+        let e = generate_molecule(&format!("molecules/{name}.toml"), &text).unwrap_err().remove(0);
         assert_eq!(
             e.message,
             format!("molecule name `{name}` gives the type name `{ty}`, which generated code already uses")

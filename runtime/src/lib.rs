@@ -19,6 +19,7 @@ pub mod modes;
 pub mod molecule;
 pub mod polarization;
 pub mod sample;
+pub mod spectrum;
 pub mod units;
 
 pub use frames::{

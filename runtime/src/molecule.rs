@@ -224,6 +224,24 @@ pub trait Molecule<const N: usize, const NA: usize> {
         self.potential_gradient(q, grad)
     }
 
+    /// Whether the definition has a `[dipole]` table (and [`Molecule::dipole`] computes it).
+    fn has_dipole(&self) -> bool {
+        false
+    }
+
+    /// The body-frame dipole moment μ(q) in e·bohr. Generated only for a definition with a
+    /// `[dipole]` table; without one (see [`Molecule::has_dipole`]) this writes NaN.
+    fn dipole(&self, q: &SVector<f64, N>, mu: &mut Vector3<f64>) {
+        let _ = q;
+        *mu = Vector3::from_element(f64::NAN);
+    }
+
+    /// `∂μ/∂q`: column `k` is `∂μ/∂q_k` in e·bohr per unit of q_k; NaN without a dipole.
+    fn dipole_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>) {
+        let _ = q;
+        dmu.fill(f64::NAN);
+    }
+
     /// The reference geometry in atomic units, or `None` if the definition gave none for some
     /// coordinate.
     fn reference_geometry(&self) -> Option<SVector<f64, N>> {

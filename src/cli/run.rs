@@ -11,8 +11,8 @@ use super::{CliError, unknown_molecule};
 use crate::dir_lock::DirLock;
 use crate::molecules;
 use crate::output::{
-    Conservation, LabXyz, RunSummary, TRAJECTORY_UNITS_FILE, TrajectoryCsv, energy_guard, remove_stale_outputs,
-    write_summary,
+    Conservation, DipoleCsv, LabXyz, RunSummary, TRAJECTORY_UNITS_FILE, TrajectoryCsv, energy_guard,
+    remove_stale_outputs, write_summary,
 };
 use crate::parameters::{WithParameters, scene_parameters};
 use crate::restart::{Dop853Point, FinalState, Restart};
@@ -166,6 +166,16 @@ impl MoleculeVisitor for Run<'_> {
 impl Run<'_> {
     fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, CliError> {
         let scene = self.scene;
+        if scene.outputs.dipole && !m.has_dipole() {
+            return Err(CliError::File(scene.source().error(
+                scene.molecule.span(),
+                format!("the scene asks for the \"dipole\" output, but molecule `{}` has no dipole surface", m.name()),
+                format!(
+                    "add a [dipole] table to {} (see the README), or remove \"dipole\" from run.outputs",
+                    m.source()
+                ),
+            )));
+        }
         let mut warnings = Vec::new();
         // Where the run starts: the scene's initial state, or the restart file's state.
         let (system, y0, com, t0) = match self.resume {
@@ -198,6 +208,9 @@ impl Run<'_> {
         }
         if scene.outputs.lab {
             keep.push("lab.xyz");
+        }
+        if scene.outputs.dipole {
+            keep.push("dipole.csv");
         }
         remove_stale_outputs(self.out_dir, &keep)?;
 
@@ -237,6 +250,11 @@ impl Run<'_> {
             diagnostics: scene.outputs.summary || scene.outputs.restart,
             conservation: self.resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
             initial_energy: self.resume.and_then(|r| r.conservation.initial_energy),
+            dipole: match (scene.outputs.dipole, self.resume) {
+                (false, _) => None,
+                (true, None) => Some(DipoleCsv::create(self.out_dir)?),
+                (true, Some(_)) => Some(DipoleCsv::append(self.out_dir, records as usize)?),
+            },
             max_energy_error: scene.max_energy_error,
             layout: layout.clone(),
             time_scale: scene.time_unit.in_au(),
@@ -282,6 +300,9 @@ impl Run<'_> {
         }
         if scene.outputs.lab {
             files.push(self.out_dir.join("lab.xyz"));
+        }
+        if scene.outputs.dipole {
+            files.push(self.out_dir.join("dipole.csv"));
         }
         let mut summary_error = None;
         if scene.outputs.restart
@@ -534,6 +555,7 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     system: ReducedSystem<'m, M, N, NA>,
     trajectory: Option<TrajectoryCsv>,
     lab: Option<LabXyz>,
+    dipole: Option<DipoleCsv>,
     diagnostics: bool,
     conservation: Conservation,
     /// H at the first output time, for the energy guard.
@@ -593,6 +615,11 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             let potential = self.system.molecule().potential(&body.q);
             let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
             xyz.frame(t_out, energy, potential, atoms)?;
+        }
+        if let Some(csv) = &mut self.dipole {
+            let mut mu = Vector3::zeros();
+            self.system.molecule().dipole(&body.q, &mut mu);
+            csv.row(t_out, &(rotation * mu))?;
         }
         self.last_y.copy_from_slice(y);
         self.records += 1;
@@ -654,6 +681,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         }
         if let Some(xyz) = &mut self.lab {
             xyz.flush()?;
+        }
+        if let Some(csv) = &mut self.dipole {
+            csv.flush()?;
         }
         Ok(())
     }

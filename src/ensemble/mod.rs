@@ -32,6 +32,7 @@ pub mod quantity;
 pub mod runner;
 pub mod scene;
 pub mod schedule;
+pub mod spectrum;
 mod states_file;
 pub mod states_xyz;
 

@@ -105,6 +105,11 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         lines.push(row);
     }
     csv("correlations.csv", lines)?;
+    let temperature = match &ensemble.method {
+        super::scene::MethodSpec::Thermal { temperature, .. } => Some(*temperature),
+        _ => None,
+    };
+    files.extend(super::spectrum::write(plan, acc, temperature, dir)?);
 
     // Plots.
     let panels: Vec<Panel> = (0..nm)

@@ -3,7 +3,7 @@
 
 use crate::runtime::Molecule;
 use crate::runtime::hamiltonian::fast::BodyState;
-use crate::runtime::nalgebra::Matrix3;
+use crate::runtime::nalgebra::{Matrix3, Vector3};
 
 /// One observable of a trajectory at an output time.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -24,7 +24,13 @@ pub enum Quantity {
     BodyJ(usize),
     /// Lab-frame angular momentum component `L = R J` (`Lx`, `Ly`, `Lz`), ħ.
     LabL(usize),
+    /// Lab-frame dipole moment component `μ_lab = R μ(q)` (`mu_x`, `mu_y`, `mu_z`), e·bohr;
+    /// only for a molecule with a dipole surface.
+    LabDipole(usize),
 }
+
+const DIPOLE: [(&str, Quantity); 3] =
+    [("mu_x", Quantity::LabDipole(0)), ("mu_y", Quantity::LabDipole(1)), ("mu_z", Quantity::LabDipole(2))];
 
 const FIXED: [(&str, Quantity); 10] = [
     ("T", Quantity::Kinetic),
@@ -51,6 +57,11 @@ impl Quantity {
         {
             return Some(Quantity::Momentum(k));
         }
+        if m.has_dipole()
+            && let Some((_, q)) = DIPOLE.iter().find(|(n, _)| *n == name)
+        {
+            return Some(*q);
+        }
         FIXED.iter().find(|(n, _)| *n == name).map(|(_, q)| *q)
     }
 
@@ -60,6 +71,9 @@ impl Quantity {
         let mut names: Vec<String> = coords.iter().map(|c| c.name.to_owned()).collect();
         names.extend(coords.iter().map(|c| format!("p_{}", c.name)));
         names.extend(FIXED.iter().map(|(n, _)| (*n).to_owned()));
+        if m.has_dipole() {
+            names.extend(DIPOLE.iter().map(|(n, _)| (*n).to_owned()));
+        }
         names
     }
 
@@ -75,7 +89,12 @@ impl Quantity {
         match self {
             Quantity::Coordinate(k) => m.coordinates()[*k].name.to_owned(),
             Quantity::Momentum(k) => format!("p_{}", m.coordinates()[*k].name),
-            other => FIXED.iter().find(|(_, q)| q == other).map(|(n, _)| (*n).to_owned()).unwrap_or_default(),
+            other => FIXED
+                .iter()
+                .chain(DIPOLE.iter())
+                .find(|(_, q)| q == other)
+                .map(|(n, _)| (*n).to_owned())
+                .unwrap_or_default(),
         }
     }
 
@@ -100,6 +119,7 @@ impl Quantity {
             }
             Quantity::Kinetic | Quantity::Potential | Quantity::Total => "hartree",
             Quantity::AngularMomentum | Quantity::BodyJ(_) | Quantity::LabL(_) => "hbar",
+            Quantity::LabDipole(_) => "e*bohr",
         }
     }
 
@@ -108,10 +128,22 @@ impl Quantity {
         matches!(self, Quantity::Kinetic | Quantity::Potential)
     }
 
-    /// Its value in state `s` with total energy `h`, potential `u` (NaN if not computed) and
-    /// body → lab rotation `rotation`.
+    /// Whether evaluating it needs the dipole μ(q) (one dipole evaluation per output time).
+    pub fn needs_dipole(&self) -> bool {
+        matches!(self, Quantity::LabDipole(_))
+    }
+
+    /// Its value in state `s` with total energy `h`, potential `u` (NaN if not computed),
+    /// body → lab rotation `rotation` and lab-frame dipole `mu_lab` (NaN if not computed).
     #[inline]
-    pub fn value<const N: usize>(&self, s: &BodyState<N>, h: f64, u: f64, rotation: &Matrix3<f64>) -> f64 {
+    pub fn value<const N: usize>(
+        &self,
+        s: &BodyState<N>,
+        h: f64,
+        u: f64,
+        rotation: &Matrix3<f64>,
+        mu_lab: &Vector3<f64>,
+    ) -> f64 {
         match self {
             Quantity::Coordinate(k) => s.q[*k],
             Quantity::Momentum(k) => s.p[*k],
@@ -121,6 +153,7 @@ impl Quantity {
             Quantity::AngularMomentum => s.j.norm(),
             Quantity::BodyJ(i) => s.j[*i],
             Quantity::LabL(i) => (rotation * s.j)[*i],
+            Quantity::LabDipole(i) => mu_lab[*i],
         }
     }
 }

@@ -23,6 +23,7 @@ use crate::runtime::Molecule;
 use crate::runtime::ensemble::{CorrelationWorkspace, Histogram, Moments};
 use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use crate::runtime::integrate::{Dop853, GaussLegendre, InvalidInput, Method, Observer, Rk4, SolveError, Stats};
+use crate::runtime::nalgebra::Vector3;
 use crate::runtime::sample::Sampler;
 
 /// Trajectories per block: the grain of parallel work and of the fixed merge order.
@@ -298,6 +299,7 @@ pub(super) struct Watch<'a, 'm, M, const N: usize, const NA: usize> {
     pub(super) plan: &'a Plan<'m, M, N, NA>,
     pub(super) buffer: &'a mut [f64],
     pub(super) needs_potential: bool,
+    pub(super) needs_dipole: bool,
     pub(super) k: usize,
     pub(super) initial_energy: f64,
     pub(super) stop: &'a AtomicBool,
@@ -336,9 +338,14 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
         }
         let u = if self.needs_potential { self.plan.molecule.potential(&body.q) } else { f64::NAN };
         let rotation = body.rotation();
+        let mut mu = Vector3::from_element(f64::NAN);
+        if self.needs_dipole {
+            self.plan.molecule.dipole(&body.q, &mut mu);
+            mu = rotation * mu;
+        }
         let row = &mut self.buffer[self.k * nq..(self.k + 1) * nq];
         for (v, q) in row.iter_mut().zip(&self.plan.quantities) {
-            *v = q.value(&body, h, u, &rotation);
+            *v = q.value(&body, h, u, &rotation, &mu);
         }
         if let Some(csv) = &mut self.csv {
             let phase = body.to_phase();
@@ -404,6 +411,7 @@ where
     let n_times = plan.times.len();
     let nq = plan.quantities.len();
     let needs_potential = plan.quantities.iter().any(Quantity::needs_potential);
+    let needs_dipole = plan.quantities.iter().any(Quantity::needs_dipole);
     let mut buffer = vec![0.0; n_times * nq];
     let mut y0 = vec![0.0; dim];
     let mut workspace = (!plan.correlations.is_empty()).then(|| CorrelationWorkspace::new(n_times));
@@ -467,6 +475,7 @@ where
             plan,
             buffer: &mut buffer,
             needs_potential,
+            needs_dipole,
             k: 0,
             initial_energy: 0.0,
             stop,

@@ -1,0 +1,94 @@
+//! The classical infrared spectrum of an ensemble: `spectrum.csv` and `spectrum.svg`, written
+//! when the scene's `[statistics] correlations` include `mu_x`, `mu_y` and `mu_z` (the lab-frame
+//! dipole of a molecule with a dipole surface).
+//!
+//! C(τ) = ⟨μ_lab(0)·μ_lab(τ)⟩ is the sum of the three components' autocorrelations (each of
+//! the fluctuation about its trajectory's time mean, averaged over trajectories); the transform,
+//! window and quantum corrections are [`crate::runtime::spectrum`]'s (docs/equations.md,
+//! section 11).
+
+use std::path::{Path, PathBuf};
+
+use super::plot::{Content, Panel, svg};
+use super::quantity::Quantity;
+use super::runner::{Accumulators, Plan};
+use crate::cli::CliError;
+use crate::output::OutputFile;
+use crate::runtime::Molecule;
+use crate::runtime::spectrum::{QuantumCorrection, Spectrum};
+
+/// The grid is this many times finer than 1/(2T) (zero padding; interpolation only).
+pub const PADDING: usize = 4;
+
+/// The highest wavenumber written, cm⁻¹ (also limited by the output interval's Nyquist limit).
+pub const MAX_WAVENUMBER: f64 = 5000.0;
+
+/// The summed dipole autocorrelation ⟨μ_lab(0)·μ_lab(τ)⟩ (e²·bohr²) per lag, if the plan
+/// correlates all three components.
+pub fn dipole_correlation<M, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    acc: &Accumulators,
+) -> Option<Vec<f64>> {
+    let mut c = vec![0.0; plan.times.len()];
+    for axis in 0..3 {
+        let ci = plan.correlations.iter().position(|&qi| plan.quantities[qi] == Quantity::LabDipole(axis))?;
+        for (sum, m) in c.iter_mut().zip(&acc.correlations[ci]) {
+            *sum += m.mean();
+        }
+    }
+    Some(c)
+}
+
+/// The spectrum of the plan's dipole correlation, if it has one.
+pub fn spectrum<M, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>, acc: &Accumulators) -> Option<Spectrum> {
+    let c = dipole_correlation(plan, acc)?;
+    Some(Spectrum::from_correlation(&c, plan.interval, MAX_WAVENUMBER, PADDING))
+}
+
+/// Writes `spectrum.csv` (wavenumber, line shape and, with a temperature, the cross section
+/// under each quantum correction) and `spectrum.svg`; returns their paths.
+pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    acc: &Accumulators,
+    temperature: Option<f64>,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, CliError> {
+    let Some(s) = spectrum(plan, acc) else { return Ok(Vec::new()) };
+    let mut header = vec!["wavenumber_cm-1".to_owned(), "lineshape_e2bohr2_per_hartree".to_owned()];
+    let sigmas: Vec<Vec<f64>> = match temperature {
+        Some(t) => QuantumCorrection::ALL.iter().map(|&c| s.cross_section(t, c)).collect(),
+        None => Vec::new(),
+    };
+    for (c, _) in QuantumCorrection::ALL.iter().zip(&sigmas) {
+        header.push(format!("sigma_{}_cm2", c.name()));
+    }
+    let mut f = OutputFile::create(dir, "spectrum.csv")?;
+    f.line(&format!("# resolution (FWHM) {:?} cm-1, Hann window over T = {:?} a.u.", s.resolution(), s.length))?;
+    f.line(&header.join(","))?;
+    for j in 0..s.wavenumber.len() {
+        let mut row = format!("{:?},{:?}", s.wavenumber[j], s.lineshape[j]);
+        for sigma in &sigmas {
+            row.push_str(&format!(",{:?}", sigma[j]));
+        }
+        f.line(&row)?;
+    }
+    f.flush()?;
+    let mut files = vec![f.path().to_owned()];
+    let (y, label, values) = match (&sigmas.get(1), temperature) {
+        (Some(sigma), Some(t)) => {
+            ("σ (cm²/molecule)", format!("IR absorption at {t} K (harmonic correction)"), (*sigma).clone())
+        }
+        _ => ("I(ω) (e² bohr²/hartree)", "dipole line shape".to_owned(), s.lineshape.clone()),
+    };
+    let panel = Panel {
+        title: label,
+        x_label: "wavenumber (cm⁻¹)".to_owned(),
+        y_label: y.to_owned(),
+        content: Content::Band(s.wavenumber.iter().zip(&values).map(|(&x, &v)| (x, v, 0.0)).collect()),
+    };
+    let path = dir.join("spectrum.svg");
+    std::fs::write(&path, svg(&[panel]))
+        .map_err(|e| CliError::context(format!("cannot write {}", path.display()), e))?;
+    files.push(path);
+    Ok(files)
+}
