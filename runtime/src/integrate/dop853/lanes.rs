@@ -433,6 +433,21 @@ impl<T: Real> Dop853Lanes<T> {
             }
         }
 
+        // The accepted lanes' new state and FSAL stage, all lanes at once when every lane
+        // accepted (the common case), else lane by lane. Nothing below reads a lane's `y` or
+        // stage 0 before a finished lane is restarted (which overwrites both).
+        if accepted == T::ALL {
+            self.y.copy_from_slice(&self.y_new);
+            self.k.copy_within(FSAL * n..(FSAL + 1) * n, 0);
+        } else {
+            for lane in lanes_of(accepted) {
+                for i in 0..n {
+                    self.y[i].set_lane(lane, self.y_new[i].lane(lane));
+                    let fsal = self.k[FSAL * n + i].lane(lane);
+                    self.k[i].set_lane(lane, fsal);
+                }
+            }
+        }
         for lane in lanes_of(accepted) {
             // Serve the output times in (x, x_new].
             let mut stopped = false;
@@ -459,11 +474,6 @@ impl<T: Real> Dop853Lanes<T> {
                 self.finish(system, feeder, run, lane, Ok(stats));
                 continue;
             }
-            for i in 0..n {
-                self.y[i].set_lane(lane, self.y_new[i].lane(lane));
-                let fsal = self.k[FSAL * n + i].lane(lane);
-                self.k[i].set_lane(lane, fsal);
-            }
             let l = &mut self.lanes[lane];
             l.x = x_new[lane];
             if l.last {
@@ -485,19 +495,18 @@ impl<T: Real> Dop853Lanes<T> {
     fn error_sums(&self) -> (T, T) {
         let n = self.dim;
         let (rtol, atol) = (T::splat(self.options.rtol), T::splat(self.options.atol));
-        let k = |stage: usize, i: usize| self.k[stage * n + i];
+        let stage = |s: usize| &self.k[s * n..(s + 1) * n];
+        let (k0, k8, k11) = (stage(0), stage(8), stage(11));
+        let er = ER.map(|(s, w)| (stage(s), T::splat(w)));
         let (mut err5, mut err3) = (T::splat(0.0), T::splat(0.0));
         for i in 0..n {
             let sk = atol + rtol * self.y[i].abs().max(self.y_new[i].abs());
-            let e3 = self.weighted[i]
-                - T::splat(BHH[0]) * k(0, i)
-                - T::splat(BHH[1]) * k(8, i)
-                - T::splat(BHH[2]) * k(11, i);
+            let e3 = self.weighted[i] - T::splat(BHH[0]) * k0[i] - T::splat(BHH[1]) * k8[i] - T::splat(BHH[2]) * k11[i];
             let r3 = e3 / sk;
             err3 = err3 + r3 * r3;
             let mut e5 = T::splat(0.0);
-            for &(stage, w) in &ER {
-                e5 = e5 + T::splat(w) * k(stage, i);
+            for (ks, w) in &er {
+                e5 = e5 + *w * ks[i];
             }
             let r5 = e5 / sk;
             err5 = err5 + r5 * r5;
@@ -557,7 +566,14 @@ struct Run {
 
 /// The lanes whose bits are set in `mask`.
 fn lanes_of(mask: u32) -> impl Iterator<Item = usize> {
-    (0..32).filter(move |i| mask >> i & 1 == 1)
+    let mut rest = mask;
+    core::iter::from_fn(move || {
+        (rest != 0).then(|| {
+            let lane = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            lane
+        })
+    })
 }
 
 /// `out = Σ_j w_j k_j` over the sparse row `row`, as the scalar solver's `weights`.
