@@ -8,7 +8,9 @@
 //! molecules without editing the checkout). `ROVIB_KINETIC_JACOBIAN=generated` also generates
 //! the symbolic `kinetic_jacobian` (the reference path's ∂a/∂q, ∂A/∂q, ∂I/∂q) instead of the
 //! runtime's default, which assembles them from the generated ∂T/∂q; it grows like n³ and is
-//! meant for small molecules.
+//! meant for small molecules. `ROVIB_LARGE_MOLECULE_FORMS=expanded` generates large molecules
+//! without their size-dependent forms (reverse-mode ∂T/∂q, run-time centre of mass), for
+//! measuring what those gain.
 
 use std::path::PathBuf;
 
@@ -18,8 +20,9 @@ fn main() {
     println!("cargo::rerun-if-changed=build.rs");
     println!("cargo::rerun-if-env-changed=ROVIB_MOLECULES_DIR");
     println!("cargo::rerun-if-env-changed=ROVIB_KINETIC_JACOBIAN");
-    let options = match std::env::var("ROVIB_KINETIC_JACOBIAN").as_deref() {
-        Ok("generated") => rovib_codegen::Options { kinetic_jacobian: true },
+    println!("cargo::rerun-if-env-changed=ROVIB_LARGE_MOLECULE_FORMS");
+    let mut options = match std::env::var("ROVIB_KINETIC_JACOBIAN").as_deref() {
+        Ok("generated") => rovib_codegen::Options { kinetic_jacobian: true, ..Default::default() },
         Ok("") | Ok("runtime") | Err(_) => rovib_codegen::Options::default(),
         Ok(other) => {
             eprintln!(
@@ -28,6 +31,21 @@ fn main() {
             std::process::exit(1);
         }
     };
+    // For measuring what the large-molecule forms gain (BENCHMARKS.md): `expanded` generates every
+    // molecule the way small ones are (explicit second derivatives, centre of mass expanded).
+    match std::env::var("ROVIB_LARGE_MOLECULE_FORMS").as_deref() {
+        Ok("expanded") => {
+            options.kinetic_gradient = rovib_codegen::GradientMethod::Direct;
+            options.run_time_centre_of_mass_from = usize::MAX;
+        }
+        Ok("") | Ok("auto") | Err(_) => {}
+        Ok(other) => {
+            eprintln!(
+                "rovib: ROVIB_LARGE_MOLECULE_FORMS={other:?} is not understood; use `auto` (the default) or `expanded`"
+            );
+            std::process::exit(1);
+        }
+    }
     let (dir, display) = match std::env::var("ROVIB_MOLECULES_DIR") {
         Ok(d) if !d.is_empty() => (PathBuf::from(&d), d),
         _ => (manifest.join("molecules"), "molecules".to_owned()),

@@ -5,6 +5,9 @@
 //! to T/2 were written by the first run; the last of them (served by the shortened step) differ
 //! from the uninterrupted run's by the local error, within the tolerances.
 
+mod common;
+
+use common::cli::{rovib, temp_dir};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -35,17 +38,6 @@ fn scene(integrator: &str, end: f64) -> String {
     SCENE.replace("INTEGRATOR", integrator).replace("END", &format!("{end:?}"))
 }
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rovib-restart-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn rovib(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_rovib")).args(args).output().unwrap()
-}
-
 fn run_ok(args: &[&str]) {
     let out = rovib(args);
     assert!(out.status.success(), "rovib {args:?}: {}", String::from_utf8_lossy(&out.stderr));
@@ -62,7 +54,7 @@ fn numbers(line: &str) -> Vec<f64> {
 /// Runs `integrator` to `end` in one go and to `end / 2` then `--resume` to `end`; returns the
 /// two trajectory.csv and lab.xyz as lines, and the directory of the split run.
 fn full_and_split(name: &str, integrator: &str, end: f64) -> ([Vec<String>; 2], [Vec<String>; 2], PathBuf) {
-    let dir = temp_dir(name);
+    let dir = temp_dir("restart", name);
     let (full, half) = (dir.join("full.toml"), dir.join("half.toml"));
     std::fs::write(&full, scene(integrator, end)).unwrap();
     std::fs::write(&half, scene(integrator, end / 2.0)).unwrap();
@@ -110,7 +102,7 @@ fn dop853_continued_from_half_time_is_the_uninterrupted_run_bit_for_bit() {
 
 #[test]
 fn the_restart_file_holds_the_last_row_and_refuses_a_second_or_changed_continuation() {
-    let dir = temp_dir("refuse");
+    let dir = temp_dir("restart", "refuse");
     let path = dir.join("s.toml");
     std::fs::write(&path, scene(DOP853, 20.0)).unwrap();
     let out = dir.join("out");
@@ -179,7 +171,7 @@ fn gauss_legendre_continued_from_half_time_follows_the_uninterrupted_run() {
 /// continuation redoes the step in which the run stopped).
 #[test]
 fn an_interrupted_run_continues_bit_for_bit() {
-    let dir = temp_dir("sigint");
+    let dir = temp_dir("restart", "sigint");
     let long = dir.join("long.toml");
     std::fs::write(&long, scene(DOP853, 4e5)).unwrap();
     let out = dir.join("out");

@@ -1,15 +1,15 @@
 //! `rovib run` as a careless or hostile user drives it: stale files of an earlier run, two runs
 //! into one directory, SIGINT/SIGTERM, a full disk, an energy guard at H(0) ≈ 0.
 
+mod common;
+
+use common::cli::rovib;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rovib-run-safety-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    common::cli::temp_dir("run-safety", name)
 }
 
 /// A vibrating, rotating water scene with the given end time (fs) and outputs.
@@ -22,10 +22,6 @@ fn scene(d: &Path, name: &str, end: f64, outputs: &str) -> PathBuf {
     let path = d.join(name);
     std::fs::write(&path, text).unwrap();
     path
-}
-
-fn rovib(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_rovib")).args(args).output().unwrap()
 }
 
 fn summary(out: &Path) -> serde_json::Value {
@@ -62,13 +58,17 @@ fn wait_for_lines(path: &Path, lines: usize) {
     }
 }
 
+/// How long an interrupted run may take to finish its record and write its summary (a record
+/// takes microseconds; the margin is for a loaded machine).
+const STOP_LIMIT: Duration = Duration::from_secs(30);
+
 /// Spawns a long run, checks that a second run into the same directory fails at once, sends
 /// `signal`, and checks the outputs: whole rows and frames, summary "interrupted" at the last row.
 fn interrupt_with(signal: &str) {
     let d = dir(signal);
     let out = d.join("out");
     let path = scene(&d, "long.toml", 4e5, "\"trajectory\", \"lab\", \"summary\"");
-    let child = Command::new(env!("CARGO_BIN_EXE_rovib"))
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rovib"))
         .args(["run", path.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -84,6 +84,17 @@ fn interrupt_with(signal: &str) {
 
     let killed = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status().unwrap();
     assert!(killed.success());
+    // The run has about 8e5 records left: without the interrupt handling it would go on for
+    // minutes, so a run that has not stopped within the limit has ignored the signal.
+    let sent = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if sent.elapsed() > STOP_LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the run did not stop within {STOP_LIMIT:?} of SIG{signal}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
     let o = child.wait_with_output().unwrap();
     let err = String::from_utf8(o.stderr).unwrap();
     assert!(!o.status.success(), "an interrupted run exits non-zero");

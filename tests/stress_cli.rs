@@ -14,16 +14,11 @@
 //! And the case that must NOT stop: CO2 with J = 0 bends through linear and completes.
 //! `STABILITY.md` records the figures.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-/// A fresh temporary directory for one test.
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rovib-stress-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use common::cli::temp_dir;
+use std::path::Path;
+use std::process::{Command, Output};
 
 /// Writes `scene` into `dir` and runs it, with the output in `dir/out`.
 fn run_scene(dir: &Path, scene: &str) -> Output {
@@ -138,7 +133,7 @@ fn failed_run(dir: &Path, err: &str, atoms: usize) -> Vec<Vec<f64>> {
 
 #[test]
 fn a_bend_closer_to_linear_than_the_threshold_stops_naming_time_q_and_the_inertia_tensor() {
-    let dir = temp_dir("linear");
+    let dir = temp_dir("stress", "linear");
     // J_x = 1e-5 ħ would bring the bend to δ = π − α ≈ 3e-7 rad; the default threshold (relative
     // pivot of I 1e-12) is reached at δ ≈ 5.4e-6 rad.
     let err = error_line(&run_scene(&dir, &co2("1e-5", "60.0", "", "")));
@@ -161,7 +156,7 @@ fn a_bend_closer_to_linear_than_the_threshold_stops_naming_time_q_and_the_inerti
 
 #[test]
 fn a_stricter_scene_threshold_stops_the_bend_earlier_as_ill_conditioned() {
-    let dir = temp_dir("threshold");
+    let dir = temp_dir("stress", "threshold");
     // J_x = 0.1 ħ reaches δ ≈ 3.4e-3 rad (relative pivot 4e-7): fine by default, below 1e-6.
     let err = error_line(&run_scene(&dir, &co2("0.1", "60.0", "", "min_metric_pivot = 1e-6")));
     assert!(err.contains("the inertia tensor I is ill-conditioned at q = ["), "{err}");
@@ -177,7 +172,7 @@ fn a_stricter_scene_threshold_stops_the_bend_earlier_as_ill_conditioned() {
 
 #[test]
 fn zero_angular_momentum_co2_bends_through_linear_and_completes() {
-    let dir = temp_dir("zero");
+    let dir = temp_dir("stress", "zero");
     let out = run_scene(&dir, &co2("0.0", "100.0", "", ""));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = trajectory(&dir);
@@ -215,7 +210,7 @@ output_interval = OUTPUT
 
 #[test]
 fn a_step_beyond_the_stability_limit_overflows_the_morse_potential_and_stops() {
-    let dir = temp_dir("nonfinite");
+    let dir = temp_dir("stress", "nonfinite");
     // RK4 is stable for ω h < 2.8: for the O–H stretch (3830 cm⁻¹) h < 3.9 fs. At 4.2 fs the
     // stretch amplitude grows each step until a stage pushes a bond deep into the repulsive wall
     // and exp(−a (r − re)) overflows.
@@ -241,7 +236,7 @@ fn a_step_beyond_the_stability_limit_overflows_the_morse_potential_and_stops() {
 
 #[test]
 fn a_collapsing_step_size_stops_the_run() {
-    let dir = temp_dir("minstep");
+    let dir = temp_dir("stress", "minstep");
     // J_x = 1e-3 ħ: near the closest approach to linear (δ ≈ 3.4e-5 rad) the molecule spins about
     // its axis at ω_x ≈ 44 rad per ħ/E_h and DOP853's steps fall to about 3e-3 ħ/E_h; elsewhere
     // they are 0.04 ħ/E_h (the first) to several ħ/E_h. min_step = 0.0005 fs = 0.021 ħ/E_h.
@@ -261,7 +256,7 @@ fn a_collapsing_step_size_stops_the_run() {
 
 #[test]
 fn a_non_finite_energy_at_an_output_time_stops_the_run() {
-    let dir = temp_dir("output");
+    let dir = temp_dir("stress", "output");
     // RK4 at 20 fs: the first step lands where U(q) overflows; the right-hand side was finite at
     // every stage, so the failure is found when the output time records H.
     let scene =
@@ -276,7 +271,7 @@ fn a_non_finite_energy_at_an_output_time_stops_the_run() {
 
 #[test]
 fn a_run_whose_energy_runs_away_stops_instead_of_completing() {
-    let dir = temp_dir("guard");
+    let dir = temp_dir("stress", "guard");
     // RK4 at 4.2 fs, just past its stability limit for the O–H stretch: the energy grows each
     // step. Without the guard the run would overflow only at 79.8 fs, and at 5 fs it would
     // "complete" with a relative energy error of 4e58; the guard stops it at the first output

@@ -25,7 +25,7 @@ const RUNS: usize = 3;
 
 fn main() -> ExitCode {
     let mut paths: Vec<String> = std::env::args().skip(1).collect();
-    let options = Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian") };
+    let options = Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian"), ..Options::default() };
     paths.retain(|p| p != "--kinetic-jacobian");
     if paths.is_empty() {
         eprintln!(

@@ -700,17 +700,17 @@ impl Validator<'_> {
                 "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
             ));
         }
+        // The dipole table's first mistake is collected with the others.
         let dipole = match &raw.dipole {
             None => None,
             Some(d) => {
-                let checked = self.dipole(d, &atoms);
-                let (dipole, spans) = self.check(checked).unzip();
+                let read = self.dipole(d, &atoms);
+                self.check(read).map(|(dipole, spans)| {
                 let what = match &dipole {
-                    Some(DipoleDef::Components(c)) => c.to_vec(),
-                    Some(DipoleDef::Charges(c)) => c.clone(),
-                    None => Vec::new(),
+                    DipoleDef::Components(c) => c.to_vec(),
+                    DipoleDef::Charges(c) => c.clone(),
                 };
-                for (e, span) in what.into_iter().zip(spans.unwrap_or_default()) {
+                for (e, span) in what.into_iter().zip(spans).filter(|_| constants_ok) {
                     if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
                         self.errors.push(src.error(
                             span,
@@ -720,6 +720,7 @@ impl Validator<'_> {
                     }
                 }
                 dipole
+                })
             }
         };
 

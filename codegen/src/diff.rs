@@ -33,7 +33,9 @@ impl Differentiator {
             }
             let pending: Vec<ExprId> = g.node(top).children().filter(|c| !self.memo.contains_key(&(*c, var))).collect();
             if pending.is_empty() {
-                let d = self.rule(g, top, var);
+                let memo = &self.memo;
+                let (zero, one) = (g.zero(), g.one());
+                let d = chain_rule(g, top, |c| memo[&(c, var)], |k| if k == var { one } else { zero });
                 self.memo.insert((top, var), d);
                 stack.pop();
             } else {
@@ -42,10 +44,14 @@ impl Differentiator {
         }
         self.memo[&(e, var)]
     }
+}
 
-    /// One step of the chain rule for node `e`, whose operands' derivatives are memoised.
-    fn rule(&self, g: &mut Graph, e: ExprId, var: u32) -> ExprId {
-        let d = |c: ExprId| self.memo[&(c, var)];
+/// One step of the chain rule for node `e`: its derivative, given its operands' derivatives
+/// `d(operand)` and, for a variable node, `dvar(variable)`. Differentiating with respect to one
+/// variable, `dvar` is 1 for it and 0 for the rest; along a direction ([`crate::adjoint`]) it
+/// is the direction's component.
+pub fn chain_rule(g: &mut Graph, e: ExprId, d: impl Fn(ExprId) -> ExprId, dvar: impl Fn(u32) -> ExprId) -> ExprId {
+    {
         let node = g.node(e);
         if !matches!(node, Node::Var(_)) && node.children().all(|c| g.is_zero(d(c))) {
             // Nothing below depends on the variable: a structural zero, with no garbage nodes.
@@ -53,13 +59,7 @@ impl Differentiator {
         }
         match node {
             Node::Const(_) => g.zero(),
-            Node::Var(k) => {
-                if k == var {
-                    g.one()
-                } else {
-                    g.zero()
-                }
-            }
+            Node::Var(k) => dvar(k),
             Node::Neg(a) => g.neg(d(a)),
             Node::Add(a, b) => g.add(d(a), d(b)),
             Node::Sub(a, b) => g.sub(d(a), d(b)),

@@ -544,3 +544,12 @@ pub fn doc_lines(text: &str) -> TokenStream {
 pub fn index(i: usize) -> Literal {
     Literal::usize_unsuffixed(i)
 }
+
+/// The operations one function computing `roots` would emit (after lowering and CSE, every
+/// node counted once; a `sin`/`cos` pair of one argument counts twice here, once when
+/// emitted). For choosing between ways of building the same outputs before emitting any.
+pub fn operations(graph: &Graph, roots: &[ExprId]) -> u64 {
+    let (lowered, lowered_roots) = lower(graph, roots);
+    let reachable = lowered.reachable(&lowered_roots);
+    lowered.nodes().iter().zip(&reachable).filter(|(_, r)| **r).map(|(node, _)| op_cost(*node)).sum()
+}

@@ -40,18 +40,54 @@
 //! the coordinates atom i depends on) instead of `NA · n²` (dense centred derivatives), and
 //! the optional `kinetic_jacobian` adds `n³`-order code.
 
+use std::collections::HashMap;
+
+use crate::adjoint;
 use crate::definition::Definition;
 use crate::diff::Differentiator;
 use crate::expr::{ExprId, Graph};
 use crate::units::DALTON_IN_ELECTRON_MASSES;
 
-/// What to generate beyond the production path.
-#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+/// What to generate beyond the production path, and how.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub struct Options {
     /// Generate `kinetic_jacobian` (∂a/∂q, ∂A/∂q, ∂I/∂q) symbolically; `n(n² + 3n + 9)`
     /// outputs, by far the largest function for large molecules. Off by default: the runtime's
     /// default method computes the same matrices from the generated `∂T/∂q`.
     pub kinetic_jacobian: bool,
+    /// How `∂T/∂q` is built (default: whichever makes the smaller production function).
+    pub kinetic_gradient: GradientMethod,
+    /// From this many internal coordinates on, the centre-of-mass term of `a` (a dense
+    /// `n × n` rank-3 update) is applied by the runtime in a loop rather than emitted as
+    /// `n(n + 1)/2` expressions ([`RunTimeCentreOfMass`]). Default [`RUN_TIME_CENTRE_OF_MASS_FROM`].
+    pub run_time_centre_of_mass_from: usize,
+}
+
+/// The default of [`Options::run_time_centre_of_mass_from`]: every shipped molecule up to
+/// methane (9 coordinates) keeps the expanded form, ethane (18) and larger use the loop.
+pub const RUN_TIME_CENTRE_OF_MASS_FROM: usize = 12;
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            kinetic_jacobian: false,
+            kinetic_gradient: GradientMethod::Auto,
+            run_time_centre_of_mass_from: RUN_TIME_CENTRE_OF_MASS_FROM,
+        }
+    }
+}
+
+/// How the generated `∂T/∂q` is built (both give the same numbers up to rounding).
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub enum GradientMethod {
+    /// Whichever of the two below gives fewer operations in the fused production function
+    /// (`kinetic_and_gradient`); ties keep [`GradientMethod::Direct`].
+    #[default]
+    Auto,
+    /// From the explicit second derivatives of the positions (`Σ_i n_i²` of them).
+    Direct,
+    /// By a directional derivative of the positions along q̇ and one reverse sweep over `T`.
+    Reverse,
 }
 
 /// Every expression the generated code evaluates, for one molecule.
@@ -70,12 +106,33 @@ pub struct KineticExprs {
     pub kinetic_energy: ExprId,
     /// `∂T/∂q_k` at fixed ω and q̇.
     pub kinetic_gradient: Vec<ExprId>,
+    /// How `kinetic_gradient` was built ([`GradientMethod::Direct`] or
+    /// [`GradientMethod::Reverse`], never `Auto`).
+    pub gradient_method: GradientMethod,
     /// The potential in hartree.
     pub potential: ExprId,
     /// `∂U/∂q_k`.
     pub potential_gradient: Vec<ExprId>,
     /// (atom, coordinate) pairs whose raw position derivative is not a structural zero.
     pub nonzero_derivatives: usize,
+    /// For large molecules ([`Options::run_time_centre_of_mass_from`]), what the production
+    /// functions emit instead of `kinetic.a`: the centre-of-mass term of `a` is then applied at
+    /// run time.
+    pub centre_of_mass_at_run_time: Option<RunTimeCentreOfMass>,
+}
+
+/// `a` without its centre-of-mass term, and what that term is made of:
+/// `a_jk = sparse_jk − M ∂c/∂q_j · ∂c/∂q_k`, a dense rank-3 update that the runtime applies in a
+/// loop (`rovib_runtime::assembly::remove_centre_of_mass`) instead of `n(n + 1)/2` expanded
+/// expressions.
+#[derive(Clone, Debug)]
+pub struct RunTimeCentreOfMass {
+    /// `Σ_i m_i ∂r_i/∂q_j · ∂r_i/∂q_k` (symmetric, structurally sparse).
+    pub a: Vec<Vec<ExprId>>,
+    /// `∂c/∂q_k`, the centre of mass's derivatives.
+    pub dcom: Vec<[ExprId; 3]>,
+    /// The total mass `M` in electron masses.
+    pub total: f64,
 }
 
 /// `a` (n × n, row-major), `A` (3 × n), `I` (3 × 3), or one derivative of each.
@@ -120,7 +177,12 @@ pub fn build(def: &mut Definition, options: &Options) -> KineticExprs {
     let jacobian: Vec<Vec<[ExprId; 3]>> =
         (0..n).map(|k| dr[k].iter().map(|d| [0, 1, 2].map(|axis| g.sub(d[axis], dcom[k][axis]))).collect()).collect();
 
-    let kinetic = kinetic_set(g, &masses, total, &positions, &dr, &dcom, &support);
+    let (kinetic, sparse_a) = kinetic_set(g, &masses, total, &positions, &dr, &dcom, &support);
+    let centre_of_mass_at_run_time = (n >= options.run_time_centre_of_mass_from).then(|| RunTimeCentreOfMass {
+        a: sparse_a,
+        dcom: dcom.clone(),
+        total,
+    });
     let kinetic_jacobian = options.kinetic_jacobian.then(|| {
         (0..n)
             .map(|l| {
@@ -145,6 +207,66 @@ pub fn build(def: &mut Definition, options: &Options) -> KineticExprs {
     let qdot: Vec<ExprId> = def.coordinates.iter().map(|c| g.var(&format!("q̇_{}", c.name))).collect();
     assert_eq!(g.var_count(), 2 * n + 3, "velocity variables are new variables");
 
+    let direct = direct_gradient(g, &mut diff, &masses, &positions, &dr, &dcom, &support, omega, &qdot);
+    let reverse = adjoint_gradient(g, &masses, &weights, &raw, &positions, omega, &qdot);
+    let emitted_a = centre_of_mass_at_run_time.as_ref().map_or(&kinetic.a, |c| &c.a);
+    let kinetic_roots: Vec<ExprId> = emitted_a
+        .iter()
+        .flatten()
+        .chain(centre_of_mass_at_run_time.iter().flat_map(|c| c.dcom.iter().flatten()))
+        .chain(kinetic.coriolis.iter().flatten())
+        .chain(kinetic.inertia.iter().flatten())
+        .copied()
+        .collect();
+    // The fused production function evaluates the kinetic matrices, T and ∂T/∂q: count it with
+    // each gradient and keep the smaller (ties keep the direct method).
+    let cost = |g: &Graph, (t, grad): &(ExprId, Vec<ExprId>)| {
+        let mut roots = kinetic_roots.clone();
+        roots.extend(grad.iter().copied());
+        roots.push(*t);
+        crate::emit::operations(g, &roots)
+    };
+    let method = match options.kinetic_gradient {
+        GradientMethod::Auto if cost(g, &reverse) < cost(g, &direct) => GradientMethod::Reverse,
+        GradientMethod::Auto => GradientMethod::Direct,
+        chosen => chosen,
+    };
+    let (kinetic_energy, kinetic_gradient) = if method == GradientMethod::Reverse { reverse } else { direct };
+
+    let potential = def.potential;
+    let potential_gradient = (0..n).map(|k| diff.derivative(g, potential, k as u32)).collect();
+
+    KineticExprs {
+        n,
+        positions,
+        jacobian,
+        kinetic,
+        kinetic_jacobian,
+        kinetic_energy,
+        kinetic_gradient,
+        gradient_method: method,
+        centre_of_mass_at_run_time,
+        potential,
+        potential_gradient,
+        nonzero_derivatives,
+    }
+}
+
+/// `(T, ∂T/∂q)` with every second derivative of the positions built explicitly: `u_i` from the
+/// sparse first derivatives and `∂T/∂q_l = Σ_i m_i u_i · ∂u_i/∂q_l` over the atoms that depend
+/// on `q_l`, `Σ_i n_i²` second derivatives in all. Cheapest for small molecules.
+fn direct_gradient(
+    g: &mut Graph,
+    diff: &mut Differentiator,
+    masses: &[f64],
+    positions: &[[ExprId; 3]],
+    dr: &[Vec<[ExprId; 3]>],
+    dcom: &[[ExprId; 3]],
+    support: &[Vec<usize>],
+    omega: [ExprId; 3],
+    qdot: &[ExprId],
+) -> (ExprId, Vec<ExprId>) {
+    let (n, na) = (qdot.len(), masses.len());
     // u_i = ω × R_i + Σ_j ∂r_i/∂q_j q̇_j − Σ_j ∂c/∂q_j q̇_j, the body-frame velocity of atom i.
     let mut com_velocity = [g.zero(); 3];
     for (k, &qd) in qdot.iter().enumerate() {
@@ -195,21 +317,45 @@ pub fn build(def: &mut Definition, options: &Options) -> KineticExprs {
         }
     }
 
-    let potential = def.potential;
-    let potential_gradient = (0..n).map(|k| diff.derivative(g, potential, k as u32)).collect();
+    (kinetic_energy, kinetic_gradient)
+}
 
-    KineticExprs {
-        n,
-        positions,
-        jacobian,
-        kinetic,
-        kinetic_jacobian,
-        kinetic_energy,
-        kinetic_gradient,
-        potential,
-        potential_gradient,
-        nonzero_derivatives,
+/// `(T, ∂T/∂q)` by forward and reverse differentiation ([`crate::adjoint`]): the atom
+/// velocities `v_i = Σ_j ∂r_i/∂q_j q̇_j` as one directional derivative of the raw positions
+/// along q̇, `u_i = ω × R_i + v_i − Σ_j (m_j/M) v_j`, `T = ½ Σ_i m_i |u_i|²`, and the whole
+/// gradient of that `T` in q by one reverse sweep. Its cost is a small multiple of the
+/// positions' and does not grow with the number of second derivatives, which wins for large
+/// molecules.
+fn adjoint_gradient(
+    g: &mut Graph,
+    masses: &[f64],
+    weights: &[f64],
+    raw: &[[ExprId; 3]],
+    positions: &[[ExprId; 3]],
+    omega: [ExprId; 3],
+    qdot: &[ExprId],
+) -> (ExprId, Vec<ExprId>) {
+    let n = qdot.len();
+    let seeds: HashMap<u32, ExprId> = (0..n).map(|k| (k as u32, qdot[k])).collect();
+    let flat: Vec<ExprId> = raw.iter().flatten().copied().collect();
+    let v = adjoint::tangent(g, &flat, &seeds);
+    let velocities: Vec<[ExprId; 3]> = v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let com_velocity = weighted_sum(g, velocities.iter().zip(weights).map(|(v, &w)| (*v, w)));
+    let mut kinetic_energy = g.zero();
+    for (i, r) in positions.iter().enumerate() {
+        let mut u = cross(g, omega, *r);
+        for axis in 0..3 {
+            let relative = g.sub(velocities[i][axis], com_velocity[axis]);
+            u[axis] = g.add(u[axis], relative);
+        }
+        let u2 = dot(g, u, u);
+        let m = g.constant(0.5 * masses[i]);
+        let term = g.mul(m, u2);
+        kinetic_energy = g.add(kinetic_energy, term);
     }
+    let vars: Vec<u32> = (0..n as u32).collect();
+    let gradient = adjoint::gradient(g, kinetic_energy, &vars);
+    (kinetic_energy, gradient)
 }
 
 /// `Σ w v` over weighted vectors.
@@ -252,7 +398,7 @@ fn kinetic_set(
     dr: &[Vec<[ExprId; 3]>],
     dcom: &[[ExprId; 3]],
     support: &[Vec<usize>],
-) -> KineticSet {
+) -> (KineticSet, Vec<Vec<ExprId>>) {
     let n = dr.len();
     // a_jk = Σ_i m_i ∂r_i/∂q_j · ∂r_i/∂q_k − M ∂c/∂q_j · ∂c/∂q_k, accumulated atom by atom over
     // the pairs (j, k) both in the atom's support.
@@ -265,6 +411,13 @@ fn kinetic_set(
                 let t = g.mul(m, d);
                 sums[j][k] = g.add(sums[j][k], t);
             }
+        }
+    }
+    let mut sparse_a = vec![vec![g.zero(); n]; n];
+    for j in 0..n {
+        for k in j..n {
+            sparse_a[j][k] = sums[j][k];
+            sparse_a[k][j] = sums[j][k];
         }
     }
     let mut a = vec![vec![g.zero(); n]; n];
@@ -313,5 +466,5 @@ fn kinetic_set(
             inertia[q][p] = s;
         }
     }
-    KineticSet { a, coriolis, inertia }
+    (KineticSet { a, coriolis, inertia }, sparse_a)
 }

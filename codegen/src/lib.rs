@@ -4,7 +4,7 @@
 //!
 //! 1. [`definition`]: the TOML file, validated, with errors that name file, line and fix;
 //! 2. [`parse`]: expressions (syn) into the [`expr`] graph, a hash-consed DAG;
-//! 3. [`diff`]: symbolic derivatives;
+//! 3. [`diff`]: symbolic derivatives ([`adjoint`]: directional derivatives and gradients);
 //! 4. [`kinetic`]: positions to the kinetic matrices a, A, I and all derivatives ([`dipole`]: the
 //!    dipole moment surface and its derivatives, for a definition with a `[dipole]` table);
 //! 5. [`emit`]: CSE, lowering and printing with quote and prettyplease;
@@ -19,6 +19,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+pub mod adjoint;
 pub mod definition;
 pub mod diff;
 pub mod dipole;
@@ -34,7 +35,7 @@ pub mod template;
 
 pub use definition::{Definition, DefinitionError, parse_definition};
 pub use emit::FunctionStats;
-pub use kinetic::Options;
+pub use kinetic::{GradientMethod, Options};
 pub use names::type_name;
 pub use rovib_base::{diagnostic, units};
 

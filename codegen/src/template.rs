@@ -240,6 +240,92 @@ pub(crate) fn molecule_items(
             barrier: None,
         },
     ];
+    // Large molecules: `kinetic` and `kinetic_and_gradient` emit `a` without its
+    // centre-of-mass term plus `∂c/∂q` (inherent `*_sparse` functions), and the trait methods
+    // wrap them with the runtime's rank-3 update (`kinetic::RunTimeCentreOfMass`).
+    let mut inherent_specs = Vec::new();
+    let mut wrappers = quote!();
+    if let Some(c) = &e.centre_of_mass_at_run_time {
+        let sparse = KineticSet { a: c.a.clone(), coriolis: e.kinetic.coriolis.clone(), inertia: e.kinetic.inertia };
+        let sparse_groups = || {
+            let mut groups = kinetic_groups(&quote!(k), &sparse);
+            groups.push(OutputGroup {
+                target: quote!(dc),
+                entries: (0..nc).flat_map(|k| (0..3).map(move |axis| (pair(axis, k), c.dcom[k][axis]))).collect(),
+            });
+            groups
+        };
+        let total = float(c.total);
+        let dc_ty = quote!(&mut SMatrix<f64, 3, #n>);
+        specs.retain(|s| s.name != "kinetic" && s.name != "kinetic_and_gradient");
+        inherent_specs.push(FunctionSpec {
+            name: "kinetic",
+            doc: "`a` without its centre-of-mass term, `A` and `I` into `k`, and ∂c/∂q into `dc` (the centre of\n\
+                  mass's derivatives, column k along q_k)."
+                .into(),
+            signature: quote!(fn kinetic_sparse(&self, q: #q_ty, k: &mut KineticMatrices<#n>, dc: #dc_ty)),
+            inputs: q_inputs.clone(),
+            groups: sparse_groups(),
+            ret: None,
+            ret_wrap: None,
+            barrier: None,
+        });
+        let mut groups = sparse_groups();
+        groups.push(OutputGroup {
+            target: quote!(grad),
+            entries: e.kinetic_gradient.iter().enumerate().map(|(k, &g)| (ix(quote!(), k), g)).collect(),
+        });
+        inherent_specs.push(FunctionSpec {
+            name: "kinetic_and_gradient",
+            doc: "[`Molecule::kinetic_and_gradient`] with ∂c/∂q in `dc`: `a` is completed by the runtime's\n\
+                  centre-of-mass update before `velocities(k)` is called."
+                .into(),
+            signature: quote!(
+                fn kinetic_and_gradient_sparse<E>(
+                    &self,
+                    q: #q_ty,
+                    k: &mut KineticMatrices<#n>,
+                    dc: #dc_ty,
+                    velocities: impl FnOnce(&KineticMatrices<#n>) -> Result<(Vector3<f64>, SVector<f64, #n>), E>,
+                    grad: &mut SVector<f64, #n>,
+                ) -> Result<(Vector3<f64>, SVector<f64, #n>, f64), E>
+            ),
+            inputs: velocity_inputs.clone(),
+            groups,
+            ret: Some(e.kinetic_energy),
+            ret_wrap: Some(|t| quote!(Ok((omega, qdot, #t)))),
+            barrier: Some(Barrier {
+                groups_before: 4,
+                statement: quote! {
+                    ::rovib_runtime::assembly::remove_centre_of_mass(&mut k.a, dc, #total);
+                    let (omega, qdot) = velocities(k)?;
+                },
+                late_vars: (nc..2 * nc + 3).map(|v| v as u32).collect(),
+            }),
+        });
+        wrappers = quote! {
+            /// The kinetic matrices a, A (coriolis) and I at q; the centre-of-mass term of `a` is applied
+            /// by the runtime.
+            fn kinetic(&self, q: #q_ty, k: &mut KineticMatrices<#n>) {
+                let mut dc = SMatrix::<f64, 3, #n>::zeros();
+                self.kinetic_sparse(q, k, &mut dc);
+                ::rovib_runtime::assembly::remove_centre_of_mass(&mut k.a, &dc, #total);
+            }
+
+            /// The kinetic matrices into `k`, then (ω, q̇) from `velocities(k)`, then ∂T/∂q at those
+            /// velocities into `grad`. Returns (ω, q̇, T).
+            fn kinetic_and_gradient<E>(
+                &self,
+                q: #q_ty,
+                k: &mut KineticMatrices<#n>,
+                velocities: impl FnOnce(&KineticMatrices<#n>) -> Result<(Vector3<f64>, SVector<f64, #n>), E>,
+                grad: &mut SVector<f64, #n>,
+            ) -> Result<(Vector3<f64>, SVector<f64, #n>, f64), E> {
+                let mut dc = SMatrix::<f64, 3, #n>::zeros();
+                self.kinetic_and_gradient_sparse(q, k, &mut dc, velocities, grad)
+            }
+        };
+    }
     let mut parameter_items = quote!();
     if let Some(p) = parametric {
         let mut inputs = q_inputs_for_parameters.clone();
@@ -350,6 +436,12 @@ pub(crate) fn molecule_items(
     // so their statistics are not counted again), before the dipole functions.
     let (lane_functions, _) = crate::emit_lanes::lane_functions(&def.graph, e, &idents);
     functions.splice(before_dipole..before_dipole, lane_functions);
+    let mut inherent_functions = Vec::new();
+    for spec in &inherent_specs {
+        let (tokens, s) = emit::emit_function(&def.graph, spec, &idents);
+        inherent_functions.push(tokens);
+        stats.push(s);
+    }
 
     let atoms = def.atoms.iter().map(|a| {
         let (label, element) = (&a.label, &a.element);
@@ -410,6 +502,8 @@ pub(crate) fn molecule_items(
             pub const N: usize = #n;
             /// Number of atoms.
             pub const NA: usize = #na;
+
+            #(#inherent_functions)*
         }
 
         impl Molecule<#n, #na> for #ty {
@@ -434,6 +528,8 @@ pub(crate) fn molecule_items(
             #(#functions)*
 
             #has_dipole
+
+            #wrappers
         }
     };
     (items, stats)

@@ -135,11 +135,14 @@ fn dipole_functions_are_generated_only_for_a_dipole() {
     assert_eq!(with.stats.len(), without.stats.len() + 2);
 }
 
+/// The one error of a definition with one mistake.
 fn error(text: &str) -> DefinitionError {
     match generate_molecule("molecules/xy2.toml", text) {
         Ok(_) => panic!("expected an error for:\n{text}"),
-        // The first error in file order (a definition reports every independent mistake).
-        Err(e) => e.into_iter().next().expect("at least one error"),
+        Err(mut e) => {
+            assert_eq!(e.len(), 1, "one mistake, one error: {e:?}");
+            e.remove(0)
+        }
     }
 }
 

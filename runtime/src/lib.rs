@@ -9,6 +9,7 @@
 //! Atomic units throughout: lengths in bohr, angles in radians, masses in electron masses,
 //! energies in hartree, time in ħ/E_h (≈ 0.024 188 fs). See [`units`] for the conversions.
 
+pub mod assembly;
 pub mod diagnostic;
 pub mod ensemble;
 pub mod frames;

@@ -53,6 +53,26 @@ impl Header {
     }
 }
 
+/// How many times longer a line may be than the same line of an empty outcome: every number
+/// of an empty outcome is written as `0` or `0.0`, and the longest an integer (20 digits) or
+/// float (24 characters) can be is under 16 times that, separators included.
+const NUMBER_GROWTH: u64 = 16;
+
+/// Room per line for the text of the listed failures (at most `LISTED_FAILURES` messages).
+const FAILURE_TEXT_BYTES: u64 = 64 << 10;
+
+/// The largest checkpoint of this run [`Checkpoint::resume`] reads, in bytes: the header, the
+/// merged line and one line per block, each at most [`NUMBER_GROWTH`] times the line of `empty`
+/// (an outcome of this run's shape with nothing in it) plus [`FAILURE_TEXT_BYTES`]. A
+/// checkpoint larger than that is not one this run wrote (a wrong file, `/dev/zero`): it is
+/// refused with the figures instead of read into memory without bound.
+pub fn size_limit(header: &Header, empty: &Outcome) -> u64 {
+    let mut bytes = Vec::new();
+    line(&mut bytes, &Line::Merged { merged: header.blocks(), outcome: empty.clone() });
+    let per_line = (bytes.len() as u64).saturating_mul(NUMBER_GROWTH).saturating_add(FAILURE_TEXT_BYTES);
+    header.blocks().saturating_add(2).saturating_mul(per_line)
+}
+
 /// One recorded block, or the merged outcome of the first blocks.
 #[derive(Serialize, Deserialize)]
 #[serde(untagged, deny_unknown_fields)]
@@ -126,11 +146,19 @@ impl Checkpoint {
     }
 
     /// Opens the checkpoint at `path` to continue it: checks its header against `header` and
-    /// returns what it holds. A torn last line (a run killed mid-write) is dropped.
-    pub fn resume(path: &Path, header: &Header) -> Result<(Self, Resumed), CheckpointError> {
+    /// returns what it holds. A torn last line (a run killed mid-write) is dropped. A file of
+    /// more than `limit` bytes ([`size_limit`]) is refused unread.
+    pub fn resume(path: &Path, header: &Header, limit: u64) -> Result<(Self, Resumed), CheckpointError> {
         let fail = |line: Option<usize>, message: String| CheckpointError { path: path.to_owned(), line, message };
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| fail(None, format!("cannot read the checkpoint to resume ({e}); run without --resume")))?;
+        let text = crate::runtime::diagnostic::read_text_capped(path, limit).map_err(|e| {
+            fail(
+                None,
+                format!(
+                    "{e} (the checkpoint of this run is at most {limit} bytes); run without --resume, after \
+                     deleting the file, to start again"
+                ),
+            )
+        })?;
         // Only lines ending in '\n' were completely written.
         let complete = text.rfind('\n').map_or(0, |i| i + 1);
         let mut lines = text[..complete].lines();
@@ -266,7 +294,7 @@ impl Checkpoint {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ensemble::runner::Accumulators;
+    use crate::ensemble::runner::{Accumulators, Failure};
     use crate::runtime::ensemble::Moments;
 
     /// An outcome whose sums are awkward floats (not exactly representable in few digits).
@@ -280,6 +308,46 @@ mod tests {
         let mut o = Outcome::new(statistics);
         o.completed = 5;
         o.steps = 100 + seed;
+        o
+    }
+
+    /// Means in [`widest`]: enough that the numbers, not the failure text, fill a line.
+    const WIDE: usize = 4000;
+
+    /// The size limit of a checkpoint of [`widest`]'s shape.
+    fn limit(header: &Header) -> u64 {
+        let empty = Accumulators {
+            n_times: WIDE,
+            n_means: 1,
+            means: vec![Moments::new(); WIDE],
+            histograms: Vec::new(),
+            correlations: Vec::new(),
+        };
+        size_limit(header, &Outcome::new(empty))
+    }
+
+    /// The longest block a run of this shape can write: the widest numbers and the
+    /// listed failures with long messages.
+    fn widest(seed: u64) -> Outcome {
+        let mut o = outcome(seed);
+        let mut m = Moments::new();
+        for x in [-1.2345678901234567e-300, 1.2345678901234567e100, -9.876543210987654e-105] {
+            m.add(x);
+        }
+        o.statistics.means = vec![m; WIDE];
+        o.statistics.n_times = WIDE;
+        (o.completed, o.steps, o.rhs_evaluations, o.interrupted) = (u64::MAX, u64::MAX, u64::MAX, u64::MAX);
+        for reason in ["energy guard", "too many steps", "step size too small", "non-finite", "not converged"] {
+            o.failed.insert(reason.to_owned(), u64::MAX);
+        }
+        o.first_failures = (0..crate::ensemble::runner::LISTED_FAILURES as u64)
+            .map(|i| Failure {
+                index: u64::MAX - i,
+                reason: "energy guard".into(),
+                time: Some(-1.2345678901234567e-300),
+                detail: "x".repeat(2000),
+            })
+            .collect();
         o
     }
 
@@ -301,7 +369,7 @@ mod tests {
         let mut f = OpenOptions::new().append(true).open(&path).unwrap();
         f.write_all(b"{\"block\":1,\"outco").unwrap();
         drop(f);
-        let (mut c, resumed) = Checkpoint::resume(&path, &header).unwrap();
+        let (mut c, resumed) = Checkpoint::resume(&path, &header, limit(&header)).unwrap();
         let done = resumed.blocks;
         assert_eq!(resumed.merged, None);
         assert_eq!(done.keys().copied().collect::<Vec<_>>(), vec![0, 2]);
@@ -310,7 +378,7 @@ mod tests {
         assert_eq!(done[&2], outcome(2));
         c.append(1, &outcome(1)).unwrap();
         drop(c);
-        let (_, resumed) = Checkpoint::resume(&path, &header).unwrap();
+        let (_, resumed) = Checkpoint::resume(&path, &header, limit(&header)).unwrap();
         assert_eq!(resumed.blocks.len(), 3);
         assert_eq!(resumed.blocks[&1], outcome(1));
     }
@@ -329,7 +397,7 @@ mod tests {
         drop(c);
         assert_eq!(std::fs::read_to_string(&path).unwrap().lines().count(), 4);
         assert!(!path.with_file_name("checkpoint.jsonl.tmp").exists());
-        let (_, resumed) = Checkpoint::resume(&path, &header).unwrap();
+        let (_, resumed) = Checkpoint::resume(&path, &header, limit(&header)).unwrap();
         assert_eq!(resumed.merged, Some((2, merged)));
         assert_eq!(resumed.blocks.keys().copied().collect::<Vec<_>>(), vec![3, 4]);
         assert_eq!(resumed.blocks[&3], outcome(3));
@@ -338,7 +406,7 @@ mod tests {
         f.write_all(serde_json::to_string(&Line::Block { block: 1, outcome: outcome(1) }).unwrap().as_bytes()).unwrap();
         f.write_all(b"\n").unwrap();
         drop(f);
-        let e = Checkpoint::resume(&path, &header).err().unwrap();
+        let e = Checkpoint::resume(&path, &header, limit(&header)).err().unwrap();
         assert_eq!(e.line, Some(5));
         assert!(e.to_string().contains("recorded twice"), "{e}");
     }
@@ -351,17 +419,46 @@ mod tests {
         c.append(0, &outcome(0)).unwrap();
         drop(c);
         for other in [Header::new(b"scene!", 7, 200, 64), Header::new(b"scene", 8, 200, 64)] {
-            let e = Checkpoint::resume(&path, &other).err().unwrap();
+            let e = Checkpoint::resume(&path, &other, limit(&other)).err().unwrap();
             assert_eq!(e.line, Some(1));
             assert!(e.to_string().contains("another run"), "{e}");
         }
         let mut f = OpenOptions::new().append(true).open(&path).unwrap();
         f.write_all(b"{\"block\":9}\n").unwrap();
         drop(f);
-        let e = Checkpoint::resume(&path, &header).err().unwrap();
+        let e = Checkpoint::resume(&path, &header, limit(&header)).err().unwrap();
         assert_eq!(e.line, Some(3));
         let missing = dir("missing").with_file_name("none.jsonl");
-        assert!(Checkpoint::resume(&missing, &header).is_err());
+        assert!(Checkpoint::resume(&missing, &header, limit(&header)).is_err());
+    }
+
+    /// The size limit holds every checkpoint the run can write, and a larger file is refused
+    /// unread with the figures and what to do.
+    #[test]
+    fn a_checkpoint_above_the_runs_size_limit_is_refused_unread() {
+        let path = dir("limit");
+        let header = Header::new(b"scene", 7, 200, 64);
+        let mut c = Checkpoint::create(&path, &header).unwrap();
+        c.compact(&header, 1, &widest(0), &BTreeMap::new()).unwrap();
+        for b in 1..header.blocks() {
+            c.append(b, &widest(b)).unwrap();
+        }
+        drop(c);
+        let size = std::fs::metadata(&path).unwrap().len();
+        let (_, resumed) = Checkpoint::resume(&path, &header, limit(&header)).unwrap();
+        assert_eq!(resumed.blocks.len() as u64, header.blocks() - 1);
+        assert!(size <= limit(&header), "a full checkpoint of {size} bytes is above the limit {}", limit(&header));
+        // Proportional to the run: 32 blocks + 2 lines against 4 + 2.
+        let ten = Header::new(b"scene", 7, 2000, 64);
+        let ratio = limit(&ten) as f64 / limit(&header) as f64;
+        assert!((ratio - 34.0 / 6.0).abs() < 1e-2, "{ratio}");
+
+        std::fs::write(&path, "x".repeat(limit(&header) as usize + 1)).unwrap();
+        let e = Checkpoint::resume(&path, &header, limit(&header)).err().unwrap();
+        assert_eq!(e.path, path);
+        let shown = e.to_string();
+        assert!(shown.contains(&format!("larger than {} bytes", limit(&header))), "{shown}");
+        assert!(shown.contains("run without --resume"), "{shown}");
     }
 
     #[test]

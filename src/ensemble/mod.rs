@@ -362,7 +362,7 @@ where
         Link::Alone => None,
     };
     let empty = Outcome::new(Accumulators::new(&plan));
-    let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options)?;
+    let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options, &empty)?;
     let mut collector = Collector::new(n, empty, resumed, checkpoint, ranks);
     if let Some(bar) = &progress.bar {
         bar.inc(collector.resumed());
@@ -423,6 +423,7 @@ fn open_checkpoint(
     scene: &Scene,
     ensemble: &EnsembleScene,
     options: &EnsembleOptions,
+    empty: &Outcome,
 ) -> Result<(Option<(Checkpoint, Header)>, Resumed), CliError> {
     let path = options.out_dir.join(CHECKPOINT_FILE);
     if !options.checkpoint {
@@ -441,7 +442,8 @@ fn open_checkpoint(
     }
     let header = Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK);
     if options.resume {
-        let (c, resumed) = Checkpoint::resume(&path, &header).map_err(|e| CliError::Message(e.to_string()))?;
+        let (c, resumed) = Checkpoint::resume(&path, &header, checkpoint::size_limit(&header, empty))
+            .map_err(|e| CliError::Message(e.to_string()))?;
         return Ok((Some((c, header)), resumed));
     }
     if path.exists() {

@@ -544,7 +544,12 @@ pub(super) fn fold<M, const N: usize, const NA: usize>(
             for (k, s) in series.iter_mut().enumerate() {
                 *s = buffer[k * nq + qi];
             }
-            ws.fluctuation_autocorrelation(series, correlation);
+            // The dipole's correlations feed the spectrum: tapered (see `runtime::spectrum`).
+            if plan.quantities[qi].needs_dipole() {
+                ws.tapered_autocorrelation(series, correlation);
+            } else {
+                ws.fluctuation_autocorrelation(series, correlation);
+            }
             for (m, &c) in acc.correlations[ci].iter_mut().zip(correlation.iter()) {
                 m.add(c);
             }

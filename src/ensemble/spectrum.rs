@@ -2,10 +2,11 @@
 //! when the scene's `[statistics] correlations` include `mu_x`, `mu_y` and `mu_z` (the lab-frame
 //! dipole of a molecule with a dipole surface).
 //!
-//! C(τ) = ⟨μ_lab(0)·μ_lab(τ)⟩ is the sum of the three components' autocorrelations (each of
-//! the fluctuation about its trajectory's time mean, averaged over trajectories); the transform,
-//! window and quantum corrections are [`crate::runtime::spectrum`]'s (docs/equations.md,
-//! section 11).
+//! C(τ) = ⟨μ_lab(0)·μ_lab(τ)⟩ is the sum of the three components' autocorrelations, each of
+//! the Hann-tapered fluctuation about its trajectory's time mean
+//! ([`crate::runtime::ensemble::CorrelationWorkspace::tapered_autocorrelation`]), averaged over
+//! trajectories; the transform and quantum corrections are [`crate::runtime::spectrum`]'s
+//! (docs/equations.md, section 11).
 
 use std::path::{Path, PathBuf};
 
@@ -63,7 +64,7 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         header.push(format!("sigma_{}_cm2", c.name()));
     }
     let mut f = OutputFile::create(dir, "spectrum.csv")?;
-    f.line(&format!("# resolution (FWHM) {:?} cm-1, Hann window over T = {:?} a.u.", s.resolution(), s.length))?;
+    f.line(&format!("# resolution (FWHM) {:?} cm-1, Hann taper over T = {:?} a.u.", s.resolution(), s.length))?;
     f.line(&header.join(","))?;
     for j in 0..s.wavenumber.len() {
         let mut row = format!("{:?},{:?}", s.wavenumber[j], s.lineshape[j]);

@@ -2,6 +2,7 @@
 //! reference geometry, finite differences, and matrix comparisons.
 #![allow(dead_code)]
 
+pub mod cli;
 pub mod ensemble;
 
 use rovib::runtime::nalgebra::{SMatrix, SVector};

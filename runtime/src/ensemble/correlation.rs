@@ -1,4 +1,5 @@
-//! Time-correlation functions of a sampled series by FFT, with the unbiased normalisation.
+//! Time-correlation functions of a sampled series by FFT, with the unbiased normalisation (or,
+//! for spectra, of the Hann-tapered series: [`CorrelationWorkspace::tapered_autocorrelation`]).
 //!
 //! For a series `x(0), …, x(n−1)` at equal times, the autocorrelation at lag `τ` is
 //!
@@ -70,7 +71,30 @@ impl CorrelationWorkspace {
         self.correlate(x, mean, out);
     }
 
+    /// The autocorrelation of the fluctuation about the time mean after a Hann taper
+    /// `h_t = sin²(π (t + ½) / n)`: with `y(t) = h_t (x(t) − x̄)`,
+    ///
+    /// ```text
+    /// C_h(τ) = Σ_{t=0}^{n−1−τ} y(t) y(t+τ) / Σ_t h_t²
+    /// ```
+    ///
+    /// Its cosine transform is the tapered periodogram `|Σ_t y(t) e^{−iωt}|² / Σ_t h_t²`, never
+    /// negative, and it keeps `C_h(0)` the (taper-weighted) variance. The expected value is the
+    /// true `C(τ)` times the taper's own normalised autocorrelation, which falls smoothly to
+    /// zero at `τ = n`: a spectrum from it needs no further window, and a slow drift or a
+    /// large low-frequency part (a molecule's rotation) does not leak into high frequencies as
+    /// it does through the kink at τ = 0 that the unbiased estimate of a drifting series has
+    /// (docs/equations.md, section 11).
+    pub fn tapered_autocorrelation(&mut self, x: &[f64], out: &mut [f64]) {
+        let mean = x.iter().sum::<f64>() / x.len().max(1) as f64;
+        self.correlate_with(x, mean, true, out);
+    }
+
     fn correlate(&mut self, x: &[f64], shift: f64, out: &mut [f64]) {
+        self.correlate_with(x, shift, false, out);
+    }
+
+    fn correlate_with(&mut self, x: &[f64], shift: f64, taper: bool, out: &mut [f64]) {
         let n = self.n;
         assert!(
             x.len() == n && out.len() == n,
@@ -78,8 +102,11 @@ impl CorrelationWorkspace {
             x.len(),
             out.len()
         );
-        for (b, &v) in self.buffer.iter_mut().zip(x) {
-            *b = Complex::new(v - shift, 0.0);
+        let mut taper_power = 0.0;
+        for (t, (b, &v)) in self.buffer.iter_mut().zip(x).enumerate() {
+            let h = if taper { hann(t, n) } else { 1.0 };
+            taper_power += h * h;
+            *b = Complex::new(h * (v - shift), 0.0);
         }
         self.buffer[n..].fill(Complex::default());
         self.forward.process_with_scratch(&mut self.buffer, &mut self.scratch);
@@ -91,9 +118,15 @@ impl CorrelationWorkspace {
         // rustfft does not normalise: the inverse carries a factor of the padded length.
         let scale = 1.0 / self.buffer.len() as f64;
         for (tau, o) in out.iter_mut().enumerate() {
-            *o = self.buffer[tau].re * scale / (n - tau) as f64;
+            let pairs = if taper { taper_power } else { (n - tau) as f64 };
+            *o = self.buffer[tau].re * scale / pairs;
         }
     }
+}
+
+/// The Hann taper `sin²(π (t + ½) / n)` at sample `t` of `n` (symmetric, never zero).
+pub fn hann(t: usize, n: usize) -> f64 {
+    (std::f64::consts::PI * (t as f64 + 0.5) / n as f64).sin().powi(2)
 }
 
 /// `C(τ) = Σ_t x(t) x(t+τ) / (n − τ)` by the direct `O(n²)` sum: the reference for the FFT.
@@ -141,6 +174,27 @@ mod tests {
         for tau in 0..3 {
             assert!((c[tau] - exact[tau]).abs() < 1e-14, "tau = {tau}: {}", c[tau]);
         }
+    }
+
+    #[test]
+    fn the_tapered_estimate_is_the_direct_sum_of_the_tapered_series() {
+        for n in [1, 2, 3, 17, 100, 257] {
+            let x = series(n);
+            let mean = x.iter().sum::<f64>() / n as f64;
+            let y: Vec<f64> = x.iter().enumerate().map(|(t, v)| hann(t, n) * (v - mean)).collect();
+            let power: f64 = (0..n).map(|t| hann(t, n).powi(2)).sum();
+            let mut ws = CorrelationWorkspace::new(n);
+            let mut c = vec![0.0; n];
+            ws.tapered_autocorrelation(&x, &mut c);
+            for tau in 0..n {
+                let direct = (0..n - tau).map(|t| y[t] * y[t + tau]).sum::<f64>() / power;
+                assert!((c[tau] - direct).abs() <= 1e-13 * (1.0 + c[0].abs()), "n = {n}, tau = {tau}");
+            }
+        }
+        // Σ h_t² = 3n/8 for n ≥ 2 (the mean of sin⁴ over whole periods).
+        let n = 64;
+        let power: f64 = (0..n).map(|t| hann(t, n).powi(2)).sum();
+        assert!((power - 3.0 * n as f64 / 8.0).abs() < 1e-12);
     }
 
     #[test]
