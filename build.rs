@@ -60,6 +60,9 @@ fn main() {
             for warning in report.molecules.iter().filter_map(|m| m.size_warning()) {
                 println!("cargo::warning={warning}");
             }
+            for note in report.molecules.iter().flat_map(|m| &m.notes) {
+                println!("cargo::warning={note}");
+            }
         }
         Err(errors) => {
             for e in &errors {

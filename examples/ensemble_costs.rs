@@ -16,6 +16,9 @@
 //! ```
 //! Without `--features mpi` the message is the same JSON without its 30-byte envelope.
 
+mod common;
+use common::thread_cpu;
+
 use std::collections::BTreeMap;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
@@ -26,12 +29,6 @@ use rovib::ensemble::runner::{BLOCK, Outcome};
 use rovib::ensemble::schedule::BlockResult;
 use rovib::ensemble::{EnsembleOptions, run_ensemble};
 use rovib::scene::parse_scene;
-
-/// CPU time of this thread, s (Linux's `/proc/thread-self/schedstat`, nanoseconds).
-fn thread_cpu() -> f64 {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").expect("Linux /proc/thread-self/schedstat");
-    text.split_whitespace().next().and_then(|t| t.parse::<f64>().ok()).expect("a number of nanoseconds") * 1e-9
-}
 
 /// CPU time of this process, all threads, s (`/proc/self/stat` utime + stime, in clock ticks of
 /// 1/100 s, Linux's USER_HZ).

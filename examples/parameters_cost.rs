@@ -8,6 +8,9 @@
 //! cargo run --release --example parameters_cost            # or: -- ROUNDS EVALS_PER_ROUND
 //! ```
 
+mod common;
+use common::thread_cpu;
+
 use std::hint::black_box;
 
 use rovib::molecules;
@@ -18,13 +21,6 @@ use rovib::runtime::integrate::OdeSystem;
 use rovib::runtime::nalgebra::{SVector, Vector3};
 use rovib::runtime::units::CoordinateUnit;
 use rovib::runtime::{Molecule, MoleculeVisitor};
-
-/// CPU time of this thread, s: the first field of Linux's `/proc/thread-self/schedstat`
-/// (nanoseconds on the CPU).
-fn thread_cpu() -> f64 {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").expect("Linux /proc/thread-self/schedstat");
-    text.split_whitespace().next().and_then(|t| t.parse::<f64>().ok()).expect("a number of nanoseconds") * 1e-9
-}
 
 fn states<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M) -> Vec<PhaseState<N>> {
     let reference = m.reference_geometry().unwrap_or_else(SVector::zeros);

@@ -13,6 +13,9 @@
 //! prints nothing else, for `valgrind --tool=callgrind` (instructions per evaluation from two
 //! runs with different `EVALS`).
 
+mod common;
+use common::thread_cpu;
+
 use std::hint::black_box;
 
 use rovib::molecules;
@@ -22,12 +25,6 @@ use rovib::runtime::integrate::OdeSystem;
 use rovib::runtime::nalgebra::{SVector, Vector3};
 use rovib::runtime::units::CoordinateUnit;
 use rovib::runtime::{Molecule, MoleculeVisitor};
-
-/// CPU time of this thread, s: the first field of Linux's `/proc/thread-self/schedstat`.
-fn thread_cpu() -> f64 {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").expect("Linux /proc/thread-self/schedstat");
-    text.split_whitespace().next().and_then(|t| t.parse::<f64>().ok()).expect("a number of nanoseconds") * 1e-9
-}
 
 /// Eight states about the reference geometry: lengths scaled by 0.97–1.04, angles moved by
 /// ±0.05 rad, varied momenta and angular momentum.

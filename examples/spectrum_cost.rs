@@ -13,18 +13,15 @@
 //! cargo run --release --example spectrum_cost            # or: -- TRAJECTORIES ROUNDS
 //! ```
 
+mod common;
+use common::thread_cpu;
+
 use std::hint::black_box;
 
 use rovib::ensemble::{EnsembleOptions, run_ensemble};
 use rovib::runtime::ensemble::CorrelationWorkspace;
 use rovib::runtime::spectrum::{QuantumCorrection, Spectrum};
 use rovib::scene::parse_scene;
-
-/// CPU time of this thread, s (Linux `/proc/thread-self/schedstat`, nanoseconds).
-fn thread_cpu() -> f64 {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").expect("Linux /proc/thread-self/schedstat");
-    text.split_whitespace().next().and_then(|t| t.parse::<f64>().ok()).expect("a number of nanoseconds") * 1e-9
-}
 
 /// CPU time of the whole process (all threads), s: utime + stime of `/proc/self/stat`.
 fn process_cpu() -> f64 {

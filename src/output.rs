@@ -563,6 +563,9 @@ pub struct RunSummary<'a> {
     pub resumed_from: Option<f64>,
     /// Warnings about the scene (e.g. a start far above the reference energy).
     pub warnings: &'a [String],
+    /// The chart switch at linear geometries, if the run could switch (`runtime::charts`):
+    /// thresholds, switches, time in the Cartesian chart.
+    pub charts: Option<Value>,
 }
 
 impl RunSummary<'_> {
@@ -584,6 +587,7 @@ impl RunSummary<'_> {
             "t_reached": self.t_reached,
             "resumed_from": self.resumed_from,
             "warnings": self.warnings,
+            "charts": self.charts,
             "method": method_json(&scene.method),
             "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
             "state_layout": self.state_layout,

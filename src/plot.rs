@@ -1,6 +1,13 @@
-//! A minimal log-log line plot as SVG, for work-precision diagrams (no plotting dependency).
+//! Log-log line plots as SVG, for work-precision diagrams, drawn with `plotters` (its SVG
+//! backend only: no fonts, no system libraries).
+//!
+//! Measured against the hand-written SVG code this replaced (issue 16; BENCHMARKS.md, "Plots"):
+//! 87 lines of code instead of 153 for three small crates (plotters, plotters-backend,
+//! plotters-svg) and files about twice as large. The linear-axis ensemble panels
+//! (`crate::ensemble::plot`) are still hand-written.
 
-use std::fmt::Write as _;
+use plotters::coord::Shift;
+use plotters::prelude::*;
 
 /// One line of a plot: a name and its points (x, y), both positive.
 pub struct Series {
@@ -22,152 +29,90 @@ pub struct Panel {
     pub series: Vec<Series>,
 }
 
-const COLOURS: [&str; 6] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"];
-const MARKERS: [&str; 6] = ["circle", "square", "diamond", "triangle", "circle", "square"];
-const W: f64 = 520.0;
-const H: f64 = 400.0;
-const MARGIN_LEFT: f64 = 75.0;
-const MARGIN_RIGHT: f64 = 20.0;
-const MARGIN_TOP: f64 = 40.0;
-const MARGIN_BOTTOM: f64 = 55.0;
+const COLOURS: [RGBColor; 6] = [
+    RGBColor(0x1f, 0x77, 0xb4),
+    RGBColor(0xd6, 0x27, 0x28),
+    RGBColor(0x2c, 0xa0, 0x2c),
+    RGBColor(0x94, 0x67, 0xbd),
+    RGBColor(0xff, 0x7f, 0x0e),
+    RGBColor(0x8c, 0x56, 0x4b),
+];
+const W: u32 = 520;
+const H: u32 = 400;
 
-fn decades(values: impl Iterator<Item = f64>) -> Option<(i32, i32)> {
+/// `s` with the characters XML gives a meaning to escaped, for SVG text written by hand
+/// (`crate::ensemble::plot`; plotters escapes its own text).
+pub(crate) fn escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// The whole decades that hold `values` (the positive, finite ones), at least one wide.
+fn decades(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| v.is_finite() && *v > 0.0) {
         lo = lo.min(v.log10());
         hi = hi.max(v.log10());
     }
-    if !lo.is_finite() {
-        return None;
-    }
-    let (lo, hi) = (lo.floor() as i32, hi.ceil() as i32);
-    Some((lo, if hi == lo { lo + 1 } else { hi }))
+    let (lo, hi) = (lo.floor(), hi.ceil());
+    lo.is_finite().then(|| (10f64.powf(lo), 10f64.powf(if hi == lo { lo + 1.0 } else { hi })))
 }
 
-fn marker(shape: &str, x: f64, y: f64, colour: &str) -> String {
-    match shape {
-        "square" => format!(r#"<rect x="{:.1}" y="{:.1}" width="7" height="7" fill="{colour}"/>"#, x - 3.5, y - 3.5),
-        "diamond" => format!(
-            r#"<polygon points="{:.1},{:.1} {:.1},{:.1} {:.1},{:.1} {:.1},{:.1}" fill="{colour}"/>"#,
-            x,
-            y - 5.0,
-            x + 5.0,
-            y,
-            x,
-            y + 5.0,
-            x - 5.0,
-            y
-        ),
-        "triangle" => format!(
-            r#"<polygon points="{:.1},{:.1} {:.1},{:.1} {:.1},{:.1}" fill="{colour}"/>"#,
-            x,
-            y - 5.0,
-            x + 4.5,
-            y + 4.0,
-            x - 4.5,
-            y + 4.0
-        ),
-        _ => format!(r#"<circle cx="{x:.1}" cy="{y:.1}" r="3.5" fill="{colour}"/>"#),
-    }
-}
-
-/// `s` with the characters XML gives a meaning to escaped, for SVG text.
-pub(crate) fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
-}
-
-fn panel(svg: &mut String, p: &Panel, x0: f64) {
-    let xs = p.series.iter().flat_map(|s| s.points.iter().map(|pt| pt.0));
-    let ys = p.series.iter().flat_map(|s| s.points.iter().map(|pt| pt.1));
-    let (Some((xlo, xhi)), Some((ylo, yhi))) = (decades(xs), decades(ys)) else {
-        let _ = write!(svg, r#"<text x="{:.0}" y="{:.0}">no data</text>"#, x0 + W / 2.0, H / 2.0);
-        return;
+/// Draws `p` into `area`; `None` if plotters reports an error (the panel is then left unfinished).
+fn panel(area: &DrawingArea<SVGBackend<'_>, Shift>, p: &Panel) -> Option<()> {
+    let visible = |s: &Series| -> Vec<(f64, f64)> {
+        s.points.iter().copied().filter(|&(x, y)| x.is_finite() && y.is_finite() && x > 0.0 && y > 0.0).collect()
     };
-    let (pw, ph) = (W - MARGIN_LEFT - MARGIN_RIGHT, H - MARGIN_TOP - MARGIN_BOTTOM);
-    let px = |x: f64| x0 + MARGIN_LEFT + (x.log10() - f64::from(xlo)) / f64::from(xhi - xlo) * pw;
-    let py = |y: f64| MARGIN_TOP + ph - (y.log10() - f64::from(ylo)) / f64::from(yhi - ylo) * ph;
-    let (left, right, top, bottom) = (x0 + MARGIN_LEFT, x0 + MARGIN_LEFT + pw, MARGIN_TOP, MARGIN_TOP + ph);
-    let _ = write!(svg, r##"<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="none" stroke="#444"/>"##);
-    let label_step = ((xhi - xlo) as f64 / 8.0).ceil().max(1.0) as i32;
-    for d in xlo..=xhi {
-        let x = px(10f64.powi(d));
-        let _ = write!(svg, r##"<line x1="{x:.1}" y1="{top}" x2="{x:.1}" y2="{bottom}" stroke="#ddd"/>"##);
-        if (d - xlo) % label_step == 0 {
-            let _ = write!(
-                svg,
-                r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle" font-size="11">1e{d}</text>"#,
-                bottom + 16.0
-            );
-        }
-    }
-    let label_step = ((yhi - ylo) as f64 / 10.0).ceil().max(1.0) as i32;
-    for d in ylo..=yhi {
-        let y = py(10f64.powi(d));
-        let _ = write!(svg, r##"<line x1="{left}" y1="{y:.1}" x2="{right}" y2="{y:.1}" stroke="#ddd"/>"##);
-        if (d - ylo) % label_step == 0 {
-            let _ = write!(
-                svg,
-                r#"<text x="{:.1}" y="{:.1}" text-anchor="end" font-size="11">1e{d}</text>"#,
-                left - 6.0,
-                y + 4.0
-            );
-        }
-    }
-    let _ = write!(
-        svg,
-        r#"<text x="{:.1}" y="22" text-anchor="middle" font-size="14" font-weight="bold">{}</text>"#,
-        left + pw / 2.0,
-        escape(&p.title)
-    );
-    let _ = write!(
-        svg,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="12">{}</text>"#,
-        left + pw / 2.0,
-        H - 12.0,
-        escape(&p.x_label)
-    );
-    let _ = write!(
-        svg,
-        r#"<text transform="translate({:.1},{:.1}) rotate(-90)" text-anchor="middle" font-size="12">{}</text>"#,
-        x0 + 16.0,
-        top + ph / 2.0,
-        escape(&p.y_label)
-    );
+    let all: Vec<(f64, f64)> = p.series.iter().flat_map(visible).collect();
+    let (Some(xs), Some(ys)) = (decades(all.iter().map(|pt| pt.0)), decades(all.iter().map(|pt| pt.1))) else {
+        return area.draw_text("no data", &("sans-serif", 14).into(), (W as i32 / 2 - 30, H as i32 / 2)).ok();
+    };
+    let mut chart = ChartBuilder::on(area)
+        .caption(&p.title, ("sans-serif", 14))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(65)
+        .build_cartesian_2d((xs.0..xs.1).log_scale(), (ys.0..ys.1).log_scale())
+        .ok()?;
+    chart
+        .configure_mesh()
+        .x_desc(&p.x_label)
+        .y_desc(&p.y_label)
+        // Decades print as 1e-7, not 9.999999999999999e-8.
+        .x_label_formatter(&|x| format!("{x:.0e}"))
+        .y_label_formatter(&|y| format!("{y:.0e}"))
+        .max_light_lines(0)
+        .draw()
+        .ok()?;
     for (i, s) in p.series.iter().enumerate() {
         let colour = COLOURS[i % COLOURS.len()];
-        let pts: Vec<(f64, f64)> = s
-            .points
-            .iter()
-            .filter(|(x, y)| x.is_finite() && y.is_finite() && *x > 0.0 && *y > 0.0)
-            .map(|&(x, y)| (px(x), py(y)))
-            .collect();
-        if pts.len() > 1 {
-            let path: Vec<String> = pts.iter().map(|(x, y)| format!("{x:.1},{y:.1}")).collect();
-            let _ = write!(
-                svg,
-                r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="1.5"/>"#,
-                path.join(" ")
-            );
-        }
-        for (x, y) in &pts {
-            svg.push_str(&marker(MARKERS[i % MARKERS.len()], *x, *y, colour));
-        }
-        let ly = top + 14.0 + 16.0 * i as f64;
-        svg.push_str(&marker(MARKERS[i % MARKERS.len()], right - 120.0, ly - 4.0, colour));
-        let _ = write!(svg, r#"<text x="{:.1}" y="{ly:.1}" font-size="11">{}</text>"#, right - 110.0, escape(&s.name));
+        let pts = visible(s);
+        chart
+            .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
+            .ok()?
+            .label(&s.name)
+            .legend(move |(x, y)| PathElement::new([(x - 8, y), (x + 8, y)], colour.stroke_width(2)));
+        // Markers tell the lines apart where colours do not (print, colour blindness).
+        match i % 3 {
+            0 => chart.draw_series(pts.iter().map(|&pt| Circle::new(pt, 3, colour.filled()))).ok()?,
+            1 => chart.draw_series(pts.iter().map(|&pt| TriangleMarker::new(pt, 4, colour.filled()))).ok()?,
+            _ => chart.draw_series(pts.iter().map(|&pt| Cross::new(pt, 3, colour.stroke_width(2)))).ok()?,
+        };
     }
+    chart.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw().ok()
 }
 
 /// Panels side by side, as a standalone SVG document.
 pub fn svg(panels: &[Panel]) -> String {
-    let width = W * panels.len() as f64;
-    let mut s = format!(
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{H}" viewBox="0 0 {width} {H}" font-family="sans-serif">"#
-    );
-    s.push_str(r#"<rect width="100%" height="100%" fill="white"/>"#);
-    for (i, p) in panels.iter().enumerate() {
-        panel(&mut s, p, W * i as f64);
+    let mut out = String::new();
+    {
+        let n = panels.len().max(1);
+        let root = SVGBackend::with_string(&mut out, (W * n as u32, H)).into_drawing_area();
+        // Drawing into a string cannot fail for lack of room; a panel that fails is left blank.
+        let _ = root.fill(&WHITE);
+        for (area, p) in root.split_evenly((1, n)).iter().zip(panels) {
+            let _ = panel(area, p);
+        }
+        let _ = root.present();
     }
-    s.push_str("</svg>\n");
-    s
+    out
 }

@@ -191,6 +191,9 @@ pub struct Scene {
     pub max_energy_error: f64,
     /// Whether trajectory.csv also gets continuous (unwrapped) φ and ψ columns.
     pub euler_unwrapped: bool,
+    /// `run.cartesian_fallback` (default true): whether `rovib run` continues in the Cartesian
+    /// chart near a linear geometry (`runtime::charts`) rather than stop at `min_metric_pivot`.
+    pub cartesian_fallback: bool,
     /// `[potential.parameters]`: values that replace the definition's compiled-in parameters
     /// for this run (names checked against the molecule when the run starts).
     pub parameters: Vec<Named<f64>>,
@@ -280,6 +283,7 @@ struct RawRun {
     max_outputs: Option<Spanned<u64>>,
     #[serde(default)]
     euler_unwrapped: bool,
+    cartesian_fallback: Option<bool>,
     stop_outside: Option<RawTable<Vec<f64>>>,
 }
 
@@ -499,6 +503,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             None => DEFAULT_MAX_ENERGY_ERROR,
         },
         euler_unwrapped: run.euler_unwrapped,
+        cartesian_fallback: run.cartesian_fallback.unwrap_or(true),
         parameters: match &raw.potential {
             Some(p) => named_numbers(&src, &p.parameters, "potential.parameters")?,
             None => Vec::new(),

@@ -7,7 +7,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 use crate::runtime::diagnostic::{Compact, FileError, MAX_INPUT_BYTES, Source, read_text_capped};
-use crate::runtime::frames::{FitOptions, LabState, from_lab_body};
+use crate::runtime::frames::{FitOptions, FrameError, LabState, body_of_lab_exact, from_lab_body};
 use crate::runtime::hamiltonian::{
     BodyState, PhaseState, ReducedSystem, Reduction, ReductionError, RotationPart, euler_momenta_from_angular_momentum,
     momenta_from_velocities, quaternion_of_euler, w_matrix,
@@ -72,6 +72,12 @@ pub struct Start<const N: usize> {
     pub com_position: Vector3<f64>,
     /// Centre-of-mass velocity.
     pub com_velocity: Vector3<f64>,
+    /// For a lab-form start at a geometry where the internal chart is singular (exactly linear):
+    /// the positions and velocities about the centre of mass (flat, `LabState::write_to`), from
+    /// which `rovib run` starts in the Cartesian chart exactly. There `body` holds only the
+    /// projections (a bending velocity out of the body frame's bend plane has no image in
+    /// `(ω, q̇)` at linear, so it is not in `p` or `J`).
+    pub lab_start: Option<Vec<f64>>,
 }
 
 /// The index of `name` among `known`, or an error at the name's place in the file: `message`
@@ -204,6 +210,7 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                 state: PhaseState { q: qv, p: pv, euler, pe: euler_momenta_from_angular_momentum(&euler, &j) },
                 com_position: Vector3::zeros(),
                 com_velocity: Vector3::zeros(),
+                lab_start: None,
             })
         }
         Initial::Lab { positions, velocities, span } => {
@@ -243,14 +250,41 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             // Before the fit: a huge velocity would only make the fit's numbers overflow.
             let com = lab.centre_of_mass(&m.masses());
             check_centre_of_mass(&src, span, com.position, com.velocity, scene.t_end)?;
-            let (body, com, _) = from_lab_body(m, &lab, &FitOptions::default()).map_err(|e| {
+            // At a linear geometry the fit's velocity report needs the (singular) metric; a
+            // molecule with closed forms q(x) takes the projections instead (`rovib run` then
+            // starts in the Cartesian chart).
+            let mut lab_start = None;
+            let fitted = match from_lab_body(m, &lab, &FitOptions::default()) {
+                Err(FrameError::SingularMetric { .. }) => {
+                    let near = m.reference_geometry().unwrap_or_else(SVector::zeros);
+                    body_of_lab_exact(m, &lab, &near).map(|(body, com)| {
+                        let mut about = lab;
+                        for i in 0..NA {
+                            about.positions.set_column(i, &(lab.positions.column(i) - com.position));
+                            about.velocities.set_column(i, &(lab.velocities.column(i) - com.velocity));
+                        }
+                        let mut y = vec![0.0; 6 * NA];
+                        about.write_to(&mut y);
+                        lab_start = Some(y);
+                        (body, com, ())
+                    })
+                }
+                other => other.map(|(body, com, _)| (body, com, ())),
+            };
+            let (body, com, _) = fitted.map_err(|e| {
                 src.error(
                     span.clone(),
                     format!("the lab-frame positions cannot start a run of {}: {e}", m.name()),
                     "check the atom positions and their units",
                 )
             })?;
-            Ok(Start { body, state: body.to_phase(), com_position: com.position, com_velocity: com.velocity })
+            Ok(Start {
+                body,
+                state: body.to_phase(),
+                com_position: com.position,
+                com_velocity: com.velocity,
+                lab_start,
+            })
         }
     }
 }
@@ -330,6 +364,21 @@ pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize
     scene: &Scene,
     start: &BodyState<N>,
 ) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
+    let (system, y0) = production_system_unchecked(m, scene, start)?;
+    // H(0) before anything is written: the kinetic metric must be invertible and the energy
+    // finite at the start (the same evaluation the run makes at its first output time).
+    system.energy(&y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
+    Ok((system, y0))
+}
+
+/// [`production_system`] without its check that the kinetic metric is invertible at the start:
+/// for a run that starts at a linear geometry in the Cartesian chart (`rovib run`'s chart
+/// switch), which checks the start there instead.
+pub fn production_system_unchecked<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &'m M,
+    scene: &Scene,
+    start: &BodyState<N>,
+) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
     let mut reduction = frozen_reduction(m, scene)?;
     if start.j == Vector3::zeros() {
         let orientation =
@@ -339,8 +388,5 @@ pub fn production_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize
     let system = ReducedSystem::from_body(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
     let mut y0 = vec![0.0; system.dim()];
     system.reduce_body(start, &mut y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
-    // H(0) before anything is written: the kinetic metric must be invertible and the energy
-    // finite at the start (the same evaluation the run makes at its first output time).
-    system.energy(&y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
     Ok((system, y0))
 }

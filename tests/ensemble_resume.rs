@@ -1,6 +1,8 @@
 //! Checkpoint and resume of `rovib ensemble`, in one process: a run killed with SIGKILL part way,
 //! or stopped by a panicking trajectory, continues with `--resume` to outputs byte-identical to
 //! an uninterrupted run's. (The same under MPI: tests/mpi.rs, with `--features mpi`.)
+//! Shown able to fail (BENCHMARKS.md, "Ensembles over MPI"): a resume that skips a block, and
+//! blocks merged in arrival order, both fail the byte comparison here.
 
 mod common;
 

@@ -15,8 +15,8 @@ use std::ops::ControlFlow;
 use common::{Rng, for_each_molecule, random_q};
 use rovib::molecules::H2o;
 use rovib::runtime::hamiltonian::PhaseState;
-use rovib::runtime::hamiltonian::fast::{BodyState, ReducedSystem, Reduction};
-use rovib::runtime::hamiltonian::lanes::{ProductionLanes, production_rhs};
+use rovib::runtime::hamiltonian::fast::{self, BodyState, ReducedSystem, Reduction};
+use rovib::runtime::hamiltonian::lanes::{self, ProductionLanes, production_rhs};
 use rovib::runtime::integrate::{
     Dop853, Dop853Lanes, Dop853Options, LaneFailure, LaneFeeder, OdeSystem, SolveError, Stats,
 };
@@ -233,7 +233,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> OdeSystem for GeneralO
         let mut k = KineticMatrices::default();
         let m = self.0.molecule();
         m.kinetic(&body.q, &mut k);
-        let factor = rovib::runtime::hamiltonian::fast::MetricFactor::new(&k, &body.q)?;
+        let factor = fast::MetricFactor::new(&k, &body.q)?;
         let (omega, qdot) = factor.solve(&body.j, &body.p);
         let mut dt = SVector::zeros();
         m.kinetic_energy_gradient(&body.q, &omega, &qdot, &mut dt);
@@ -259,6 +259,44 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> OdeSystem for GeneralO
 #[test]
 fn production_rhs_lanes_equal_f64_and_the_general_path() {
     for_each_molecule(ProductionLanesMatch);
+}
+
+/// Which molecules take the lane code: every shipped molecule has exact lane forms (so the
+/// tests above run the generated lane code, not the lane-by-lane defaults), a molecule without
+/// them does not; its nothing-reduced `ReducedSystem` then takes the general path, which gives
+/// the fast path's q̇ and ṗ bit for bit (as the lane path does for molecules with lane forms,
+/// `tests/fast_path.rs`).
+#[derive(Copy, Clone)]
+struct LaneAvailability;
+
+impl MoleculeVisitor for LaneAvailability {
+    type Output = ();
+
+    fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
+    where
+        M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+    {
+        assert!(lanes::available(&m), "{} has exact lane forms", m.name());
+        let scalar = ScalarOnly(&m);
+        assert!(!lanes::available(&scalar), "{}: the trait's defaults are not lane forms", m.name());
+        let mut rng = Rng::new(31);
+        for _ in 0..10 {
+            let s = common::random_state(&m, &mut rng);
+            let mut system = ReducedSystem::new(&scalar, Reduction::none(), &s);
+            let mut y = vec![0.0; system.dim()];
+            system.reduce(&s, &mut y).unwrap();
+            let mut dy = vec![0.0; y.len()];
+            system.rhs(0.0, &y, &mut dy).unwrap();
+            let reference = fast::rhs(&scalar, &s).unwrap();
+            assert_eq!(&dy[..N], reference.q.as_slice(), "{}", m.name());
+            assert_eq!(&dy[N..2 * N], reference.p.as_slice(), "{}", m.name());
+        }
+    }
+}
+
+#[test]
+fn lane_code_only_for_molecules_with_lane_forms() {
+    for_each_molecule(LaneAvailability);
 }
 
 /// What one trajectory produced: every output, then the end.

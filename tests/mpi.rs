@@ -151,20 +151,33 @@ fn ranks_of(parent: u32) -> Vec<(u32, u32)> {
     found
 }
 
-/// Runs 1280 trajectories on 3 ranks, SIGKILLs rank `victim` once the checkpoint holds three
-/// blocks, and checks that the job ends (no hang) with Open MPI's message naming the lost
-/// process, without outputs, and that the checkpoint resumes in one process to the bytes of the
-/// single-process run.
-fn kill_rank_and_resume(victim: u32) {
-    let d = dir(&format!("dead{victim}"));
-    let n = 1280;
-    let scene = thermal_scene(&d, n, 500.0);
+/// A job of `SIGNALLED_TRAJECTORIES` of `end`-long trajectories in `name`: the
+/// single-process reference written first, then 3 ranks started and left running until the
+/// checkpoint holds 3 blocks. Returns the reference, the output directory, its checkpoint and
+/// the running `mpirun`.
+fn job_under_way(name: &str, end: f64) -> (PathBuf, PathBuf, PathBuf, PathBuf, Child) {
+    let d = dir(name);
+    let scene = thermal_scene(&d, SIGNALLED_TRAJECTORIES, end);
     let reference = d.join("single");
     ok(&single(&scene, &reference, &[]));
     let out = d.join("out");
     let checkpoint = out.join("checkpoint.jsonl");
     let child = spawn(mpirun(3, &scene, &out, &["--quiet"]));
     wait_for_lines(&checkpoint, 4, Duration::from_secs(120));
+    (scene, reference, out, checkpoint, child)
+}
+
+/// Trajectories of the jobs that get a signal: 80 blocks, enough that the job is still running
+/// when the signal arrives on a fast, idle machine (with 20 blocks it sometimes completed first).
+const SIGNALLED_TRAJECTORIES: u64 = 5120;
+
+/// Runs 1280 trajectories on 3 ranks, SIGKILLs rank `victim` once the checkpoint holds three
+/// blocks, and checks that the job ends (no hang) with Open MPI's message naming the lost
+/// process, without outputs, and that the checkpoint resumes in one process to the bytes of the
+/// single-process run.
+fn kill_rank_and_resume(victim: u32) {
+    let n = SIGNALLED_TRAJECTORIES;
+    let (scene, reference, out, checkpoint, child) = job_under_way(&format!("dead{victim}"), 500.0);
     let ranks = ranks_of(child.id());
     let &(pid, _) =
         ranks.iter().find(|(_, r)| *r == victim).unwrap_or_else(|| panic!("no rank {victim} among {ranks:?}"));
@@ -200,18 +213,11 @@ fn rank_0_killed_with_sigkill_ends_the_job_and_the_run_resumes_to_the_same_bytes
 /// single-process run.
 #[test]
 fn sigterm_to_mpirun_ends_the_job_and_the_run_resumes_to_the_same_bytes() {
-    let d = dir("sigterm");
-    let n = 1280;
+    let n = SIGNALLED_TRAJECTORIES;
     // Trajectories 16 times longer than the other tests' (a run of about 5 s): `mpirun` passes
     // the signal on to the ranks only after 1-2 s here, and a run that finishes before that
     // completes (correctly, but untested).
-    let scene = thermal_scene(&d, n, 8000.0);
-    let reference = d.join("single");
-    ok(&single(&scene, &reference, &[]));
-    let out = d.join("out");
-    let checkpoint = out.join("checkpoint.jsonl");
-    let child = spawn(mpirun(3, &scene, &out, &["--quiet"]));
-    wait_for_lines(&checkpoint, 4, Duration::from_secs(120));
+    let (scene, reference, out, checkpoint, child) = job_under_way("sigterm", 8000.0);
     let term = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
     assert!(term.success());
     let (status, err) = finish(child, Duration::from_secs(60));

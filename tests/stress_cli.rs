@@ -136,7 +136,7 @@ fn a_bend_closer_to_linear_than_the_threshold_stops_naming_time_q_and_the_inerti
     let dir = temp_dir("stress", "linear");
     // J_x = 1e-5 ħ would bring the bend to δ = π − α ≈ 3e-7 rad; the default threshold (relative
     // pivot of I 1e-12) is reached at δ ≈ 5.4e-6 rad.
-    let err = error_line(&run_scene(&dir, &co2("1e-5", "60.0", "", "")));
+    let err = error_line(&run_scene(&dir, &co2("1e-5", "60.0", "", "cartesian_fallback = false")));
     assert!(
         err.starts_with("error: the run stopped: the inertia tensor I is singular or not positive definite at q = ["),
         "{err}"
@@ -158,7 +158,8 @@ fn a_bend_closer_to_linear_than_the_threshold_stops_naming_time_q_and_the_inerti
 fn a_stricter_scene_threshold_stops_the_bend_earlier_as_ill_conditioned() {
     let dir = temp_dir("stress", "threshold");
     // J_x = 0.1 ħ reaches δ ≈ 3.4e-3 rad (relative pivot 4e-7): fine by default, below 1e-6.
-    let err = error_line(&run_scene(&dir, &co2("0.1", "60.0", "", "min_metric_pivot = 1e-6")));
+    let err =
+        error_line(&run_scene(&dir, &co2("0.1", "60.0", "", "min_metric_pivot = 1e-6\ncartesian_fallback = false")));
     assert!(err.contains("the inertia tensor I is ill-conditioned at q = ["), "{err}");
     assert!(err.contains("below the threshold 1e-6"), "{err}");
     // Measured: t = 12.687 fs, relative pivot 9.8e-7, α = π − 5.4e-3.
@@ -173,7 +174,7 @@ fn a_stricter_scene_threshold_stops_the_bend_earlier_as_ill_conditioned() {
 #[test]
 fn zero_angular_momentum_co2_bends_through_linear_and_completes() {
     let dir = temp_dir("stress", "zero");
-    let out = run_scene(&dir, &co2("0.0", "100.0", "", ""));
+    let out = run_scene(&dir, &co2("0.0", "100.0", "", "cartesian_fallback = false"));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let rows = trajectory(&dir);
     assert_eq!(rows.len(), 201);
@@ -240,7 +241,7 @@ fn a_collapsing_step_size_stops_the_run() {
     // J_x = 1e-3 ħ: near the closest approach to linear (δ ≈ 3.4e-5 rad) the molecule spins about
     // its axis at ω_x ≈ 44 rad per ħ/E_h and DOP853's steps fall to about 3e-3 ħ/E_h; elsewhere
     // they are 0.04 ħ/E_h (the first) to several ħ/E_h. min_step = 0.0005 fs = 0.021 ħ/E_h.
-    let err = error_line(&run_scene(&dir, &co2("1e-3", "60.0", "min_step = 0.0005", "")));
+    let err = error_line(&run_scene(&dir, &co2("1e-3", "60.0", "min_step = 0.0005", "cartesian_fallback = false")));
     assert!(err.starts_with("error: the run stopped: the step size fell to "), "{err}");
     // In the scene's unit, like min_step itself.
     assert!(err.contains(" fs, below integrator.min_step, at t = "), "{err}");

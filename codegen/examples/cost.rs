@@ -4,10 +4,13 @@
 //! ```text
 //! cargo run --release -p rovib-codegen --example cost -- molecules/*.toml
 //! cargo run --release -p rovib-codegen --example cost -- --kinetic-jacobian molecules/*.toml
+//! cargo run --release -p rovib-codegen --example cost -- --expanded molecules/*.toml
 //! ```
 //!
 //! `--kinetic-jacobian` also generates the symbolic `kinetic_jacobian` (off by default, see
-//! `rovib_codegen::Options`). The column "dr nz" counts the (atom, coordinate) pairs whose raw
+//! `rovib_codegen::Options`). `--expanded` generates every molecule without the large-molecule
+//! forms (∂T/∂q from explicit second derivatives, centre-of-mass term of `a` expanded), as
+//! `ROVIB_LARGE_MOLECULE_FORMS=expanded` does in a build. The column "dr nz" counts the (atom, coordinate) pairs whose raw
 //! position derivative is not a structural zero, out of atoms × coordinates.
 //!
 //! Prints one summary row per molecule, then each molecule's per-function table
@@ -25,8 +28,13 @@ const RUNS: usize = 3;
 
 fn main() -> ExitCode {
     let mut paths: Vec<String> = std::env::args().skip(1).collect();
-    let options = Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian"), ..Options::default() };
-    paths.retain(|p| p != "--kinetic-jacobian");
+    let mut options =
+        Options { kinetic_jacobian: paths.iter().any(|p| p == "--kinetic-jacobian"), ..Options::default() };
+    if paths.iter().any(|p| p == "--expanded") {
+        options.kinetic_gradient = rovib_codegen::GradientMethod::Direct;
+        options.run_time_centre_of_mass_from = usize::MAX;
+    }
+    paths.retain(|p| p != "--kinetic-jacobian" && p != "--expanded");
     if paths.is_empty() {
         eprintln!(
             "usage: cost MOLECULE.toml...   (e.g. cargo run --release -p rovib-codegen --example cost -- molecules/*.toml)"

@@ -112,6 +112,10 @@ pub struct Definition {
     pub potential: ExprId,
     /// The energy unit the file used for the potential.
     pub energy_unit: EnergyUnit,
+    /// The coordinates' kinds, in coordinate order, when the definition declares coordinates by
+    /// kind (then `positions` are the Z-matrix construction of [`crate::zmatrix`]); `None` for
+    /// explicit positions.
+    pub kinds: Option<Vec<crate::zmatrix::Kind>>,
     /// The potential's parameters, sorted by name, with their values as written (in the units
     /// the potential expression uses them in).
     pub parameters: Vec<(String, f64)>,
@@ -173,6 +177,9 @@ struct RawCoordinate {
     reference: Option<Spanned<f64>>,
     #[serde(default)]
     range: Option<Spanned<Vec<Spanned<RawValue>>>>,
+    /// What the coordinate is, e.g. `"angle(H1, O, H2)"` ([`crate::zmatrix`]).
+    #[serde(default)]
+    kind: Option<Spanned<String>>,
     #[serde(default)]
     #[allow(dead_code)]
     description: Option<String>,
@@ -428,6 +435,13 @@ impl Validator<'_> {
 
     /// Records a problem and carries on, so that every independent mistake in the file is
     /// reported at once; the value is `None` where the problem was.
+    /// Adds `e` to the errors found so far and returns them all: for an error after which
+    /// validation cannot go on (the coordinates by kind).
+    fn fail(&mut self, e: DefinitionError) -> Vec<DefinitionError> {
+        self.errors.push(e);
+        std::mem::take(&mut self.errors)
+    }
+
     fn check<T>(&mut self, result: Result<T, DefinitionError>) -> Option<T> {
         result.map_err(|e| self.errors.push(e)).ok()
     }
@@ -540,6 +554,19 @@ impl Validator<'_> {
                 "add [[atoms]] entries, each with a label and a position",
             ));
         }
+        // Coordinates by kind (every coordinate says what it is) place the atoms themselves.
+        let by_kind = raw.coordinates.iter().any(|c| c.kind.is_some());
+        if by_kind && let Some(c) = raw.coordinates.iter().find(|c| c.kind.is_none()) {
+            return Err(self.fail(src.error(
+                c.name.span(),
+                format!("coordinate `{}` has no kind, but other coordinates declare theirs", c.name.get_ref()),
+                "declare every coordinate's kind (distance, angle, dihedral) or none (then every atom needs a position)",
+            )));
+        }
+        // With kinds and no positions the generator places the atoms; with kinds and positions
+        // the positions are used and checked against the kinds.
+        let zmatrix_positions = by_kind && raw.atoms.iter().any(|a| a.position.is_none());
+        let mut kinds = None;
         let mut atoms = Vec::new();
         let mut positions: Vec<Option<[ExprId; 3]>> = Vec::new();
         let mut labels: HashMap<String, Range<usize>> = HashMap::new();
@@ -559,6 +586,18 @@ impl Validator<'_> {
                 ("X".to_owned(), PLACEHOLDER)
             });
             let context = format!("the position of atom {label}");
+            if zmatrix_positions {
+                if let Some(position) = &a.position {
+                    return Err(self.fail(src.error(
+                        position.span(),
+                        format!("atom `{label}` has a position, but other atoms have none and the coordinates declare their kind"),
+                        "remove every `position` (coordinates by kind place the atoms themselves) or give every atom one",
+                    )));
+                }
+                atoms.push(AtomDef { label: label.clone(), element, mass_da });
+                position_spans.push(vec![a.label.span(); 3]);
+                continue;
+            }
             let position = match &a.position {
                 None => {
                     self.errors.push(src.error(
@@ -601,6 +640,50 @@ impl Validator<'_> {
                 Some(p) => p.get_ref().iter().map(|c| c.span()).collect::<Vec<_>>(),
                 None => vec![a.label.span(); 3],
             });
+        }
+
+        if by_kind {
+            let labels: Vec<&str> = atoms.iter().map(|a| a.label.as_str()).collect();
+            let atom_spans: Vec<Range<usize>> = raw.atoms.iter().map(|a| a.label.span()).collect();
+            let mut declared = Vec::new();
+            for (k, c) in raw.coordinates.iter().enumerate() {
+                let kind_value = c.kind.as_ref().expect("every coordinate has a kind");
+                let kind = crate::zmatrix::parse_kind(src, kind_value.span(), kind_value.get_ref(), &labels)
+                    .map_err(|e| self.fail(e))?;
+                let is_angle = matches!(coordinates[k].unit, CoordinateUnit::Angle(_));
+                if kind.is_angle() != is_angle {
+                    return Err(self.fail(src.error(
+                        c.unit.span(),
+                        format!(
+                            "coordinate `{}` is declared `{}` but its unit `{}` is {}",
+                            coordinates[k].name,
+                            kind.name(),
+                            c.unit.get_ref(),
+                            if is_angle { "an angle" } else { "a length" }
+                        ),
+                        if kind.is_angle() {
+                            "write unit = \"rad\" or \"deg\""
+                        } else {
+                            "write unit = \"bohr\" or \"angstrom\""
+                        },
+                    )));
+                }
+                let c_def = &coordinates[k];
+                declared.push(crate::zmatrix::Declared {
+                    kind,
+                    span: kind_value.span(),
+                    var: self.graph.var(&c_def.name),
+                    reference: c_def.reference.map(|r| r * c_def.unit.in_atomic_units()),
+                });
+            }
+            if zmatrix_positions {
+                let built = crate::zmatrix::build_positions(src, &mut self.graph, &labels, &atom_spans, &declared);
+                positions = built.map_err(|e| self.fail(e))?.into_iter().map(Some).collect();
+            } else if let Some(all) = positions.iter().copied().collect::<Option<Vec<_>>>() {
+                let checked = crate::zmatrix::check_positions(src, &mut self.graph, &all, &declared, &labels);
+                checked.map_err(|e| self.fail(e))?;
+            }
+            kinds = Some(declared.iter().map(|d| d.kind).collect());
         }
 
         // The total mass divides every position (the centre-of-mass shift): it must be finite.
@@ -740,6 +823,7 @@ impl Validator<'_> {
             positions,
             potential,
             energy_unit,
+            kinds,
             parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
             potential_scope,
             potential_text: pot.expression.get_ref().clone(),

@@ -125,4 +125,20 @@ mod tests {
         assert!(!lanes.contains("f64"), "no f64 in lane code:\n{lanes}");
         assert!(lanes.contains("let (omega, qdot) = velocities(k);"));
     }
+
+    /// A molecule whose `a` gets its centre-of-mass term at run time (propane, 27 coordinates)
+    /// gets no lane functions (they would expand that term and not be the `f64` operations):
+    /// the runtime's `lanes::available` then sends it down the one-trajectory path.
+    #[test]
+    fn run_time_centre_of_mass_molecules_get_no_lane_functions() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/alkanes/propane.toml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let m = generate_molecule("propane.toml", &text).unwrap();
+        assert!(m.source.contains("fn kinetic_and_gradient_sparse"), "propane uses the run-time centre of mass");
+        assert!(!m.source.contains("_lanes"), "no lane function");
+        assert!(!m.source.contains("has_lane_forms"));
+        assert!(!m.source.contains("lanes::"), "no unused lane import");
+        let water = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../molecules/h2o.toml")).unwrap();
+        assert!(generate_molecule("molecules/h2o.toml", &water).unwrap().source.contains("fn has_lane_forms"));
+    }
 }

@@ -9,6 +9,7 @@ use proc_macro2::{Ident, Span, TokenStream};
 use quote::quote;
 
 use crate::GeneratedMolecule;
+use crate::cartesian::CartesianExprs;
 use crate::definition::Definition;
 use crate::dipole::DipoleExprs;
 use crate::emit::{self, Barrier, FunctionSpec, FunctionStats, OutputGroup, doc_lines, index};
@@ -102,12 +103,18 @@ fn kinetic_groups(target: &TokenStream, set: &KineticSet) -> Vec<OutputGroup> {
 pub(crate) fn molecule_items(
     def: &Definition,
     e: &KineticExprs,
+    cartesian: Option<&CartesianExprs>,
     parametric: Option<&ParametricExprs>,
     dipole: Option<&DipoleExprs>,
 ) -> (TokenStream, Vec<FunctionStats>) {
     let (n, na) = (index(e.n), index(def.atoms.len()));
     let ty = Ident::new(&type_name(&def.name), Span::call_site());
     let mut idents = var_idents(def);
+    if let Some(c) = cartesian {
+        // The Cartesian position variables come after the velocities (see `crate::cartesian`).
+        assert_eq!(idents.len(), c.first_var as usize, "position variables follow the velocities");
+        idents.extend((0..c.atoms).flat_map(|i| (0..3).map(move |a| crate::cartesian::ident(i, a))));
+    }
     if let Some(p) = parametric {
         // Parameter i is graph variable `first_var + i`, bound to `param{i}`.
         while idents.len() < p.first_var as usize {
@@ -240,6 +247,9 @@ pub(crate) fn molecule_items(
             barrier: None,
         },
     ];
+    if let Some(c) = cartesian {
+        specs.extend(crate::cartesian::specs(c, nc, &def.graph));
+    }
     // Large molecules: `kinetic` and `kinetic_and_gradient` emit `a` without its
     // centre-of-mass term plus `∂c/∂q` (inherent `*_sparse` functions), and the trait methods
     // wrap them with the runtime's rank-3 update (`kinetic::RunTimeCentreOfMass`).
@@ -433,9 +443,20 @@ pub(crate) fn molecule_items(
         stats.push(s);
     }
     // The lane-generic production functions (the same operations as their f64 counterparts,
-    // so their statistics are not counted again), before the dipole functions.
-    let (lane_functions, _) = crate::emit_lanes::lane_functions(&def.graph, e, &idents);
-    functions.splice(before_dipole..before_dipole, lane_functions);
+    // so their statistics are not counted again), before the dipole functions. Not for a
+    // molecule whose `a` gets its centre-of-mass term at run time: its lane functions would
+    // have to expand that term (the code the sparse form avoids) and would not be the `f64`
+    // functions' operations, so such a molecule keeps the trait's lane-by-lane defaults and
+    // `has_lane_forms() == false`, and the runtime integrates it one trajectory at a time.
+    if e.centre_of_mass_at_run_time.is_none() {
+        let (mut lane_functions, _) = crate::emit_lanes::lane_functions(&def.graph, e, &idents);
+        lane_functions.push(quote! {
+            fn has_lane_forms(&self) -> bool {
+                true
+            }
+        });
+        functions.splice(before_dipole..before_dipole, lane_functions);
+    }
     let mut inherent_functions = Vec::new();
     for spec in &inherent_specs {
         let (tokens, s) = emit::emit_function(&def.graph, spec, &idents);
@@ -487,11 +508,18 @@ pub(crate) fn molecule_items(
     let unit_idents = unit_names.iter().map(|n| Ident::new(n, Span::call_site()));
     let unit_imports =
         if unit_names.is_empty() { quote!() } else { quote!(use ::rovib_runtime::units::{#(#unit_idents),*};) };
+    let lane_imports = if e.centre_of_mass_at_run_time.is_none() {
+        quote!(
+            use ::rovib_runtime::lanes::{KineticLanes, Real};
+        )
+    } else {
+        quote!()
+    };
     let items = quote! {
         use ::rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
         #unit_imports
         use ::rovib_runtime::{Atom, Coordinate, KineticMatrices, Molecule};
-        use ::rovib_runtime::lanes::{KineticLanes, Real};
+        #lane_imports
 
         #doc
         #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]

@@ -20,13 +20,25 @@ use nalgebra::SMatrix;
 
 /// `a_jk −= total · dc_·j · dc_·k` for every entry: the centre-of-mass term of `a`, with `dc`
 /// column `k` = `∂c/∂q_k` and `total` the total mass: the arithmetic of the expanded expression
-/// it replaces (`a − M (x₀y₀ + x₁y₁ + x₂y₂)`), and exactly symmetric (the products commute).
+/// it replaces (`a − M (x₀y₀ + x₁y₁ + x₂y₂)`), on the lower triangle, mirrored to the upper
+/// (`a` must be symmetric on entry; it stays exactly symmetric).
 #[inline]
 pub fn remove_centre_of_mass<const N: usize>(a: &mut SMatrix<f64, N, N>, dc: &SMatrix<f64, 3, N>, total: f64) {
+    // The three rows of dc as contiguous arrays, so that the inner loop runs over contiguous
+    // memory; the lower triangle is computed and mirrored.
+    let mut rows = [[0.0f64; N]; 3];
+    for j in 0..N {
+        for axis in 0..3 {
+            rows[axis][j] = dc[(axis, j)];
+        }
+    }
     for k in 0..N {
-        let (x0, x1, x2) = (dc[(0, k)], dc[(1, k)], dc[(2, k)]);
-        for j in 0..N {
-            a[(j, k)] -= total * (dc[(0, j)] * x0 + dc[(1, j)] * x1 + dc[(2, j)] * x2);
+        let (x0, x1, x2) = (rows[0][k], rows[1][k], rows[2][k]);
+        for j in k..N {
+            a[(j, k)] -= total * (rows[0][j] * x0 + rows[1][j] * x1 + rows[2][j] * x2);
+        }
+        for j in k + 1..N {
+            a[(k, j)] = a[(j, k)];
         }
     }
 }

@@ -68,6 +68,11 @@
 //!    order, the molecule is rigid or has frozen coordinates, or the geometry is simply another
 //!    molecule's. Setting the tolerance to `f64::INFINITY` accepts the least-squares fit.
 //!
+//! For a molecule whose coordinates are declared by kind (distances, angles, dihedrals) steps
+//! 1–3 are replaced by the closed form `q = q(x)` ([`Molecule::internal_coordinates`]) and one
+//! Kabsch rotation: no iteration and no metric, so the fit also works where the metric is
+//! singular (a linear geometry). Angles are taken on the branch nearest the starting `q`.
+//!
 //! Euler angles are read off the fitted `R` with `θ ∈ [0, π]` and `φ, ψ ∈ (−π, π]`; at
 //! `|sin θ| <` [`MIN_SIN_THETA`] the z-x-z angles are degenerate (gimbal lock) and the fit fails
 //! with [`FrameError::EulerSingular`]. That is a property of the coordinates, not of the
@@ -373,6 +378,25 @@ pub enum FrameError {
         /// What is wrong.
         reason: &'static str,
     },
+    /// The molecule's coordinates have no closed forms q(x) (its definition gives positions
+    /// rather than coordinates by kind).
+    #[error("{molecule} has no closed-form internal coordinates q(x) (declare its coordinates by kind)")]
+    NoClosedForms {
+        /// The molecule's name.
+        molecule: &'static str,
+    },
+    /// At a singular geometry, the momenta `(J, p)` are not in the range of the kinetic metric:
+    /// angular momentum about the axis of a linear molecule, which no motion of the atoms carries.
+    #[error(
+        "the momenta (J, p) are not those of any motion of the atoms at this singular geometry (residual \
+         {residual:e} of {momentum:e}): a linear molecule carries no angular momentum about its axis"
+    )]
+    NotInRange {
+        /// `|M v − (J, p)|` of the least-squares solution.
+        residual: f64,
+        /// `|(J, p)|`.
+        momentum: f64,
+    },
     /// Any other failure to evaluate the Hamiltonian's quantities at a phase state.
     #[error(transparent)]
     Hamiltonian(HamiltonianError),
@@ -589,7 +613,13 @@ where
     let step_tolerance = options.step_tolerance.max(64.0 * f64::EPSILON * scale);
     let rms = |s: f64| (s.max(0.0) / total_mass).sqrt();
 
-    let fit = fit_positions(molecule, &masses, &y, q, step_tolerance, options.max_iterations);
+    // Coordinates declared by kind have closed forms q(x): no iteration (and no metric, so this
+    // works at a linear geometry too). Otherwise Gauss–Newton.
+    let fit_at = |y: &SMatrix<f64, 3, NA>| match closed_form_fit(molecule, &masses, y, &q) {
+        Some(f) => f,
+        None => fit_positions(molecule, &masses, y, q, step_tolerance, options.max_iterations),
+    };
+    let fit = fit_at(&y);
     let good = |f: &PositionFit<N, NA>| rms(f.s) <= options.residual_tolerance && molecule.in_range(&f.q).is_ok();
     let fit = match fit {
         Ok(f) if good(&f) => f,
@@ -600,7 +630,7 @@ where
             // the way (the molecule flattening), or fits only with coordinates outside their
             // ranges (negative bond lengths), while the inverted input fits. Inversion is
             // improper, so fitting −y tests every improper superposition at once.
-            let mirrored = fit_positions(molecule, &masses, &(-y), q, step_tolerance, options.max_iterations);
+            let mirrored = fit_at(&(-y));
             if mirrored.as_ref().is_ok_and(good) {
                 return Err(FrameError::MirrorImage { molecule: molecule.name() });
             }
@@ -675,6 +705,100 @@ where
     Ok((state, com, report))
 }
 
+/// The body-formulation state of a lab state for a molecule whose coordinates have closed forms,
+/// with no metric: `q = q(x)` (each angle on the branch nearest `near`), the Kabsch orientation,
+/// `J = Σ m_i R_i × u_i` and `p_j = Σ m_i ∂R_i/∂q_j · u_i` with `u_i` the body-frame velocities
+/// about the centre of mass. Unlike [`from_lab_body`] it works at a singular geometry (a linear
+/// molecule: the momenta are projections, defined everywhere); the Cartesian chart of
+/// [`crate::charts`] converts back with it. Returns the state and the centre of mass.
+///
+/// # Errors
+///
+/// [`FrameError::NoClosedForms`] for a molecule without closed forms, [`FrameError::NonFinite`],
+/// and [`FrameError::NotRepresentable`] if the positions do not fit (RMS above 1e-6 bohr).
+pub fn body_of_lab_exact<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    lab: &LabState<NA>,
+    near: &SVector<f64, N>,
+) -> Result<(BodyState<N>, CentreOfMass), FrameError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    let masses = molecule.masses();
+    let total_mass: f64 = masses.iter().sum();
+    let com = lab.centre_of_mass(&masses);
+    let mut y = lab.positions;
+    for i in 0..NA {
+        y.set_column(i, &(lab.positions.column(i) - com.position));
+    }
+    let fit = closed_form_fit(molecule, &masses, &y, near)
+        .ok_or(FrameError::NoClosedForms { molecule: molecule.name() })??;
+    let residual = (fit.s.max(0.0) / total_mass).sqrt();
+    if residual.is_nan() || residual > 1e-6 {
+        return Err(FrameError::NotRepresentable {
+            molecule: molecule.name(),
+            residual,
+            tolerance: 1e-6,
+            worst_atom: 0,
+            worst_atom_residual: residual,
+            q: fit.q.iter().copied().collect(),
+        });
+    }
+    let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
+    molecule.positions_jacobian(&fit.q, &mut dr);
+    let mut u = lab.velocities;
+    for i in 0..NA {
+        u.set_column(i, &(fit.rotation.transpose() * (lab.velocities.column(i) - com.velocity)));
+    }
+    let (j, p) = projections(&masses, &fit.r, &dr, &u);
+    let orientation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(fit.rotation));
+    let state = BodyState { q: fit.q, p, orientation, j };
+    if !state.q.iter().chain(state.p.iter()).chain(state.j.iter()).all(|x| x.is_finite()) {
+        return Err(FrameError::NonFinite { quantity: "body state of the lab state" });
+    }
+    Ok((state, com))
+}
+
+/// [`to_lab_body`], also at a singular geometry: there `(ω, q̇)` solves `M (ω, q̇) = (J, p)` by the
+/// metric's pseudo-inverse (the null direction, the spin about a linear molecule's axis, moves no
+/// atom, so the lab velocities are unique). Fails with [`FrameError::NotInRange`] if `(J, p)` is
+/// not in the metric's range (angular momentum about the axis of a linear molecule).
+pub fn lab_of_body_any<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    state: &BodyState<N>,
+    com: &CentreOfMass,
+) -> Result<LabState<NA>, FrameError>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    match to_lab_body(molecule, state, com) {
+        Err(FrameError::SingularMetric { .. }) => {}
+        other => return other,
+    }
+    let mut k = KineticMatrices::<N>::default();
+    molecule.kinetic(&state.q, &mut k);
+    let d = 3 + N;
+    let metric = nalgebra::DMatrix::<f64>::from_fn(d, d, |r, c| match (r < 3, c < 3) {
+        (true, true) => k.inertia[(r, c)],
+        (true, false) => k.coriolis[(r, c - 3)],
+        (false, true) => k.coriolis[(c, r - 3)],
+        (false, false) => k.a[(r - 3, c - 3)],
+    });
+    let rhs = nalgebra::DVector::<f64>::from_iterator(d, state.j.iter().chain(state.p.iter()).copied());
+    let scale = metric.amax();
+    let svd = metric.clone().svd(true, true);
+    let v = svd
+        .solve(&rhs, 1e-10 * scale)
+        .map_err(|_| FrameError::NonFinite { quantity: "pseudo-inverse of the metric" })?;
+    let residual = (&metric * &v - &rhs).norm();
+    if residual.is_nan() || residual > 1e-9 * rhs.norm().max(f64::MIN_POSITIVE) {
+        return Err(FrameError::NotInRange { residual, momentum: rhs.norm() });
+    }
+    let omega = Vector3::new(v[0], v[1], v[2]);
+    let qdot = SVector::<f64, N>::from_iterator(v.iter().skip(3).copied());
+    lab_state(molecule, &state.q, &state.rotation(), &omega, &qdot, com)
+}
+
 /// The result of the Gauss–Newton position fit: the rotation, `q`, `S`, the body-frame residuals
 /// `e_i`, the steps taken and `R_i(q)`.
 struct PositionFit<const N: usize, const NA: usize> {
@@ -684,6 +808,49 @@ struct PositionFit<const N: usize, const NA: usize> {
     e: SMatrix<f64, 3, NA>,
     iterations: usize,
     r: SMatrix<f64, 3, NA>,
+}
+
+/// The fit of the centre-of-mass positions `y` for a molecule whose coordinates have closed
+/// forms ([`Molecule::internal_coordinates`]): `q = q(y)`, each angle moved by a multiple of 2π
+/// to the value nearest `start` (a dihedral keeps its branch), then the Kabsch rotation of
+/// `R_i(q)` onto `y`. `None` for a molecule without closed forms.
+fn closed_form_fit<M, const N: usize, const NA: usize>(
+    molecule: &M,
+    masses: &[f64; NA],
+    y: &SMatrix<f64, 3, NA>,
+    start: &SVector<f64, N>,
+) -> Option<Result<PositionFit<N, NA>, FrameError>>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    let mut q = SVector::<f64, N>::zeros();
+    if !molecule.internal_coordinates(y, &mut q) {
+        return None;
+    }
+    for (k, c) in molecule.coordinates().iter().enumerate() {
+        if matches!(c.unit, crate::units::CoordinateUnit::Angle(_)) {
+            let tau = std::f64::consts::TAU;
+            let shifted = q[k] + tau * ((start[k] - q[k]) / tau).round();
+            // Keep the shift only if it stays valid (a bond angle stays in [0, π]).
+            if c.contains(shifted) {
+                q[k] = shifted;
+            }
+        }
+    }
+    if !q.iter().all(|x| x.is_finite()) {
+        return Some(Err(FrameError::NonFinite { quantity: "internal coordinates of the positions" }));
+    }
+    let mut r = SMatrix::<f64, 3, NA>::zeros();
+    molecule.positions(&q, &mut r);
+    let mut c = Matrix3::zeros();
+    for i in 0..NA {
+        c += y.column(i) * r.column(i).transpose() * masses[i];
+    }
+    let Some(rotation) = nearest_rotation(&c) else {
+        return Some(Err(FrameError::NonFinite { quantity: "kabsch rotation" }));
+    };
+    let (s, e) = residuals(molecule, masses, y, &rotation, &q, &mut r);
+    Some(Ok(PositionFit { rotation, q, s, e, iterations: 0, r }))
 }
 
 /// Steps 1–3 of the fit (module documentation) of the centre-of-mass positions `y`, from `q`.

@@ -153,6 +153,15 @@ pub trait Molecule<const N: usize, const NA: usize> {
     /// `∂U/∂q` into `grad`; returns `U(q)` as well.
     fn potential_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64;
 
+    /// Whether the generator emitted lane-generic [`Molecule::kinetic_and_gradient_lanes`] and
+    /// [`Molecule::potential_gradient_lanes`] (the same operations as the `f64` functions).
+    /// `false` for the trait's lane-by-lane defaults, and for molecules whose `a` gets its
+    /// centre-of-mass term at run time (large molecules, `rovib_codegen::Options`): those are
+    /// integrated one trajectory at a time ([`crate::hamiltonian::lanes::available`]).
+    fn has_lane_forms(&self) -> bool {
+        false
+    }
+
     /// [`Molecule::kinetic_and_gradient`] for `T::LANES` states at once, one per lane of `T`
     /// ([`crate::lanes`]), with no error path: `velocities` returns `(ω, q̇)` for every lane.
     ///
@@ -265,6 +274,33 @@ pub trait Molecule<const N: usize, const NA: usize> {
     /// The atomic masses in electron masses, in atom order.
     fn masses(&self) -> [f64; NA] {
         self.atoms().map(|a| a.mass)
+    }
+
+    // Coordinates declared by kind (distance, angle, dihedral): closed forms in Cartesian
+    // positions. Generated for such definitions; the defaults say "not available".
+
+    /// The internal coordinates of Cartesian positions `x` (bohr, column `i` is atom `i`, any
+    /// frame and origin) in closed form, into `q`: distances, angles in `[0, π]`, dihedrals in
+    /// `(−π, π]`. Returns `false` (and leaves `q` alone) for a molecule whose definition gives
+    /// explicit positions without kinds; then only the iterative fit of `crate::frames` applies.
+    fn internal_coordinates(&self, x: &SMatrix<f64, 3, NA>, q: &mut SVector<f64, N>) -> bool {
+        let _ = (x, q);
+        false
+    }
+
+    /// The potential `U(q(x))` in hartree at Cartesian positions `x` (bohr), or `None` when the
+    /// coordinates have no closed form ([`Molecule::internal_coordinates`]).
+    fn cartesian_potential(&self, x: &SMatrix<f64, 3, NA>) -> Option<f64> {
+        let _ = x;
+        None
+    }
+
+    /// `∂U/∂x` (hartree per bohr, column `i` is atom `i`) into `grad` and `U` (hartree), or
+    /// `None` when the coordinates have no closed form. Not finite where a coordinate's closed
+    /// form is not differentiable (an angle at exactly 0 or π, a dihedral about collinear atoms).
+    fn cartesian_potential_gradient(&self, x: &SMatrix<f64, 3, NA>, grad: &mut SMatrix<f64, 3, NA>) -> Option<f64> {
+        let _ = (x, grad);
+        None
     }
 }
 

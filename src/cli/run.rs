@@ -16,6 +16,9 @@ use crate::output::{
 };
 use crate::parameters::{WithParameters, scene_parameters};
 use crate::restart::{Dop853Point, FinalState, Restart};
+use crate::runtime::cartesian_system::CartesianSystem;
+use crate::runtime::charts::{self, ChartError, ChartObserver, ChartReport, ChartStart, ChartState};
+use crate::runtime::frames::body_of_lab_exact;
 use crate::runtime::frames::{CentreOfMass, LabState, to_lab_body};
 use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::hamiltonian::{ReducedSystem, Reduction, RotationPart};
@@ -28,6 +31,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 // The initial state and the production system live in `crate::start`; re-exported here for
 // callers that used these paths.
+use crate::start::production_system_unchecked;
 pub use crate::start::{Start, initial_state, load_scene, production_system};
 
 /// What a finished run reports on the terminal.
@@ -84,6 +88,7 @@ fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), Cl
         (scene.outputs != stored.outputs, "run.outputs"),
         (frozen(scene) != frozen(stored), "run.frozen"),
         (scene.euler_unwrapped != stored.euler_unwrapped, "run.euler_unwrapped"),
+        (scene.cartesian_fallback != stored.cartesian_fallback, "run.cartesian_fallback"),
         (scene.min_metric_pivot != stored.min_metric_pivot, "run.min_metric_pivot"),
         (parameters(scene) != parameters(stored), "potential.parameters"),
     ]
@@ -178,20 +183,45 @@ impl Run<'_> {
         }
         let mut warnings = Vec::new();
         // Where the run starts: the scene's initial state, or the restart file's state.
-        let (system, y0, com, t0) = match self.resume {
+        // A lab-form start at a linear geometry: started in the Cartesian chart as given.
+        let mut lab_start: Option<Vec<f64>> = None;
+        let (system, y0, com, t0, start_body) = match self.resume {
             None => {
                 let start = initial_state(&m, scene)?;
-                // Fails before anything is written if the initial state is not valid.
-                let (system, y0) = production_system(&m, scene, &start.body)?;
+                // Fails before anything is written if the initial state is not valid, unless the
+                // run can start in the Cartesian chart (a linear start, `crate::runtime::charts`).
+                lab_start = start.lab_start.clone();
+                let (system, y0) = match production_system(&m, scene, &start.body) {
+                    Ok(s) => s,
+                    Err(e) => match production_system_unchecked(&m, scene, &start.body) {
+                        Ok(s) if uses_charts(scene, &s.0) => s,
+                        _ => return Err(e.into()),
+                    },
+                };
                 if let Some(q_ref) = m.reference_geometry() {
-                    let h0 = system.energy(&y0).map_err(|e| CliError::context("the initial state", e))?;
+                    let h0 = match system.energy(&y0) {
+                        Ok(h) => h,
+                        Err(_) if uses_charts(scene, &system) => lab_start
+                            .clone()
+                            .or_else(|| charts::to_cartesian(&m, &start.body).ok())
+                            .and_then(|y| CartesianSystem::new(&m).ok()?.energy(&y).ok())
+                            .ok_or_else(|| CliError::Message("the initial state: no finite energy".into()))?,
+                        Err(e) => return Err(CliError::context("the initial state", e)),
+                    };
                     warnings.extend(start_energy_warning(m.name(), h0, m.potential(&q_ref)));
                 }
-                (system, y0, (start.com_position, start.com_velocity), 0.0)
+                (system, y0, (start.com_position, start.com_velocity), 0.0, start.body)
             }
             Some(r) => {
                 let (system, y0) = resumed_system(&m, scene, r)?;
-                (system, y0, (Vector3::from(r.com_position_bohr), Vector3::from(r.com_velocity_bohr_per_au)), r.t_au)
+                let body = restart_body(r)?;
+                (
+                    system,
+                    y0,
+                    (Vector3::from(r.com_position_bohr), Vector3::from(r.com_velocity_bohr_per_au)),
+                    r.t_au,
+                    body,
+                )
             }
         };
         for w in &warnings {
@@ -270,12 +300,36 @@ impl Run<'_> {
             skip_first: self.resume.is_some() && !dop853_continues(scene, self.resume),
             records,
             last_y: y0.clone(),
+            last_y_valid: true,
+            last_q: start_body.q,
+            cartesian: CartesianSystem::new(&m).ok(),
             stops,
             stopped: None,
         };
         let mut counted = Counted { inner: system, evaluations: 0 };
         let begin = Instant::now();
-        let result = integrate(&mut counted, scene, t0, &y0, self.resume, &mut recorder);
+        let switching = uses_charts(scene, &system);
+        let mut chart_report = None;
+        let result = if switching {
+            let mut report = ChartReport::default();
+            let r = integrate_charts(
+                &system,
+                scene,
+                t0,
+                &start_body,
+                lab_start.as_deref(),
+                self.resume,
+                &mut recorder,
+                &mut report,
+            );
+            counted.evaluations = report.stats.rhs_evals;
+            let out = r.map(|()| (report.stats, report.resume.clone()));
+            chart_report = Some(report);
+            out
+        } else {
+            integrate(&mut counted, scene, t0, &y0, self.resume, &mut recorder)
+                .map_err(|e| charts::map_error(e, ChartError::Internal))
+        };
         let wall_time = begin.elapsed().as_secs_f64();
         if let Some(bar) = &recorder.progress {
             bar.finish_and_clear();
@@ -333,6 +387,7 @@ impl Run<'_> {
                 com_velocity: com.1,
                 resumed_from: self.resume.map(|r| r.t),
                 warnings: &warnings,
+                charts: switching.then(|| charts_json(chart_report.as_ref(), scene)),
             };
             match write_summary(self.out_dir, &summary.to_json()) {
                 Ok(path) => files.push(path),
@@ -370,6 +425,84 @@ impl Run<'_> {
             warnings,
             stopped,
         })
+    }
+}
+
+/// Whether the run switches to the Cartesian chart at singular geometries: DOP853, a molecule
+/// with a Cartesian potential (coordinates by kind, compiled parameters) and no frozen
+/// coordinates (`crate::runtime::charts`).
+fn uses_charts<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    scene: &Scene,
+    system: &ReducedSystem<'_, M, N, NA>,
+) -> bool {
+    scene.cartesian_fallback && matches!(scene.method, Method::Dop853(_)) && charts::can_switch(system)
+}
+
+/// The chart switches of a run, for summary.json.
+fn charts_json(report: Option<&ChartReport>, scene: &Scene) -> serde_json::Value {
+    let per_unit = 1.0 / scene.time_unit.in_au();
+    match report {
+        Some(r) => serde_json::json!({
+            "switch_pivot": charts::SWITCH_PIVOT,
+            "return_pivot": charts::RETURN_PIVOT,
+            "switches": r.switches,
+            "cartesian_time": r.cartesian_time * per_unit,
+            "last_chart": r.last_chart.map(|c| match c {
+                charts::Chart::Internal => "internal",
+                charts::Chart::Cartesian => "cartesian",
+            }),
+        }),
+        None => serde_json::json!({
+            "switch_pivot": charts::SWITCH_PIVOT,
+            "return_pivot": charts::RETURN_PIVOT,
+        }),
+    }
+}
+
+/// The body state stored in a restart file.
+fn restart_body<const N: usize>(r: &Restart) -> Result<BodyState<N>, CliError> {
+    let [w, x, y, z] = r.state.orientation;
+    let orientation = UnitQuaternion::try_new(Quaternion::new(w, x, y, z), 0.0)
+        .ok_or_else(|| CliError::Message("the restart file's orientation quaternion is zero".into()))?;
+    if r.state.q.len() != N || r.state.p.len() != N {
+        return Err(CliError::Message(format!("the restart file has {} coordinates, expected {N}", r.state.q.len())));
+    }
+    Ok(BodyState {
+        q: SVector::from_column_slice(&r.state.q),
+        p: SVector::from_column_slice(&r.state.p),
+        orientation,
+        j: Vector3::from(r.state.j),
+    })
+}
+
+/// [`integrate`] with the chart switch of `crate::runtime::charts` (DOP853 only): fresh from
+/// `start`, or continuing `resume` (from its DOP853 point in the internal chart, else from its
+/// last output state with the output grid restarted there, as [`integrate`] does).
+#[allow(clippy::too_many_arguments)]
+fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const NA: usize>(
+    system: &ReducedSystem<'_, M, N, NA>,
+    scene: &Scene,
+    t0: f64,
+    start: &BodyState<N>,
+    lab_start: Option<&[f64]>,
+    resume: Option<&Restart>,
+    observer: &mut O,
+    report: &mut ChartReport,
+) -> Result<(), SolveError<ChartError>> {
+    let Method::Dop853(options) = scene.method else {
+        return Err(SolveError::InvalidInput("the chart switch runs with dop853 only".into()));
+    };
+    let (t_end, interval) = (scene.t_end, scene.output_interval);
+    match resume {
+        Some(r) if dop853_continues(scene, resume) => {
+            let point = r.dop853.as_ref().expect("checked by dop853_continues").to_resume(r.outputs_done);
+            charts::integrate(system, options, 0.0, ChartStart::Resume(&point), t_end, interval, observer, report)
+        }
+        None if lab_start.is_some() => {
+            let y = lab_start.expect("checked");
+            charts::integrate(system, options, t0, ChartStart::FreshCartesian(y), t_end, interval, observer, report)
+        }
+        _ => charts::integrate(system, options, t0, ChartStart::Fresh(start), t_end, interval, observer, report),
     }
 }
 
@@ -579,8 +712,15 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     skip_first: bool,
     /// Output records in the files so far (the next one is number `records` of the grid).
     records: u64,
-    /// The flat state at the last output recorded.
+    /// The flat state (internal chart) at the last output recorded.
     last_y: Vec<f64>,
+    /// Whether `last_y` is the last output's state (not so after an output at an exactly
+    /// linear geometry, which the internal chart cannot hold).
+    last_y_valid: bool,
+    /// q at the last output recorded (the branch for closed-form angles).
+    last_q: SVector<f64, N>,
+    /// The Cartesian chart, if the molecule has one (states the chart switch hands over).
+    cartesian: Option<CartesianSystem<'m, M, N, NA>>,
     /// `run.stop_outside`: coordinate index, name, bounds in atomic units.
     stops: Vec<StopCondition>,
     /// The stop condition met, for summary.json.
@@ -588,14 +728,36 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
-    fn record(&mut self, t: f64, y: &[f64]) -> Result<(), String> {
+    fn record(&mut self, t: f64, state: ChartState<'_>) -> Result<(), String> {
         let t_out = t / self.time_scale;
         let at = |e: &dyn std::fmt::Display, y: &[f64], layout: &str| {
             format!("{e} at t = {t_out} {}; state {layout} = {y:?}", self.time_unit)
         };
         // H at every output time: for the outputs, and for the guard against a run that has
         // gone unstable (a too large fixed step) and would otherwise "complete" with garbage.
-        let (body, energy) = self.system.expand_body_and_energy(y).map_err(|e| at(&e, y, &self.layout))?;
+        // A Cartesian-chart state (near a linear geometry) gives the same quantities through
+        // the closed-form q(x) and projections, and the Cartesian H.
+        let (y, cartesian) = match state {
+            ChartState::Internal(y) => (y, None),
+            ChartState::Cartesian(y) => (y, Some(y)),
+        };
+        let cartesian_layout = "[positions about the centre of mass (bohr), velocities (bohr/au)], atom by atom";
+        let (body, energy, internal_y) = match cartesian {
+            None => {
+                let (body, energy) = self.system.expand_body_and_energy(y).map_err(|e| at(&e, y, &self.layout))?;
+                (body, energy, None)
+            }
+            Some(y) => {
+                let chart = self.cartesian.as_ref().ok_or("a Cartesian state without a Cartesian chart")?;
+                let lab = CartesianSystem::<M, N, NA>::lab(y);
+                let (body, _) = body_of_lab_exact(self.system.molecule(), &lab, &self.last_q)
+                    .map_err(|e| at(&e, y, cartesian_layout))?;
+                let energy = chart.energy(y).map_err(|e| at(&e, y, cartesian_layout))?;
+                let internal = charts::to_internal(&self.system, y, &self.last_q).ok().map(|(_, yi)| yi);
+                (body, energy, Some(internal))
+            }
+        };
+        let layout = if cartesian.is_some() { cartesian_layout } else { self.layout.as_str() };
         let h0 = *self.initial_energy.get_or_insert(energy);
         let rotation = body.rotation();
         let phase = body.to_phase();
@@ -603,15 +765,24 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         if self.diagnostics {
             self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
         }
-        energy_guard(h0, energy, self.max_energy_error).map_err(|e| at(&e, y, &self.layout))?;
+        energy_guard(h0, energy, self.max_energy_error).map_err(|e| at(&e, y, layout))?;
         if let Some(csv) = &mut self.trajectory {
             let (euler, pe) = (phase.euler.into(), phase.pe.into());
             csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, energy)?;
         }
         if let Some(xyz) = &mut self.lab {
             let com = CentreOfMass { position: self.com.0 + self.com.1 * t, velocity: self.com.1 };
-            let lab: LabState<NA> =
-                to_lab_body(self.system.molecule(), &body, &com).map_err(|e| at(&e, y, &self.layout))?;
+            let lab: LabState<NA> = match cartesian {
+                None => to_lab_body(self.system.molecule(), &body, &com).map_err(|e| at(&e, y, layout))?,
+                Some(y) => {
+                    let mut lab = CartesianSystem::<M, N, NA>::lab(y);
+                    for i in 0..NA {
+                        lab.positions.set_column(i, &(lab.positions.column(i) + com.position));
+                        lab.velocities.set_column(i, &(lab.velocities.column(i) + com.velocity));
+                    }
+                    lab
+                }
+            };
             let potential = self.system.molecule().potential(&body.q);
             let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
             xyz.frame(t_out, energy, potential, atoms)?;
@@ -621,7 +792,14 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             self.system.molecule().dipole(&body.q, &mut mu);
             csv.row(t_out, &(rotation * mu))?;
         }
-        self.last_y.copy_from_slice(y);
+        // A state the internal chart cannot hold (exactly linear) leaves no restart point.
+        self.last_y_valid = true;
+        match &internal_y {
+            None => self.last_y.copy_from_slice(y),
+            Some(Some(yi)) => self.last_y.copy_from_slice(yi),
+            Some(None) => self.last_y_valid = false,
+        }
+        self.last_q = body.q;
         self.records += 1;
         if let Some(&(k, name, [low, high])) =
             self.stops.iter().find(|(k, _, [lo, hi])| !(*lo..=*hi).contains(&body.q[*k]))
@@ -643,6 +821,10 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
     /// The restart file for a run that reached output time `t` (a.u.), with DOP853's
     /// continuation point if it has one.
     fn restart(&self, scene: &Scene, t: f64, point: Option<&Dop853Resume>, layout: &str) -> Result<Restart, String> {
+        if !self.last_y_valid {
+            return Err("cannot write the restart file: the last output is at a linear geometry, which internal                         coordinates cannot hold (continue from an earlier time or run longer)"
+                .into());
+        }
         let body = self.system.expand_body(&self.last_y).map_err(|e| format!("cannot write the restart file: {e}"))?;
         let phase = body.to_phase();
         let q = body.orientation.quaternion();
@@ -691,6 +873,12 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Recorder<'_, M, N, NA> {
     fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
+        ChartObserver::observe(self, t, ChartState::Internal(y))
+    }
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> ChartObserver for Recorder<'_, M, N, NA> {
+    fn observe(&mut self, t: f64, y: ChartState<'_>) -> ControlFlow<()> {
         if std::mem::take(&mut self.skip_first) {
             return ControlFlow::Continue(());
         }

@@ -62,8 +62,8 @@ const NUMBER_GROWTH: u64 = 16;
 const FAILURE_TEXT_BYTES: u64 = 64 << 10;
 
 /// The largest checkpoint of this run [`Checkpoint::resume`] reads, in bytes: the header, the
-/// merged line and one line per block, each at most [`NUMBER_GROWTH`] times the line of `empty`
-/// (an outcome of this run's shape with nothing in it) plus [`FAILURE_TEXT_BYTES`]. A
+/// merged line and one line per block, each at most `NUMBER_GROWTH` (16) times the line of `empty`
+/// (an outcome of this run's shape with nothing in it) plus `FAILURE_TEXT_BYTES` (64 KiB). A
 /// checkpoint larger than that is not one this run wrote (a wrong file, `/dev/zero`): it is
 /// refused with the figures instead of read into memory without bound.
 pub fn size_limit(header: &Header, empty: &Outcome) -> u64 {

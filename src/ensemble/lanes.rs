@@ -28,9 +28,12 @@ pub type Lanes = F64x2;
 /// Trajectories per vector.
 pub const LANES: usize = <Lanes as Real>::LANES;
 
-/// Whether `plan` can run on lanes.
-pub fn applies<M, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>) -> bool {
+/// Whether `plan` can run on lanes: lanes asked for, DOP853, nothing reduced, no kept
+/// trajectories, and a molecule with exact lane forms (not a large molecule whose kinetic
+/// matrix is completed at run time, see [`crate::runtime::hamiltonian::lanes::available`]).
+pub fn applies<M: Molecule<N, NA>, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>) -> bool {
     plan.lanes
+        && crate::runtime::hamiltonian::lanes::available(plan.molecule)
         && matches!(plan.method, Method::Dop853(_))
         && plan.reduction.active.iter().all(|&a| a)
         && plan.reduction.rotation == crate::runtime::hamiltonian::fast::RotationPart::Free

@@ -85,11 +85,20 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         title: label,
         x_label: "wavenumber (cm⁻¹)".to_owned(),
         y_label: y.to_owned(),
-        content: Content::Band(s.wavenumber.iter().zip(&values).map(|(&x, &v)| (x, v, 0.0)).collect()),
+        // Plotted every ~resolution/6 (the file has every grid point): the plot stays small.
+        content: Content::Band(
+            s.wavenumber.iter().zip(&values).step_by(plot_stride(&s)).map(|(&x, &v)| (x, v, 0.0)).collect(),
+        ),
     };
     let path = dir.join("spectrum.svg");
     std::fs::write(&path, svg(&[panel]))
         .map_err(|e| CliError::context(format!("cannot write {}", path.display()), e))?;
     files.push(path);
     Ok(files)
+}
+
+/// The step through the grid for the plot: points about a sixth of the resolution apart.
+fn plot_stride(s: &Spectrum) -> usize {
+    let spacing = s.wavenumber.get(1).map_or(1.0, |w| w - s.wavenumber[0]);
+    ((s.resolution() / 6.0 / spacing).floor() as usize).max(1)
 }

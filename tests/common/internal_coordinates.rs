@@ -208,6 +208,12 @@ pub fn ch4<T: Real>(x: &[V3<T>]) -> Vec<T> {
     ]
 }
 
+/// Hydrogen cyanide: (r_CH, r_CN, α) = (|C − H|, |N − C|, ∠H–C–N), atoms in the order H, C, N;
+/// linear at α = π.
+pub fn hcn<T: Real>(x: &[V3<T>]) -> Vec<T> {
+    vec![distance(x[1], x[0]), distance(x[2], x[1]), angle(x[0], x[1], x[2])]
+}
+
 /// Ethane: (r_C1C2, then for each H its r, its H–C–C angle and, for all but H1a, the dihedral
 /// H1a–C1–C2–H mapped to [0, 2π) (the definition's staggered reference has azimuths 60°–300°,
 /// away from that cut)), atoms in the order C1, C2, H1a, H1b, H1c, H2a, H2b, H2c, coordinates in

@@ -20,13 +20,25 @@ pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
 #[allow(unused_imports)]
 pub use rovib_testkit::Rng;
 
-/// A random geometry near the reference: lengths within ±8 %, angles within ±0.15 rad.
+/// A random geometry near the reference: lengths within ±8 %, angles within ±0.15 rad, reflected
+/// back into the coordinate's range at its ends (a linear reference, α = π, gives α in
+/// [π − 0.15, π]).
 pub fn random_q<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, rng: &mut Rng) -> SVector<f64, N> {
     let reference = m.reference_geometry().unwrap_or_else(|| panic!("{} has no reference geometry", m.name()));
     let coords = m.coordinates();
     SVector::from_fn(|k, _| match coords[k].unit {
         CoordinateUnit::Length(_) => reference[k] * rng.uniform(0.92, 1.08),
-        CoordinateUnit::Angle(_) => reference[k] + rng.uniform(-0.15, 0.15),
+        CoordinateUnit::Angle(_) => {
+            let (low, high) = coords[k].range;
+            let x = reference[k] + rng.uniform(-0.15, 0.15);
+            if x > high {
+                2.0 * high - x
+            } else if x < low {
+                2.0 * low - x
+            } else {
+                x
+            }
+        }
     })
 }
 

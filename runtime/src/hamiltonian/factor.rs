@@ -6,6 +6,7 @@
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 use super::HamiltonianError;
+use super::factor_large;
 use super::finite::all_finite;
 use super::metric::{InverseMetric, MetricBlock, PIVOT_TOLERANCE};
 use crate::molecule::KineticMatrices;
@@ -46,7 +47,8 @@ pub struct MetricFactor<const N: usize> {
     i_inv: Matrix3<f64>,
     /// `Y = I⁻¹ A` (3 × N).
     y: SMatrix<f64, 3, N>,
-    /// `S = L₂ D₂ L₂ᵀ`: `L₂` in the strict lower triangle (the rest is never read).
+    /// `S = L₂ D₂ L₂ᵀ`: `L₂` in the strict lower triangle (the rest is never read); for
+    /// `N ≥ LARGE_BLOCK`, transposed in the strict upper triangle (`factor_large`).
     l2: SMatrix<f64, N, N>,
     /// `1 / D₂`.
     d2_inv: SVector<f64, N>,
@@ -97,6 +99,21 @@ impl<const N: usize> MetricFactor<N> {
             return Err(metric_failure(k, q, MetricBlock::G22Inverse, tol));
         };
         Ok(Self { i_inv, y, l2, d2_inv })
+    }
+
+    /// Whether [`MetricFactor::with_tolerance`] would succeed with `min_pivot`, without building
+    /// an error (so without allocating): the test the Cartesian chart of `crate::charts` makes at
+    /// every evaluation to know when the internal chart is regular again.
+    pub fn is_regular(k: &KineticMatrices<N>, min_pivot: f64) -> bool {
+        let tol = min_pivot.max(PIVOT_TOLERANCE);
+        if !(all_finite(k.a.as_slice()) & all_finite(k.coriolis.as_slice()) & all_finite(k.inertia.as_slice())) {
+            return false;
+        }
+        let Some(i_inv) = inverse_spd3(&k.inertia, tol) else {
+            return false;
+        };
+        let mut schur = k.a - k.coriolis.transpose() * (i_inv * k.coriolis);
+        ldl_in_place(&mut schur, |j| k.a[(j, j)], tol).is_some()
     }
 
     /// `v = (ω, q̇) = M⁻¹ (j, p)`.
@@ -191,13 +208,18 @@ fn inverse_spd3(m: &Matrix3<f64>, tol: f64) -> Option<Matrix3<f64>> {
 ///
 /// Row by row: with `v_k = L_jk D_k`, `v_k = m_jk − Σ_{l<k} L_kl v_l`, `L_jk = v_k / D_k`,
 /// `D_j = m_jj − Σ_{k<j} L_jk v_k`. Hand-written rather than `nalgebra::Cholesky` because with
-/// constant bounds it unrolls into straight-line code, and for the reciprocal pivots.
+/// constant bounds it unrolls into straight-line code, and for the reciprocal pivots. Blocks of
+/// [`factor_large::LARGE_BLOCK`] and more go to [`factor_large::ldl_in_place`] instead, which
+/// stores `L` transposed (strict upper triangle).
 #[inline]
 fn ldl_in_place<const D: usize>(
     m: &mut SMatrix<f64, D, D>,
     scale: impl Fn(usize) -> f64,
     tol: f64,
 ) -> Option<SVector<f64, D>> {
+    if D >= factor_large::LARGE_BLOCK {
+        return factor_large::ldl_in_place(m, scale, tol);
+    }
     let mut d_inv = SVector::<f64, D>::zeros();
     let mut v = SVector::<f64, D>::zeros();
     for j in 0..D {
@@ -227,6 +249,9 @@ fn ldl_solve<const D: usize>(
     d_inv: &SVector<f64, D>,
     mut x: SVector<f64, D>,
 ) -> SVector<f64, D> {
+    if D >= factor_large::LARGE_BLOCK {
+        return factor_large::ldl_solve(l, d_inv, x);
+    }
     for i in 0..D {
         for k in 0..i {
             x[i] -= l[(i, k)] * x[k];

@@ -23,6 +23,20 @@
 use crate::lanes::{KineticLanes, Real};
 use crate::molecule::Molecule;
 
+/// Whether `molecule`'s production system runs on this module's lane-generic code with the
+/// `f64` path's numbers bit for bit: the molecule has generated lane forms
+/// ([`Molecule::has_lane_forms`]: not a large molecule with the centre-of-mass term of `a` at run
+/// time) and its vibrational block is factorized by [`super::factor`]'s small-block `L D Lᵀ`
+/// (fewer than [`super::factor_large::LARGE_BLOCK`] coordinates), which [`solve`] repeats
+/// operation for operation. Otherwise [`super::ReducedSystem`] takes its general path and the
+/// ensemble runner runs one trajectory at a time.
+pub fn available<M, const N: usize, const NA: usize>(molecule: &M) -> bool
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    molecule.has_lane_forms() && N < super::factor_large::LARGE_BLOCK
+}
+
 /// `(ω, q̇) = M⁻¹ (J, p)` by the block factorization of [`super::MetricFactor`] (closed-form
 /// `I⁻¹`, `Y = I⁻¹ A`, `S = a − AᵀY = L D Lᵀ`), lane-generic. Clears the bits of `ok` whose
 /// pivots are not above `tol` times their scale (`trace I` for `I`, `a_jj` for `S`); NaN fails.

@@ -53,6 +53,7 @@
 pub mod body;
 pub mod euler;
 pub mod factor;
+mod factor_large;
 pub mod fast;
 mod finite;
 pub mod gmatrix;

@@ -185,6 +185,9 @@ pub struct ReducedSystem<'a, M: ?Sized, const N: usize, const NA: usize> {
     index: [usize; N],
     n_active: usize,
     all_active: bool,
+    /// Nothing reduced and the molecule has exact lane forms ([`super::lanes::available`]):
+    /// [`OdeSystem::rhs`] takes the lane-generic production code at `f64`.
+    production_lanes: bool,
     min_pivot: f64,
 }
 
@@ -248,6 +251,9 @@ where
             index,
             n_active,
             all_active: n_active == N,
+            production_lanes: n_active == N
+                && reduction.rotation == RotationPart::Free
+                && super::lanes::available(molecule),
             min_pivot: PIVOT_TOLERANCE,
         }
     }
@@ -493,8 +499,9 @@ where
     fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), HamiltonianError> {
         // Nothing reduced (the common case): the lane-generic production right-hand side at
         // `f64`, with no index maps and one finiteness test; if it fails, the general path
-        // below evaluates the state again and names the error.
-        if self.all_active && self.reduction.rotation == RotationPart::Free {
+        // below evaluates the state again and names the error. Molecules without exact lane
+        // forms (large ones, see `super::lanes::available`) take the general path.
+        if self.production_lanes {
             if super::lanes::production_rhs::<M, f64, N, NA>(self.molecule, y, dydt, self.min_pivot) == 1 {
                 return Ok(());
             }

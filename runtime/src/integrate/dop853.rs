@@ -366,6 +366,10 @@ pub struct Dop853 {
     y_out: Vec<f64>,
     /// The state where a run stopped being the run to a later end time (see [`Dop853Resume`]).
     y_resume: Vec<f64>,
+    /// The time of `y` and the step the controller proposed there ([`Dop853::last_accepted`]).
+    x_accepted: f64,
+    h_proposed: f64,
+    stats_accepted: Stats,
 }
 
 /// Where a DOP853 run stood when it returned, to continue it later exactly (bit for bit) as if
@@ -413,6 +417,9 @@ impl Dop853 {
             cont: vec![0.0; 8 * dim],
             y_out: vec![0.0; dim],
             y_resume: vec![0.0; dim],
+            x_accepted: f64::NAN,
+            h_proposed: f64::NAN,
+            stats_accepted: Stats::default(),
         })
     }
 
@@ -424,6 +431,16 @@ impl Dop853 {
     /// The dimension this solver was created for.
     pub fn dim(&self) -> usize {
         self.y.len()
+    }
+
+    /// Where the last run stood at its last accepted step: `(t, y, h)` with the step `h` the
+    /// controller proposed from there. After a [`SolveError::Rhs`] this is the point to continue
+    /// from in another system (the error's own `t` is that of the failing stage, later than
+    /// `t`): how the chart switch of `rovib run` (`crate::charts`) restarts at a singular
+    /// geometry. Before any run, `t` and `h` are NaN.
+    /// The work counters up to that step are the fourth element.
+    pub fn last_accepted(&self) -> (f64, &[f64], f64, Stats) {
+        (self.x_accepted, &self.y, self.h_proposed, self.stats_accepted)
     }
 
     /// Integrates from `(t0, y0)` to `t_end`, calling `observer` at `t0` and at every output time
@@ -579,6 +596,7 @@ impl Dop853 {
             }
             // Where this step starts, for a continuation from it.
             let step_start = (x, h, fac_old, reject);
+            (self.x_accepted, self.h_proposed, self.stats_accepted) = (x, h, stats);
             // Stretch a step that would end just short of t_end (as dop853.f does), so no
             // sliver step follows.
             let last = x + 1.01 * h > t_end;
