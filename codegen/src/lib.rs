@@ -26,6 +26,7 @@ pub mod diff;
 pub mod dipole;
 pub mod elements;
 pub mod emit;
+pub mod emit_lanes;
 pub mod expr;
 pub mod kinetic;
 pub mod names;
