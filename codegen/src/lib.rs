@@ -151,9 +151,12 @@ pub fn generate_molecule_with(
     let notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
     // Variables: coordinates, ω, velocities (kinetic), then positions (cartesian), then the
     // parameters (parametric, last); the dipole adds none.
-    let cartesian = cartesian::build(&mut def);
+    let mut cartesian = cartesian::build(&mut def);
     let dipole = dipole::build(&mut def, &exprs.positions);
     let parametric = parametric::build(&mut def);
+    if let (Some(c), Some(p)) = (&mut cartesian, &parametric) {
+        cartesian::with_parameters(&mut def, c, p);
+    }
     let (items, stats) =
         template::molecule_items(&def, &exprs, cartesian.as_ref(), parametric.as_ref(), dipole.as_ref());
     let header = format!(
