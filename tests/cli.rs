@@ -153,9 +153,16 @@ fn eval_at_a_linear_reference_says_the_chart_is_singular_and_prints_what_exists(
         let c = &v["cartesian"];
         assert!((c["U"].as_f64().unwrap() - u_ref).abs() < 1e-12, "{name}: {c}");
         assert_eq!(c["H"].as_f64(), c["U"].as_f64(), "{name}: at rest H = U");
-        let grad: Vec<f64> = c["gradient_U"].as_array().unwrap().iter().flat_map(|r| r.as_array().unwrap().clone()).map(|x| x.as_f64().unwrap()).collect();
+        let grad: Vec<f64> = c["gradient_U"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|r| r.as_array().unwrap().clone())
+            .map(|x| x.as_f64().unwrap())
+            .collect();
         assert!(grad.iter().all(|g| g.abs() < 1e-10), "{name}: the gradient at the linear minimum: {grad:?}");
-        let x: Vec<[f64; 3]> = c["positions"].as_array().unwrap().iter().map(|r| serde_json::from_value(r.clone()).unwrap()).collect();
+        let x: Vec<[f64; 3]> =
+            c["positions"].as_array().unwrap().iter().map(|r| serde_json::from_value(r.clone()).unwrap()).collect();
         let d1 = [x[1][0] - x[0][0], x[1][1] - x[0][1], x[1][2] - x[0][2]];
         let d2 = [x[2][0] - x[0][0], x[2][1] - x[0][1], x[2][2] - x[0][2]];
         let cross = [d1[1] * d2[2] - d1[2] * d2[1], d1[2] * d2[0] - d1[0] * d2[2], d1[0] * d2[1] - d1[1] * d2[0]];
@@ -173,7 +180,8 @@ fn eval_at_linear_with_momenta_gives_consistent_cartesian_quantities() {
     // HCN's molecular axis is body z at linear: J perpendicular to it.
     let euler = Vector3::new(0.4, 1.2, -0.7);
     let pe = euler_momenta_from_angular_momentum(&euler, &Vector3::new(3.0, -4.0, 0.0));
-    let state = format!(r#"{{"p": [0.2, -0.1, 1.5], "euler": [0.4, 1.2, -0.7], "pe": [{}, {}, {}]}}"#, pe[0], pe[1], pe[2]);
+    let state =
+        format!(r#"{{"p": [0.2, -0.1, 1.5], "euler": [0.4, 1.2, -0.7], "pe": [{}, {}, {}]}}"#, pe[0], pe[1], pe[2]);
     let out = rovib(&["eval", "--molecule", "hcn", "--state", "-"], Some(&state));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

@@ -111,10 +111,21 @@ fn linear_triatomic(m: [f64; 3], r: [f64; 2], f1: f64, f2: f64, f12: f64, fb: f6
 /// differentiable there), so at such a displaced point it is the mean over two points moved
 /// ±1e-6 bohr off the line (exact to O(1e-12) for a smooth U). Not projected: all 3N
 /// eigenvalues, ascending by magnitude.
-fn cartesian_hessian_eigenvalues<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, q: &SVector<f64, N>) -> Vec<f64> {
+fn cartesian_hessian_eigenvalues<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    q: &SVector<f64, N>,
+) -> Vec<f64> {
     let mut x0 = SMatrix::<f64, 3, NA>::zeros();
     m.positions(q, &mut x0);
-    let off = SMatrix::<f64, 3, NA>::from_fn(|a, i| if a == 0 { 1e-6 * (i as f64 + 1.0) } else if a == 1 { 1e-6 * (1.0 - i as f64) } else { 0.0 });
+    let off = SMatrix::<f64, 3, NA>::from_fn(|a, i| {
+        if a == 0 {
+            1e-6 * (i as f64 + 1.0)
+        } else if a == 1 {
+            1e-6 * (1.0 - i as f64)
+        } else {
+            0.0
+        }
+    });
     let gradient = |x: &SMatrix<f64, 3, NA>| {
         let mut g = SMatrix::<f64, 3, NA>::zeros();
         m.cartesian_potential_gradient(x, &mut g).expect("coordinates by kind");
@@ -161,7 +172,11 @@ fn check_linear(name: &str, closed_form: [f64; 4]) -> Frequencies {
     for (w, c) in f.wavenumbers.iter().zip(closed_form) {
         assert!((w - c).abs() < 1e-6 * c, "{name}: {w} vs closed form {c} cm-1 ({:e})", (w - c) / c);
     }
-    assert!((f.wavenumbers[0] - f.wavenumbers[1]).abs() < 1e-7 * f.wavenumbers[0], "{name}: bend pair {:?}", f.wavenumbers);
+    assert!(
+        (f.wavenumbers[0] - f.wavenumbers[1]).abs() < 1e-7 * f.wavenumbers[0],
+        "{name}: bend pair {:?}",
+        f.wavenumbers
+    );
     f
 }
 
@@ -257,7 +272,10 @@ fn hcn_has_four_modes_a_degenerate_bend_and_b() {
     let f = check_linear("hcn", closed);
     check_linear_against_cartesian_hessian(&Hcn, &f);
     let text = freq("hcn", false).unwrap();
-    assert!(text.contains("3N - 5 = 4") && text.contains("doubly degenerate") && text.contains("linear rotor"), "{text}");
+    assert!(
+        text.contains("3N - 5 = 4") && text.contains("doubly degenerate") && text.contains("linear rotor"),
+        "{text}"
+    );
     let j: serde_json::Value = serde_json::from_str(&freq("hcn", true).unwrap()).unwrap();
     assert_eq!(j["linear"], true);
     assert_eq!(j["wavenumbers_cm-1"].as_array().unwrap().len(), 4);

@@ -45,7 +45,7 @@ pub fn is_linear<const NA: usize>(x: &SMatrix<f64, 3, NA>) -> bool {
         return false;
     };
     let size = far.norm();
-    if !(size > 0.0) || !size.is_finite() {
+    if size.is_nan() || size <= 0.0 || !size.is_finite() {
         return false;
     }
     let axis = far / size;
@@ -128,9 +128,8 @@ impl<const NA: usize> CartesianModes<NA> {
         // The external space: translations and rotations, mass-weighted, orthonormalised
         // (Gram–Schmidt; the rotation about a linear molecule's axis comes out as zero).
         let mut external: Vec<DVector<f64>> = Vec::with_capacity(6);
-        let mut candidates: Vec<DVector<f64>> = (0..3)
-            .map(|a| DVector::from_fn(dim, |k, _| if k % 3 == a { sqrt_m[k] } else { 0.0 }))
-            .collect();
+        let mut candidates: Vec<DVector<f64>> =
+            (0..3).map(|a| DVector::from_fn(dim, |k, _| if k % 3 == a { sqrt_m[k] } else { 0.0 })).collect();
         for a in 0..3 {
             let e = Vector3::ith(a, 1.0);
             candidates.push(DVector::from_fn(dim, |k, _| {
@@ -164,7 +163,8 @@ impl<const NA: usize> CartesianModes<NA> {
         let internal: Vec<usize> = (0..dim).filter(|&k| basis.eigenvalues[k] > 0.5).collect();
         let d = DMatrix::from_fn(dim, internal.len(), |r, c| basis.eigenvectors[(r, internal[c])]);
         let reduced = d.transpose() * &weighted * &d;
-        let reduced = DMatrix::from_fn(reduced.nrows(), reduced.ncols(), |i, j| 0.5 * (reduced[(i, j)] + reduced[(j, i)]));
+        let reduced =
+            DMatrix::from_fn(reduced.nrows(), reduced.ncols(), |i, j| 0.5 * (reduced[(i, j)] + reduced[(j, i)]));
         let eig = reduced.symmetric_eigen();
         let mut order: Vec<usize> = (0..internal.len()).collect();
         order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
@@ -175,10 +175,8 @@ impl<const NA: usize> CartesianModes<NA> {
             let l = SMatrix::<f64, 3, NA>::from_fn(|a, i| y[3 * i + a] / sqrt_m[3 * i + a]);
             let lambda = eig.eigenvalues[k];
             if lambda <= 0.0 {
-                let (atom, _) = (0..NA)
-                    .map(|i| (i, l.column(i).norm()))
-                    .max_by(|a, b| a.1.total_cmp(&b.1))
-                    .unwrap_or((0, 0.0));
+                let (atom, _) =
+                    (0..NA).map(|i| (i, l.column(i).norm())).max_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or((0, 0.0));
                 return Err(ModesError::NotMinimum {
                     mode,
                     wavenumber: (-lambda).sqrt() * HARTREE_IN_WAVENUMBERS,

@@ -145,7 +145,10 @@ impl MoleculeVisitor for Eval<'_> {
                 let u = m.potential(&state.q);
                 fields.extend([
                     ("euler_chart", json!(EulerChart::Singular.name())),
-                    ("note", json!(EulerChart::Singular.note(m.name(), state.p.iter().chain(&state.pe).any(|&x| x != 0.0)))),
+                    (
+                        "note",
+                        json!(EulerChart::Singular.note(m.name(), state.p.iter().chain(&state.pe).any(|&x| x != 0.0))),
+                    ),
                     ("reason", json!(err.to_string())),
                     ("positions", rows(&positions.transpose())),
                     ("U", json!(u)),
@@ -212,7 +215,11 @@ impl EulerChart {
                  the rotation about the molecular axis moves no atom, so the kinetic metric M = [[I, A], [A^T, a]] has \
                  no inverse and there is no H(q, p, euler, pe), G or Hamilton's equations in this chart); printed are \
                  what exists: the positions, U and the kinetic matrices a, A, I{}",
-                if moving { " (the momenta give lab velocities only if J has no component along the axis)" } else { "" }
+                if moving {
+                    " (the momenta give lab velocities only if J has no component along the axis)"
+                } else {
+                    ""
+                }
             ),
         };
         format!(

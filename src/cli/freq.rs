@@ -79,7 +79,9 @@ impl MoleculeVisitor for Freq {
         let linear = is_linear(&x0);
         let (wavenumbers, vectors, not_minimum) = if linear {
             match CartesianModes::at(&m, &q0) {
-                Ok(modes) => (modes.wavenumbers(), modes.vectors.iter().map(|l| l.iter().copied().collect()).collect(), None),
+                Ok(modes) => {
+                    (modes.wavenumbers(), modes.vectors.iter().map(|l| l.iter().copied().collect()).collect(), None)
+                }
                 Err(e @ ModesError::NotMinimum { .. }) => (Vec::new(), Vec::new(), Some(e.to_string())),
                 Err(e) => {
                     return Err(CliError::context(
@@ -175,8 +177,7 @@ pub fn freq(name: &str, json: bool) -> Result<String, CliError> {
             );
             for (k, (w, v)) in f.wavenumbers.iter().zip(&f.vectors).enumerate() {
                 let paired = |j: usize| f.wavenumbers.get(j).is_some_and(|x| (x - w).abs() <= 1e-6 * w);
-                let note =
-                    if paired(k + 1) || (k > 0 && paired(k - 1)) { "  (doubly degenerate)" } else { "" };
+                let note = if paired(k + 1) || (k > 0 && paired(k - 1)) { "  (doubly degenerate)" } else { "" };
                 let _ = writeln!(s, "  {w:10.3}  {v:.6?}{note}");
             }
         }
