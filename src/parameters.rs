@@ -7,6 +7,7 @@
 
 use crate::ensemble::scene::did_you_mean;
 use crate::runtime::diagnostic::FileError;
+use crate::runtime::lanes::{KineticLanes, Real};
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use crate::runtime::{Atom, Coordinate, KineticMatrices, Molecule};
 use crate::scene::Scene;
@@ -103,6 +104,20 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Wi
     ) -> Result<(Vector3<f64>, SVector<f64, N>, f64), E> {
         self.molecule.kinetic_and_gradient(q, k, velocities, grad)
     }
+
+    fn kinetic_and_gradient_lanes<T: Real>(
+        &self,
+        q: &[T; N],
+        k: &mut KineticLanes<T, N>,
+        velocities: impl FnOnce(&KineticLanes<T, N>) -> ([T; 3], [T; N]),
+        grad: &mut [T; N],
+    ) -> ([T; 3], [T; N], T) {
+        self.molecule.kinetic_and_gradient_lanes(q, k, velocities, grad)
+    }
+
+    // `potential_gradient_lanes` is deliberately not forwarded: the molecule's lane-generic
+    // potential has the compiled-in parameters folded in, so the trait's default (lane by lane
+    // through `potential_gradient` above, i.e. `potential_gradient_with`) is the right one.
 
     fn potential(&self, q: &SVector<f64, N>) -> f64 {
         self.molecule.potential_with(q, &self.values)

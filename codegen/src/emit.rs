@@ -19,6 +19,7 @@ use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 
 use crate::expr::{ExprId, Func, Graph, Node};
+use crate::scopes::{self, Statement};
 
 /// A single-use expression heavier than this many operations gets its own `let`, so that no
 /// line of generated code grows unreadable.
@@ -63,6 +64,17 @@ pub struct FunctionSpec {
     pub ret_wrap: Option<fn(TokenStream) -> TokenStream>,
     /// A barrier splitting the body in two, if any.
     pub barrier: Option<Barrier>,
+}
+
+/// How numbers are written in an emitted function.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum Flavor {
+    /// Plain `f64` code (`2.0 * x`, `x.sin_cos()`, structural zeros by one `fill(0.0)`).
+    F64,
+    /// Code generic over `T: rovib_runtime::lanes::Real` (`T::splat(2.0) * x`; structural zeros
+    /// stored entry by entry as `T::splat(0.0)`); the same operations in the same order as
+    /// [`Flavor::F64`], so every lane computes the `f64` code's numbers bit for bit.
+    Lanes,
 }
 
 /// Operation counts of one emitted function.
@@ -184,7 +196,12 @@ impl Printed {
     }
 }
 
-fn literal(value: f64, suffixed: bool) -> Printed {
+fn literal(value: f64, suffixed: bool, flavor: Flavor) -> Printed {
+    if flavor == Flavor::Lanes {
+        let lit: Literal = format!("{:?}", value.abs()).parse().expect("a finite f64 prints as a valid literal");
+        let tokens = if value.is_sign_negative() { quote!(T::splat(-#lit)) } else { quote!(T::splat(#lit)) };
+        return Printed { tokens, prec: 4, weight: 0 };
+    }
     let text = format!("{:?}{}", value.abs(), if suffixed { "f64" } else { "" });
     let lit: Literal = text.parse().expect("a finite f64 prints as a valid literal");
     if value.is_sign_negative() {
@@ -207,10 +224,11 @@ struct Emitter<'a> {
     /// `trig[x] = [sin(x), cos(x)]` where the function needs them.
     trig: HashMap<ExprId, [Option<ExprId>; 2]>,
     printed: Vec<Option<Printed>>,
-    statements: Vec<TokenStream>,
+    statements: Vec<Statement>,
     temporaries: usize,
     ops_emitted: u64,
     next_temp: usize,
+    flavor: Flavor,
 }
 
 impl Emitter<'_> {
@@ -233,7 +251,7 @@ impl Emitter<'_> {
         self.ops_emitted += op_cost(node);
         let expr = match node {
             Node::Const(bits) => {
-                self.printed[i] = Some(literal(f64::from_bits(bits), false));
+                self.printed[i] = Some(literal(f64::from_bits(bits), false, self.flavor));
                 return;
             }
             Node::Var(k) => {
@@ -245,7 +263,7 @@ impl Emitter<'_> {
                     .find(|(v, _)| *v == k)
                     .map(|(_, t)| t.clone())
                     .expect("every variable a function reaches is one of its inputs");
-                self.statements.push(quote!(let #ident = #load;));
+                self.statements.push(Statement::binding(quote!(let #ident = #load;), vec![ident.clone()]));
                 self.printed[i] = Some(atom(ident));
                 return;
             }
@@ -254,7 +272,8 @@ impl Emitter<'_> {
                 let [s, c] = self.trig[&x].map(|id| id.expect("both present"));
                 let (ts, tc) = (self.fresh(), self.fresh());
                 let recv = self.get(x).at_least(4);
-                self.statements.push(quote!(let (#ts, #tc) = #recv.sin_cos();));
+                self.statements
+                    .push(Statement::binding(quote!(let (#ts, #tc) = #recv.sin_cos();), vec![ts.clone(), tc.clone()]));
                 self.temporaries += 2;
                 self.printed[s.index()] = Some(atom(&ts));
                 self.printed[c.index()] = Some(atom(&tc));
@@ -281,18 +300,18 @@ impl Emitter<'_> {
             }
             Node::Powi(..) => unreachable!("integer powers were lowered to multiplications"),
             Node::Powf(a, b) => {
-                let (a, b) = (receiver(self.lg, a, &self.printed), self.get(b));
+                let (a, b) = (receiver(self.lg, a, &self.printed, self.flavor), self.get(b));
                 let (ra, tb) = (a.at_least(4), &b.tokens);
                 Printed { tokens: quote!(#ra.powf(#tb)), prec: 4, weight: a.weight + b.weight + 1 }
             }
             Node::Call(f, a) => {
-                let a = receiver(self.lg, a, &self.printed);
+                let a = receiver(self.lg, a, &self.printed, self.flavor);
                 let ra = a.at_least(4);
                 let method = Ident::new(f.name(), Span::call_site());
                 Printed { tokens: quote!(#ra.#method()), prec: 4, weight: a.weight + 1 }
             }
             Node::Atan2(y, x) => {
-                let (y, x) = (receiver(self.lg, y, &self.printed), self.get(x));
+                let (y, x) = (receiver(self.lg, y, &self.printed, self.flavor), self.get(x));
                 let (ry, tx) = (y.at_least(4), &x.tokens);
                 Printed { tokens: quote!(#ry.atan2(#tx)), prec: 4, weight: y.weight + x.weight + 1 }
             }
@@ -300,7 +319,7 @@ impl Emitter<'_> {
         if self.uses[i] > 1 || expr.weight > MAX_INLINE_WEIGHT {
             let t = self.fresh();
             let tokens = &expr.tokens;
-            self.statements.push(quote!(let #t = #tokens;));
+            self.statements.push(Statement::binding(quote!(let #t = #tokens;), vec![t.clone()]));
             self.temporaries += 1;
             self.printed[i] = Some(atom(&t));
         } else {
@@ -314,21 +333,41 @@ impl Emitter<'_> {
             return;
         }
         let target = &group.target;
+        if self.flavor == Flavor::Lanes {
+            for ((index, _), v) in group.entries.iter().zip(values) {
+                let value = match self.lg.is_zero(*v) {
+                    true => quote!(T::splat(0.0)),
+                    false => self.printed[v.index()].as_ref().expect("outputs are printed").tokens.clone(),
+                };
+                self.statements.push(quote!(#target #index = #value;));
+            }
+            return;
+        }
         if values.iter().any(|&v| self.lg.is_zero(v)) {
-            self.statements.push(quote!(#target.fill(0.0);));
+            self.statements.push(Statement::store(quote!(#target.fill(0.0);)));
         }
         for ((index, _), v) in group.entries.iter().zip(values) {
             if self.lg.is_zero(*v) {
                 continue;
             }
             let value = &self.printed[v.index()].as_ref().expect("outputs are printed").tokens;
-            self.statements.push(quote!(#target #index = #value;));
+            self.statements.push(Statement::store(quote!(#target #index = #value;)));
         }
     }
 }
 
 /// Emits one function: its tokens and statistics.
 pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -> (TokenStream, FunctionStats) {
+    emit_function_as(graph, spec, var_idents, Flavor::F64)
+}
+
+/// [`emit_function`] with numbers written as `flavor` says.
+pub fn emit_function_as(
+    graph: &Graph,
+    spec: &FunctionSpec,
+    var_idents: &[Ident],
+    flavor: Flavor,
+) -> (TokenStream, FunctionStats) {
     let mut roots: Vec<ExprId> = spec.groups.iter().flat_map(|g| g.entries.iter().map(|(_, e)| *e)).collect();
     roots.extend(spec.ret);
     let stats_before = count_before(graph, &roots);
@@ -380,6 +419,7 @@ pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -
         temporaries: 0,
         ops_emitted: 0,
         next_temp: 0,
+        flavor,
     };
     // Each group's values, in the lowered graph.
     let mut values: Vec<&[ExprId]> = Vec::new();
@@ -396,7 +436,7 @@ pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -
         e.store(g, v);
     }
     if let Some(b) = &spec.barrier {
-        e.statements.push(b.statement.clone());
+        e.statements.push(Statement { tokens: b.statement.clone(), defines: Vec::new(), movable: false });
         for i in (0..lg.len()).filter(|&i| reachable[i] && late[i]) {
             e.node(i);
         }
@@ -410,15 +450,16 @@ pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -
         outputs += 1;
         let r = lowered_roots[lowered_roots.len() - 1];
         let value = e.printed[r.index()].as_ref().expect("the return value is printed").tokens.clone();
-        e.statements.push(match spec.ret_wrap {
+        let tail = match spec.ret_wrap {
             Some(wrap) => wrap(value),
             None => value,
-        });
+        };
+        e.statements.push(Statement { tokens: tail, defines: Vec::new(), movable: false });
     }
 
     let doc = doc_lines(&spec.doc);
     let signature = &spec.signature;
-    let statements = &e.statements;
+    let statements = scopes::nest(std::mem::take(&mut e.statements));
     let tokens = quote! {
         #doc
         #signature {
@@ -438,9 +479,9 @@ pub fn emit_function(graph: &Graph, spec: &FunctionSpec, var_idents: &[Ident]) -
 }
 
 /// A method-call receiver: a constant needs a type suffix (`2.0f64.sqrt()`).
-fn receiver(g: &Graph, id: ExprId, printed: &[Option<Printed>]) -> Printed {
+fn receiver(g: &Graph, id: ExprId, printed: &[Option<Printed>], flavor: Flavor) -> Printed {
     match g.as_const(id) {
-        Some(v) => literal(v, true),
+        Some(v) => literal(v, true, flavor),
         None => printed[id.index()].clone().expect("children are printed before parents"),
     }
 }

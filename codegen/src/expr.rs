@@ -30,7 +30,11 @@
 //! `x * 1`, `x * 0 = 0` and `x − x = 0` for finite `x`, `0 / x = 0` and `x / x = 1` where the
 //! quotient is finite), collection of like terms (`c·x + d·x = (c + d)·x`), collection of
 //! integer powers (`x · x = x²`, `x² · x³ = x⁵`, positive exponents only so that `x / x` is never
-//! hidden), signs pulled outward (`(−x)·y = −(x·y)`), and canonical operand order for `+` and
+//! hidden), common factors taken out of sums and differences (`c·x ± c·y = c·(x ± y)` for a
+//! constant `c`, which then folds into an enclosing constant factor, and `p·x ± p·y = p·(x ± y)`
+//! for any common factor `p`; these change the rounding by an ulp or so and could overflow only
+//! where `x ± y` does), `sin²x + cos²x = 1`, signs pulled outward (`(−x)·y = −(x·y)`), and
+//! canonical operand order for `+` and
 //! `·`, which are commutative in IEEE arithmetic. Division by a constant becomes multiplication
 //! only when the reciprocal is exact (a power of two). With simplification switched off
 //! ([`Graph::new_unsimplified`]) the constructors only hash-cons; tests use that to check that
@@ -323,6 +327,45 @@ impl Graph {
         }
     }
 
+    /// `p·x ± p·y = p·(x ± y)` for a common factor `p` that is not a constant (constants are
+    /// [`Graph::split_coefficient`]'s), with `op` the sum or the difference; `None` if `a` and `b`
+    /// are not two products with a common factor.
+    fn factored(&mut self, a: ExprId, b: ExprId, op: fn(&mut Self, ExprId, ExprId) -> ExprId) -> Option<ExprId> {
+        let (Node::Mul(a0, a1), Node::Mul(b0, b1)) = (self.node(a), self.node(b)) else { return None };
+        let (p, x, y) = if a0 == b0 {
+            (a0, a1, b1)
+        } else if a0 == b1 {
+            (a0, a1, b0)
+        } else if a1 == b0 {
+            (a1, a0, b1)
+        } else if a1 == b1 {
+            (a1, a0, b0)
+        } else {
+            return None;
+        };
+        // Constant coefficients are split_coefficient's business (with its finiteness checks).
+        if self.as_const(p).is_some() || self.as_const(x).is_some() || self.as_const(y).is_some() {
+            return None;
+        }
+        let s = op(self, x, y);
+        Some(self.mul(p, s))
+    }
+
+    /// Whether `{a, b}` is `{sin²x, cos²x}` for one `x` (then `a + b = 1`, up to rounding).
+    fn is_pythagorean(&self, a: ExprId, b: ExprId) -> bool {
+        let square_of = |e: ExprId| match self.node(e) {
+            Node::Powi(x, 2) => match self.node(x) {
+                Node::Call(f @ (Func::Sin | Func::Cos), arg) => Some((f, arg)),
+                _ => None,
+            },
+            _ => None,
+        };
+        match (square_of(a), square_of(b)) {
+            (Some((fa, xa)), Some((fb, xb))) => xa == xb && fa != fb,
+            _ => false,
+        }
+    }
+
     /// `c · x` with the constant rules applied.
     fn scaled(&mut self, c: f64, x: ExprId) -> ExprId {
         let c = self.constant(c);
@@ -350,6 +393,18 @@ impl Graph {
         // Like terms are collected only where the summed coefficient is finite.
         if xa == xb && self.as_const(xa).is_none() && (ca + cb).is_finite() {
             return self.scaled(ca + cb, xa);
+        }
+        // A common constant factor: `c·x + c·y = c·(x + y)` (one product fewer; rounds
+        // differently, by an ulp or so).
+        if ca == cb && xa != a && xb != b {
+            let s = self.add(xa, xb);
+            return self.scaled(ca, s);
+        }
+        if let Some(id) = self.factored(a, b, Self::add) {
+            return id;
+        }
+        if self.is_pythagorean(a, b) {
+            return self.one;
         }
         // A negative term is subtracted: `a + (−c)·y = a − c·y`, exactly, since negation is.
         if cb < 0.0 && xb != b {
@@ -387,6 +442,13 @@ impl Graph {
         let (cb, xb) = self.split_coefficient(b);
         if xa == xb && self.as_const(xa).is_none() && (ca - cb).is_finite() {
             return self.scaled(ca - cb, xa);
+        }
+        if ca == cb && xa != a && xb != b {
+            let d = self.sub(xa, xb);
+            return self.scaled(ca, d);
+        }
+        if let Some(id) = self.factored(a, b, Self::sub) {
+            return id;
         }
         if cb < 0.0 && xb != b {
             let y = self.scaled(-cb, xb);

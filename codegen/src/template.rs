@@ -396,6 +396,8 @@ pub(crate) fn molecule_items(
         });
     }
     // The dipole surface only where the definition has one: nothing else changes without it.
+    // The dipole functions come last (after the lane-generic ones too).
+    let before_dipole = specs.len();
     let mut has_dipole = quote!();
     if let Some(d) = dipole {
         has_dipole = quote! {
@@ -439,6 +441,21 @@ pub(crate) fn molecule_items(
         let (tokens, s) = emit::emit_function(&def.graph, spec, &idents);
         functions.push(tokens);
         stats.push(s);
+    }
+    // The lane-generic production functions (the same operations as their f64 counterparts,
+    // so their statistics are not counted again), before the dipole functions. Not for a
+    // molecule whose `a` gets its centre-of-mass term at run time: its lane functions would
+    // have to expand that term (the code the sparse form avoids) and would not be the `f64`
+    // functions' operations, so such a molecule keeps the trait's lane-by-lane defaults and
+    // `has_lane_forms() == false`, and the runtime integrates it one trajectory at a time.
+    if e.centre_of_mass_at_run_time.is_none() {
+        let (mut lane_functions, _) = crate::emit_lanes::lane_functions(&def.graph, e, &idents);
+        lane_functions.push(quote! {
+            fn has_lane_forms(&self) -> bool {
+                true
+            }
+        });
+        functions.splice(before_dipole..before_dipole, lane_functions);
     }
     let mut inherent_functions = Vec::new();
     for spec in &inherent_specs {
@@ -491,10 +508,18 @@ pub(crate) fn molecule_items(
     let unit_idents = unit_names.iter().map(|n| Ident::new(n, Span::call_site()));
     let unit_imports =
         if unit_names.is_empty() { quote!() } else { quote!(use ::rovib_runtime::units::{#(#unit_idents),*};) };
+    let lane_imports = if e.centre_of_mass_at_run_time.is_none() {
+        quote!(
+            use ::rovib_runtime::lanes::{KineticLanes, Real};
+        )
+    } else {
+        quote!()
+    };
     let items = quote! {
         use ::rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
         #unit_imports
         use ::rovib_runtime::{Atom, Coordinate, KineticMatrices, Molecule};
+        #lane_imports
 
         #doc
         #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]

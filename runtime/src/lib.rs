@@ -18,6 +18,7 @@ pub mod ensemble;
 pub mod frames;
 pub mod hamiltonian;
 pub mod integrate;
+pub mod lanes;
 pub mod modes;
 pub mod molecule;
 pub mod polarization;

@@ -20,6 +20,7 @@
 
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
+use crate::lanes::{KineticLanes, Real};
 use crate::units::CoordinateUnit;
 
 /// One atom of a molecule.
@@ -151,6 +152,65 @@ pub trait Molecule<const N: usize, const NA: usize> {
 
     /// `∂U/∂q` into `grad`; returns `U(q)` as well.
     fn potential_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64;
+
+    /// Whether the generator emitted lane-generic [`Molecule::kinetic_and_gradient_lanes`] and
+    /// [`Molecule::potential_gradient_lanes`] (the same operations as the `f64` functions).
+    /// `false` for the trait's lane-by-lane defaults, and for molecules whose `a` gets its
+    /// centre-of-mass term at run time (large molecules, `rovib_codegen::Options`): those are
+    /// integrated one trajectory at a time ([`crate::hamiltonian::lanes::available`]).
+    fn has_lane_forms(&self) -> bool {
+        false
+    }
+
+    /// [`Molecule::kinetic_and_gradient`] for `T::LANES` states at once, one per lane of `T`
+    /// ([`crate::lanes`]), with no error path: `velocities` returns `(ω, q̇)` for every lane.
+    ///
+    /// Generated molecules override this with lane-generic straight-line code (the same
+    /// operations as their `kinetic_and_gradient`, so every lane's numbers are the `f64`
+    /// function's, bit for bit); the default calls the `f64` methods lane by lane.
+    fn kinetic_and_gradient_lanes<T: Real>(
+        &self,
+        q: &[T; N],
+        k: &mut KineticLanes<T, N>,
+        velocities: impl FnOnce(&KineticLanes<T, N>) -> ([T; 3], [T; N]),
+        grad: &mut [T; N],
+    ) -> ([T; 3], [T; N], T) {
+        for lane in 0..T::LANES {
+            let mut kl = KineticMatrices::default();
+            self.kinetic(&SVector::from_fn(|i, _| q[i].lane(lane)), &mut kl);
+            k.set_lane(lane, &kl);
+        }
+        let (omega, qdot) = velocities(k);
+        let mut t = T::splat(0.0);
+        for lane in 0..T::LANES {
+            let mut g = SVector::zeros();
+            let tl = self.kinetic_energy_gradient(
+                &SVector::from_fn(|i, _| q[i].lane(lane)),
+                &Vector3::from_fn(|i, _| omega[i].lane(lane)),
+                &SVector::from_fn(|i, _| qdot[i].lane(lane)),
+                &mut g,
+            );
+            t.set_lane(lane, tl);
+            for i in 0..N {
+                grad[i].set_lane(lane, g[i]);
+            }
+        }
+        (omega, qdot, t)
+    }
+
+    /// [`Molecule::potential_gradient`] for `T::LANES` states at once (generated molecules
+    /// override it with lane-generic code; the default calls the `f64` method lane by lane).
+    fn potential_gradient_lanes<T: Real>(&self, q: &[T; N], grad: &mut [T; N]) -> T {
+        let mut u = T::splat(0.0);
+        for lane in 0..T::LANES {
+            let mut g = SVector::zeros();
+            u.set_lane(lane, self.potential_gradient(&SVector::from_fn(|i, _| q[i].lane(lane)), &mut g));
+            for i in 0..N {
+                grad[i].set_lane(lane, g[i]);
+            }
+        }
+        u
+    }
 
     /// The potential's parameters (`[potential.parameters]` of the definition, sorted by name)
     /// with their compiled-in values as written there; empty for a potential without any.

@@ -17,6 +17,7 @@ pub fn ensemble(
     threads: Option<usize>,
     quiet: bool,
     resume: bool,
+    lanes: bool,
 ) -> Result<Option<EnsembleReport>, CliError> {
     let out_dir = match out_dir {
         Some(d) => d.to_owned(),
@@ -27,6 +28,7 @@ pub fn ensemble(
     options.progress = !quiet && std::io::stderr().is_terminal();
     options.stop = crate::interrupt::flag();
     options.resume = resume;
+    options.lanes = lanes;
     #[cfg(feature = "mpi")]
     if crate::ensemble::mpi::launched() {
         return crate::ensemble::mpi::run(path, &options);

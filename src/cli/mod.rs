@@ -84,6 +84,11 @@ pub enum Command {
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
+        /// One trajectory at a time instead of two per SIMD vector (the results are the same,
+        /// bit for bit; lanes are used only with DOP853, no frozen coordinate and no kept
+        /// trajectories).
+        #[arg(long)]
+        no_lanes: bool,
         /// Continue a run that was killed or interrupted from OUT/checkpoint.jsonl: only the
         /// trajectories not finished there run; the outputs equal an uninterrupted run's.
         #[arg(long)]
@@ -161,11 +166,11 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
         Command::Run { scene: Some(scene), out, resume: None, quiet }
             if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) =>
         {
-            run_ensemble(&scene, out.as_deref(), None, quiet, false)
+            run_ensemble(&scene, out.as_deref(), None, quiet, false, true)
         }
         Command::Freq { molecule, json } => say(&freq::freq(&molecule, json)?),
-        Command::Ensemble { scene, out, threads, quiet, resume } => {
-            run_ensemble(&scene, out.as_deref(), threads, quiet, resume)
+        Command::Ensemble { scene, out, threads, quiet, resume, no_lanes } => {
+            run_ensemble(&scene, out.as_deref(), threads, quiet, resume, !no_lanes)
         }
         Command::Run { scene, out, resume, quiet } => {
             let report = match (&resume, &scene) {
@@ -227,9 +232,10 @@ fn run_ensemble(
     threads: Option<usize>,
     quiet: bool,
     resume: bool,
+    lanes: bool,
 ) -> Result<(), CliError> {
     // Under `mpirun` (with the `mpi` feature) only rank 0 has a report to print.
-    let Some(report) = ensemble::ensemble(scene, out, threads, quiet, resume)? else {
+    let Some(report) = ensemble::ensemble(scene, out, threads, quiet, resume, lanes)? else {
         return Ok(());
     };
     if !quiet {

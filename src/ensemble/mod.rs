@@ -23,6 +23,7 @@
 //! is removed when the ensemble completes.
 
 pub mod checkpoint;
+pub mod lanes;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod output;
@@ -66,6 +67,9 @@ pub struct EnsembleOptions {
     /// When set, no new trajectory starts and running ones stop at their next output time;
     /// the outputs then cover the trajectories that finished (status "interrupted").
     pub stop: Arc<AtomicBool>,
+    /// Run trajectories on SIMD lanes where possible (default; the results are the same bit
+    /// for bit, see `lanes`); `false` runs one trajectory at a time.
+    pub lanes: bool,
     /// Record finished blocks in `out_dir/checkpoint.jsonl` (removed when the ensemble
     /// completes). A run without `resume` refuses to start over an existing checkpoint.
     pub checkpoint: bool,
@@ -83,6 +87,7 @@ impl EnsembleOptions {
             threads: None,
             progress: false,
             stop: Arc::new(AtomicBool::new(false)),
+            lanes: true,
             checkpoint: true,
             resume: false,
         }
@@ -329,6 +334,7 @@ where
         min_pivot: scene.min_metric_pivot,
         keep: ensemble.keep_trajectories.map(|k| (k, options.out_dir.join("trajectories"))),
         time_scale: scene.time_unit.in_au(),
+        lanes: options.lanes,
     };
     let threads = options
         .threads

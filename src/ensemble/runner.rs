@@ -64,6 +64,9 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     pub keep: Option<(u64, PathBuf)>,
     /// Scale from a.u. of time to the scene's time unit, for kept trajectories.
     pub time_scale: f64,
+    /// Run the trajectories on SIMD lanes where the plan allows it (DOP853, nothing frozen, no
+    /// kept trajectories): the same results, bit for bit, faster (see `super::lanes`).
+    pub lanes: bool,
 }
 
 /// Sums over the trajectories of a block (or of the whole ensemble), mergeable.
@@ -187,7 +190,7 @@ impl Outcome {
         self.failed.values().sum()
     }
 
-    fn fail(&mut self, f: Failure, progress: &Progress) {
+    pub(super) fn fail(&mut self, f: Failure, progress: &Progress) {
         *self.failed.entry(f.reason.clone()).or_default() += 1;
         if self.first_failures.len() < LISTED_FAILURES {
             self.first_failures.push(f);
@@ -205,7 +208,7 @@ pub struct Progress {
 }
 
 impl Progress {
-    fn done(&self) {
+    pub(super) fn done(&self) {
         if let Some(b) = &self.bar {
             b.inc(1);
         }
@@ -234,7 +237,7 @@ impl Progress {
 /// intact, in one process and under MPI. Never set it otherwise.
 pub const PANIC_HOOK: &str = "ROVIB_TEST_PANIC_AT";
 
-fn panic_hook() -> Option<u64> {
+pub(super) fn panic_hook() -> Option<u64> {
     std::env::var(PANIC_HOOK).ok()?.trim().parse().ok()
 }
 
@@ -291,18 +294,18 @@ fn solve_reason(e: &SolveError<HamiltonianError>) -> (&'static str, String) {
 }
 
 /// Observes one trajectory at the output times into `buffer` (`[time][quantity]`).
-struct Watch<'a, 'm, M, const N: usize, const NA: usize> {
-    system: ReducedSystem<'m, M, N, NA>,
-    plan: &'a Plan<'m, M, N, NA>,
-    buffer: &'a mut [f64],
-    needs_potential: bool,
-    needs_dipole: bool,
-    k: usize,
-    initial_energy: f64,
-    stop: &'a AtomicBool,
-    failure: Option<(&'static str, f64, String)>,
-    interrupted: bool,
-    csv: Option<TrajectoryCsv>,
+pub(super) struct Watch<'a, 'm, M, const N: usize, const NA: usize> {
+    pub(super) system: ReducedSystem<'m, M, N, NA>,
+    pub(super) plan: &'a Plan<'m, M, N, NA>,
+    pub(super) buffer: &'a mut [f64],
+    pub(super) needs_potential: bool,
+    pub(super) needs_dipole: bool,
+    pub(super) k: usize,
+    pub(super) initial_energy: f64,
+    pub(super) stop: &'a AtomicBool,
+    pub(super) failure: Option<(&'static str, f64, String)>,
+    pub(super) interrupted: bool,
+    pub(super) csv: Option<TrajectoryCsv>,
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_, '_, M, N, NA> {
@@ -362,7 +365,27 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
 /// Runs trajectories `indices` (a block) and returns their outcome. Never panics on a bad
 /// trajectory: each failure is recorded and the block goes on. Stops starting trajectories
 /// (and cuts running ones short at their next output time) once `stop` is set.
+///
+/// On SIMD lanes ([`super::lanes`]) when `plan.lanes` is set and the plan allows it, else one
+/// trajectory at a time; the outcome is the same.
 pub fn run_block<M, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    sampler: &dyn Sampler<N>,
+    indices: Range<u64>,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Outcome
+where
+    M: Molecule<N, NA> + Sync,
+{
+    if super::lanes::applies(plan) {
+        return super::lanes::run_block_lanes(plan, sampler, indices, stop, progress);
+    }
+    run_block_scalar(plan, sampler, indices, stop, progress)
+}
+
+/// [`run_block`] one trajectory at a time.
+pub(super) fn run_block_scalar<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     sampler: &dyn Sampler<N>,
     indices: Range<u64>,
@@ -494,7 +517,7 @@ where
 }
 
 /// Folds one completed trajectory's observations into the accumulators.
-fn fold<M, const N: usize, const NA: usize>(
+pub(super) fn fold<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     acc: &mut Accumulators,
     buffer: &[f64],

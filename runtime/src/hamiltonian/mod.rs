@@ -7,6 +7,7 @@
 //! | [`fast`] | the fast right-hand side: one block factorization, one generated `∂T/∂q`, no G matrices |
 //! | [`reduced`] | the production system: body formulation (quaternion, J), reduced to what a scene needs |
 //! | [`body`] | the body formulation's state and the Legendre map `(J, p) = M (ω, q̇)` |
+//! | [`lanes`] | the production right-hand side over lane types: one trajectory (`f64`) or several per SIMD vector |
 //! | [`factor`] | the block factorization of the kinetic metric the fast paths solve with |
 //! | [`metric`] | the inverse metric (G11, G12, G22) and its q-derivatives |
 //! | [`euler`] | z-x-z Euler angles: rotation matrix, W and its derivatives |
@@ -56,6 +57,7 @@ mod factor_large;
 pub mod fast;
 mod finite;
 pub mod gmatrix;
+pub mod lanes;
 pub mod metric;
 pub mod reduced;
 mod state;

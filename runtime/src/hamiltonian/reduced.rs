@@ -185,6 +185,9 @@ pub struct ReducedSystem<'a, M: ?Sized, const N: usize, const NA: usize> {
     index: [usize; N],
     n_active: usize,
     all_active: bool,
+    /// Nothing reduced and the molecule has exact lane forms ([`super::lanes::available`]):
+    /// [`OdeSystem::rhs`] takes the lane-generic production code at `f64`.
+    production_lanes: bool,
     min_pivot: f64,
 }
 
@@ -248,6 +251,9 @@ where
             index,
             n_active,
             all_active: n_active == N,
+            production_lanes: n_active == N
+                && reduction.rotation == RotationPart::Free
+                && super::lanes::available(molecule),
             min_pivot: PIVOT_TOLERANCE,
         }
     }
@@ -491,6 +497,34 @@ where
 
     /// `dydt` in the reduced layout: `(q̇_a, ṗ_a, ς̇, J̇)` as the reduction keeps them.
     fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), HamiltonianError> {
+        // Nothing reduced (the common case): the lane-generic production right-hand side at
+        // `f64`, with no index maps and one finiteness test; if it fails, the general path
+        // below evaluates the state again and names the error. Molecules without exact lane
+        // forms (large ones, see `super::lanes::available`) take the general path.
+        if self.production_lanes {
+            if super::lanes::production_rhs::<M, f64, N, NA>(self.molecule, y, dydt, self.min_pivot) == 1 {
+                return Ok(());
+            }
+            return self.general_rhs_cold(y, dydt);
+        }
+        self.general_rhs(y, dydt)
+    }
+}
+
+impl<M, const N: usize, const NA: usize> ReducedSystem<'_, M, N, NA>
+where
+    M: Molecule<N, NA> + ?Sized,
+{
+    /// [`Self::general_rhs`] out of line: after the specialised path failed.
+    #[cold]
+    #[inline(never)]
+    fn general_rhs_cold(&self, y: &[f64], dydt: &mut [f64]) -> Result<(), HamiltonianError> {
+        self.general_rhs(y, dydt)
+    }
+
+    /// The right-hand side for any reduction, with an error that names what failed.
+    #[inline(always)]
+    fn general_rhs(&self, y: &[f64], dydt: &mut [f64]) -> Result<(), HamiltonianError> {
         let o = self.offsets();
         if dydt.len() != o.dim {
             return Err(HamiltonianError::DimensionMismatch { expected: o.dim, found: dydt.len() });

@@ -11,6 +11,9 @@
 use super::{InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_run};
 use crate::diagnostic::Compact;
 
+mod lanes;
+pub use lanes::{Dop853Lanes, LaneFailure, LaneFeeder, LaneSystem};
+
 /// Number of stages including the FSAL stage and the three extra dense-output stages.
 const STAGES: usize = 16;
 /// Index of the stage `f(t + h, y_new)`: the first stage of the next step.

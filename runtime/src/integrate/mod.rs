@@ -101,7 +101,7 @@ mod gauss_legendre;
 pub mod problems;
 mod rk4;
 
-pub use dop853::{Dop853, Dop853Options, Dop853Resume};
+pub use dop853::{Dop853, Dop853Lanes, Dop853Options, Dop853Resume, LaneFailure, LaneFeeder, LaneSystem};
 
 /// The default most steps of a run, the same for every method: 10⁸ (about 12 minutes of
 /// Gauss–Legendre for water on one core; `dop853.f`'s own default of 10⁵ is too few for long

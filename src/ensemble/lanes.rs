@@ -1,0 +1,234 @@
+//! A block of an ensemble on SIMD lanes: the block's trajectories run [`LANES`] at a time through
+//! the batched DOP853 ([`Dop853Lanes`]) and the lane-generic production right-hand side
+//! ([`ProductionLanes`]), each lane taking the next trajectory as soon as its own ends.
+//!
+//! Every lane computes its trajectory exactly as the one-trajectory path does, bit for bit
+//! (`tests/lanes.rs`), so the outcome is the scalar [`super::runner::run_block`]'s: the
+//! observations are kept per trajectory and folded into the accumulators in index order at the
+//! end of the block (`tests/ensemble.rs` compares the two block outcomes). A trajectory whose
+//! lane fails is run again by the scalar path, which reports its failure with the full error.
+//!
+//! Used by [`super::runner::run_block`] when the plan asks for lanes and the run allows them:
+//! DOP853, no frozen coordinate, no kept trajectory files.
+
+use std::ops::{ControlFlow, Range};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use super::runner::{Accumulators, Failure, Outcome, Plan, Progress, Watch, fold, run_block_scalar};
+use crate::runtime::Molecule;
+use crate::runtime::hamiltonian::fast::ReducedSystem;
+use crate::runtime::hamiltonian::lanes::ProductionLanes;
+use crate::runtime::integrate::{Dop853Lanes, LaneFailure, LaneFeeder, Method, Stats};
+use crate::runtime::lanes::{F64x2, Real};
+use crate::runtime::sample::Sampler;
+
+/// The lane type of ensembles: two `f64` lanes, which measured faster per trajectory than four
+/// on the baseline x86-64 build (BENCHMARKS.md, "Many trajectories per core").
+pub type Lanes = F64x2;
+/// Trajectories per vector.
+pub const LANES: usize = <Lanes as Real>::LANES;
+
+/// Whether `plan` can run on lanes: lanes asked for, DOP853, nothing reduced, no kept
+/// trajectories, and a molecule with exact lane forms (not a large molecule whose kinetic
+/// matrix is completed at run time, see [`crate::runtime::hamiltonian::lanes::available`]).
+pub fn applies<M: Molecule<N, NA>, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>) -> bool {
+    plan.lanes
+        && crate::runtime::hamiltonian::lanes::available(plan.molecule)
+        && matches!(plan.method, Method::Dop853(_))
+        && plan.reduction.active.iter().all(|&a| a)
+        && plan.reduction.rotation == crate::runtime::hamiltonian::fast::RotationPart::Free
+        && plan.keep.is_none()
+}
+
+/// What became of one trajectory of the block.
+enum Fate {
+    /// Completed: its observations and statistics.
+    Completed(Vec<f64>, Stats),
+    /// Failed before integration (sampler, initial state).
+    Failed(Failure),
+    /// Stopped by the stop flag (or never started).
+    Interrupted,
+    /// To be run again by the scalar path (its lane failed, or its observer reported a failure).
+    Redo,
+}
+
+/// One lane's running trajectory.
+struct Slot<'m, M, const N: usize, const NA: usize> {
+    index: u64,
+    system: ReducedSystem<'m, M, N, NA>,
+    buffer: Vec<f64>,
+    k: usize,
+    initial_energy: f64,
+    failure: Option<(&'static str, f64, String)>,
+    interrupted: bool,
+}
+
+struct Feeder<'a, 'm, M, const N: usize, const NA: usize> {
+    plan: &'a Plan<'m, M, N, NA>,
+    sampler: &'a dyn Sampler<N>,
+    next: u64,
+    end: u64,
+    stop: &'a AtomicBool,
+    needs_potential: bool,
+    needs_dipole: bool,
+    slots: Vec<Option<Slot<'m, M, N, NA>>>,
+    results: Vec<Option<Fate>>,
+    first: u64,
+    /// [`super::runner::PANIC_HOOK`], as the scalar path honours it.
+    panic_at: Option<u64>,
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, '_, M, N, NA> {
+    fn set(&mut self, index: u64, r: Fate) {
+        self.results[(index - self.first) as usize] = Some(r);
+    }
+}
+
+impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Feeder<'_, 'm, M, N, NA> {
+    fn next(&mut self, lane: usize, y0: &mut [f64]) -> bool {
+        while self.next < self.end {
+            let index = self.next;
+            self.next += 1;
+            if self.stop.load(Ordering::Relaxed) {
+                self.set(index, Fate::Interrupted);
+                continue;
+            }
+            if self.panic_at == Some(index) {
+                panic!("{}={index}: a deliberate panic (test hook)", super::runner::PANIC_HOOK);
+            }
+            let failure = |reason: &str, time: Option<f64>, detail: String| Failure {
+                index,
+                reason: reason.into(),
+                time,
+                detail,
+            };
+            let state = match self.sampler.draw(index) {
+                Ok(s) => s,
+                Err(e) => {
+                    self.set(index, Fate::Failed(failure("sampler", None, e.to_string())));
+                    continue;
+                }
+            };
+            let finite = state.q.iter().chain(state.p.iter()).chain(state.j.iter()).all(|v| v.is_finite())
+                && state.orientation.coords.iter().all(|v| v.is_finite());
+            if !finite {
+                let detail = format!("the drawn state is not finite: {state:?}");
+                self.set(index, Fate::Failed(failure("invalid initial state", Some(0.0), detail)));
+                continue;
+            }
+            let system = ReducedSystem::from_body(self.plan.molecule, self.plan.reduction, &state)
+                .with_min_pivot(self.plan.min_pivot);
+            if let Err(e) = system.reduce_body(&state, y0) {
+                self.set(index, Fate::Failed(failure("invalid initial state", Some(0.0), e.to_string())));
+                continue;
+            }
+            self.slots[lane] = Some(Slot {
+                index,
+                system,
+                buffer: vec![0.0; self.plan.times.len() * self.plan.quantities.len()],
+                k: 0,
+                initial_energy: 0.0,
+                failure: None,
+                interrupted: false,
+            });
+            return true;
+        }
+        false
+    }
+
+    fn observe(&mut self, lane: usize, t: f64, y: &[f64]) -> ControlFlow<()> {
+        let Some(slot) = self.slots[lane].as_mut() else { return ControlFlow::Break(()) };
+        let mut watch = Watch {
+            system: slot.system,
+            plan: self.plan,
+            buffer: &mut slot.buffer,
+            needs_potential: self.needs_potential,
+            needs_dipole: self.needs_dipole,
+            k: slot.k,
+            initial_energy: slot.initial_energy,
+            stop: self.stop,
+            failure: None,
+            interrupted: false,
+            csv: None,
+        };
+        let flow = crate::runtime::integrate::Observer::observe(&mut watch, t, y);
+        (slot.k, slot.initial_energy, slot.interrupted) = (watch.k, watch.initial_energy, watch.interrupted);
+        slot.failure = watch.failure.take();
+        flow
+    }
+
+    fn finish(&mut self, lane: usize, result: Result<Stats, LaneFailure>) {
+        let Some(slot) = self.slots[lane].take() else { return };
+        let n_times = self.plan.times.len();
+        let r = match (result, slot.failure) {
+            (Ok(_), None) if slot.interrupted => Fate::Interrupted,
+            (Ok(stats), None) if slot.k == n_times => Fate::Completed(slot.buffer, stats),
+            // A failed lane, an observer's failure or a short run: the scalar path reports it.
+            _ => Fate::Redo,
+        };
+        self.set(slot.index, r);
+    }
+}
+
+/// [`super::runner::run_block`] on lanes (see the module docs); `plan` must satisfy [`applies`].
+pub fn run_block_lanes<M, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    sampler: &dyn Sampler<N>,
+    indices: Range<u64>,
+    stop: &AtomicBool,
+    progress: &Progress,
+) -> Outcome
+where
+    M: Molecule<N, NA> + Sync,
+{
+    let Method::Dop853(options) = plan.method else { return run_block_scalar(plan, sampler, indices, stop, progress) };
+    let mut solver = match Dop853Lanes::<Lanes>::new(plan.reduction.dim(), options) {
+        Ok(s) => s,
+        Err(_) => return run_block_scalar(plan, sampler, indices, stop, progress),
+    };
+    let count = (indices.end - indices.start) as usize;
+    let mut feeder = Feeder {
+        plan,
+        sampler,
+        next: indices.start,
+        end: indices.end,
+        stop,
+        needs_potential: plan.quantities.iter().any(super::quantity::Quantity::needs_potential),
+        needs_dipole: plan.quantities.iter().any(super::quantity::Quantity::needs_dipole),
+        slots: (0..LANES).map(|_| None).collect(),
+        results: (0..count).map(|_| None).collect(),
+        first: indices.start,
+        panic_at: super::runner::panic_hook(),
+    };
+    let mut system = ProductionLanes::new(plan.molecule, plan.min_pivot);
+    if solver.integrate(&mut system, 0.0, plan.t_end, plan.interval, &mut feeder).is_err() {
+        return run_block_scalar(plan, sampler, indices, stop, progress);
+    }
+
+    // In index order, as the scalar path folds them.
+    let mut outcome = Outcome::new(Accumulators::new(plan));
+    let n_times = plan.times.len();
+    let mut workspace =
+        (!plan.correlations.is_empty()).then(|| crate::runtime::ensemble::CorrelationWorkspace::new(n_times));
+    let mut series = vec![0.0; n_times];
+    let mut correlation = vec![0.0; n_times];
+    for (offset, result) in feeder.results.into_iter().enumerate() {
+        let index = indices.start + offset as u64;
+        match result.unwrap_or(Fate::Interrupted) {
+            Fate::Completed(buffer, stats) => {
+                outcome.completed += 1;
+                outcome.steps += stats.steps;
+                outcome.rhs_evaluations += stats.rhs_evals;
+                fold(plan, &mut outcome.statistics, &buffer, workspace.as_mut(), &mut series, &mut correlation);
+                progress.done();
+            }
+            Fate::Failed(f) => {
+                outcome.fail(f, progress);
+                progress.done();
+            }
+            Fate::Interrupted => outcome.interrupted += 1,
+            Fate::Redo => outcome.merge(&run_block_scalar(plan, sampler, index..index + 1, stop, progress)),
+        }
+    }
+    outcome
+}

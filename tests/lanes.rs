@@ -1,0 +1,409 @@
+//! SIMD lanes (`runtime::lanes`, `hamiltonian::lanes`, `integrate::Dop853Lanes`) against the
+//! one-trajectory code, bit for bit:
+//!
+//! * the generated lane-generic functions at 4 lanes against the generated `f64` functions
+//!   called lane by lane (the trait's default), on varied states of every shipped molecule;
+//! * the production right-hand side at 4 and 2 lanes against itself at `f64`, and against the
+//!   general (reduction-aware) path of `ReducedSystem` to round-off;
+//! * the batched DOP853 against the scalar DOP853 with `ReducedSystem`, trajectory by
+//!   trajectory: every output, the step counts, and failures at the same time.
+
+mod common;
+
+use std::ops::ControlFlow;
+
+use common::{Rng, for_each_molecule, random_q};
+use rovib::molecules::H2o;
+use rovib::runtime::hamiltonian::PhaseState;
+use rovib::runtime::hamiltonian::fast::{self, BodyState, ReducedSystem, Reduction};
+use rovib::runtime::hamiltonian::lanes::{self, ProductionLanes, production_rhs};
+use rovib::runtime::integrate::{
+    Dop853, Dop853Lanes, Dop853Options, LaneFailure, LaneFeeder, OdeSystem, SolveError, Stats,
+};
+use rovib::runtime::lanes::{F64x2, F64x4, KineticLanes, Real};
+use rovib::runtime::nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
+use rovib::runtime::{Atom, Coordinate, KineticMatrices, Molecule, MoleculeVisitor};
+
+/// A molecule that forwards only the `f64` methods, so that its lane methods are the trait's
+/// defaults (the `f64` functions lane by lane).
+struct ScalarOnly<'a, M>(&'a M);
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for ScalarOnly<'_, M> {
+    fn name(&self) -> &'static str {
+        self.0.name()
+    }
+    fn source(&self) -> &'static str {
+        self.0.source()
+    }
+    fn atoms(&self) -> [Atom; NA] {
+        self.0.atoms()
+    }
+    fn coordinates(&self) -> [Coordinate; N] {
+        self.0.coordinates()
+    }
+    fn positions(&self, q: &SVector<f64, N>, r: &mut SMatrix<f64, 3, NA>) {
+        self.0.positions(q, r)
+    }
+    fn positions_jacobian(&self, q: &SVector<f64, N>, dr: &mut [SMatrix<f64, 3, NA>; N]) {
+        self.0.positions_jacobian(q, dr)
+    }
+    fn kinetic(&self, q: &SVector<f64, N>, k: &mut KineticMatrices<N>) {
+        self.0.kinetic(q, k)
+    }
+    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]) {
+        self.0.kinetic_jacobian(q, dk)
+    }
+    fn kinetic_energy_gradient(
+        &self,
+        q: &SVector<f64, N>,
+        omega: &Vector3<f64>,
+        qdot: &SVector<f64, N>,
+        grad: &mut SVector<f64, N>,
+    ) -> f64 {
+        self.0.kinetic_energy_gradient(q, omega, qdot, grad)
+    }
+    fn potential(&self, q: &SVector<f64, N>) -> f64 {
+        self.0.potential(q)
+    }
+    fn potential_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64 {
+        self.0.potential_gradient(q, grad)
+    }
+}
+
+fn same_bits(a: f64, b: f64) -> bool {
+    a.to_bits() == b.to_bits()
+}
+
+/// A random body state near the reference geometry: momenta of a few ħ/bohr, a random unit
+/// quaternion, |J| up to ~17 ħ.
+fn random_body<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, rng: &mut Rng) -> BodyState<N> {
+    let axis = Vector3::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+    BodyState {
+        q: random_q(m, rng),
+        p: SVector::from_fn(|_, _| rng.uniform(-5.0, 5.0)),
+        orientation: UnitQuaternion::from_scaled_axis(axis * 3.0),
+        j: Vector3::from_fn(|_, _| rng.uniform(-10.0, 10.0)),
+    }
+}
+
+fn flat_body<const N: usize>(b: &BodyState<N>) -> Vec<f64> {
+    let q = b.orientation.quaternion();
+    b.q.iter().chain(b.p.iter()).copied().chain([q.w, q.i, q.j, q.k]).chain(b.j.iter().copied()).collect()
+}
+
+/// Lane vectors of four flat states.
+fn pack4(states: &[Vec<f64>]) -> Vec<F64x4> {
+    (0..states[0].len()).map(|i| F64x4::from_array([0, 1, 2, 3].map(|l| states[l][i]))).collect()
+}
+
+#[derive(Copy, Clone)]
+struct GeneratedLanesMatchF64;
+
+impl MoleculeVisitor for GeneratedLanesMatchF64 {
+    type Output = ();
+
+    #[allow(clippy::type_complexity)]
+    fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
+    where
+        M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+    {
+        let mut rng = Rng::new(17);
+        let reference = ScalarOnly(&m);
+        for _ in 0..20 {
+            let qs: Vec<SVector<f64, N>> = (0..4).map(|_| random_q(&m, &mut rng)).collect();
+            let q: [F64x4; N] = std::array::from_fn(|i| F64x4::from_array([0, 1, 2, 3].map(|l| qs[l][i])));
+            let omega: [F64x4; 3] =
+                std::array::from_fn(|_| F64x4::from_array([0; 4].map(|_| rng.uniform(-0.01, 0.01))));
+            let qdot: [F64x4; N] = std::array::from_fn(|_| F64x4::from_array([0; 4].map(|_| rng.uniform(-0.01, 0.01))));
+            let run =
+                |mol: &dyn Fn(&mut KineticLanes<F64x4, N>, &mut [F64x4; N], &mut [F64x4; N]) -> (F64x4, F64x4)| {
+                    let (mut k, mut g, mut du) =
+                        (KineticLanes::zeros(), [F64x4::splat(0.0); N], [F64x4::splat(0.0); N]);
+                    let (t, u) = mol(&mut k, &mut g, &mut du);
+                    (k, g, du, t, u)
+                };
+            let generated = run(&|k, g, du| {
+                let (_, _, t) = m.kinetic_and_gradient_lanes(&q, k, |_| (omega, qdot), g);
+                (t, m.potential_gradient_lanes(&q, du))
+            });
+            let lane_by_lane = run(&|k, g, du| {
+                let (_, _, t) = reference.kinetic_and_gradient_lanes(&q, k, |_| (omega, qdot), g);
+                (t, reference.potential_gradient_lanes(&q, du))
+            });
+            for lane in 0..4 {
+                let (a, b) = (generated.0.lane(lane), lane_by_lane.0.lane(lane));
+                for (x, y) in
+                    a.a.iter()
+                        .chain(a.coriolis.iter())
+                        .chain(a.inertia.iter())
+                        .zip(b.a.iter().chain(b.coriolis.iter()).chain(b.inertia.iter()))
+                {
+                    assert!(same_bits(*x, *y), "{}: kinetic matrices {x} vs {y}", m.name());
+                }
+                for i in 0..N {
+                    assert!(same_bits(generated.1[i].lane(lane), lane_by_lane.1[i].lane(lane)), "{}: ∂T/∂q", m.name());
+                    assert!(same_bits(generated.2[i].lane(lane), lane_by_lane.2[i].lane(lane)), "{}: ∂U/∂q", m.name());
+                }
+                assert!(same_bits(generated.3.lane(lane), lane_by_lane.3.lane(lane)), "{}: T", m.name());
+                assert!(same_bits(generated.4.lane(lane), lane_by_lane.4.lane(lane)), "{}: U", m.name());
+            }
+        }
+    }
+}
+
+/// The generated lane functions compute, in every lane, the generated `f64` functions'
+/// numbers bit for bit, for every shipped molecule on varied geometries and velocities.
+#[test]
+fn generated_lane_functions_equal_the_f64_functions_bit_for_bit() {
+    for_each_molecule(GeneratedLanesMatchF64);
+}
+
+#[derive(Copy, Clone)]
+struct ProductionLanesMatch;
+
+impl MoleculeVisitor for ProductionLanesMatch {
+    type Output = ();
+
+    fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
+    where
+        M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+    {
+        let mut rng = Rng::new(29);
+        let dim = 2 * N + 7;
+        for _ in 0..20 {
+            let states: Vec<Vec<f64>> = (0..4).map(|_| flat_body(&random_body(&m, &mut rng))).collect();
+            let y4 = pack4(&states);
+            let mut d4 = vec![F64x4::splat(0.0); dim];
+            assert_eq!(production_rhs::<M, F64x4, N, NA>(&m, &y4, &mut d4, 1e-12), 0b1111, "{}", m.name());
+            let y2: Vec<F64x2> = (0..dim).map(|i| F64x2::from_array([states[2][i], states[3][i]])).collect();
+            let mut d2 = vec![F64x2::splat(0.0); dim];
+            assert_eq!(production_rhs::<M, F64x2, N, NA>(&m, &y2, &mut d2, 1e-12), 0b11);
+            for (lane, y) in states.iter().enumerate() {
+                let mut d = vec![0.0; dim];
+                assert_eq!(production_rhs::<M, f64, N, NA>(&m, y, &mut d, 1e-12), 1);
+                for i in 0..dim {
+                    assert!(same_bits(d4[i].lane(lane), d[i]), "{} lane {lane} component {i}", m.name());
+                    if lane >= 2 {
+                        assert!(same_bits(d2[i].lane(lane - 2), d[i]));
+                    }
+                }
+                // Against the general path (a reduction that keeps everything but is not
+                // recognised as "nothing reduced": the same system through the index maps).
+                let template = PhaseState::<N> {
+                    q: SVector::from_fn(|i, _| y[i]),
+                    p: SVector::zeros(),
+                    euler: Vector3::new(0.1, 1.0, 0.2),
+                    pe: Vector3::zeros(),
+                };
+                let mut general = GeneralOnly(ReducedSystem::new(&m, Reduction::none(), &template));
+                let mut dg = vec![0.0; dim];
+                general.rhs(0.0, y, &mut dg).unwrap();
+                let scale = dg.iter().fold(0f64, |a, v| a.max(v.abs()));
+                for i in 0..dim {
+                    assert!((d[i] - dg[i]).abs() <= 1e-12 * scale, "{} component {i}: {} vs {}", m.name(), d[i], dg[i]);
+                }
+            }
+            // A lane with a non-finite state, or a singular metric, fails alone.
+            let mut bad = states.clone();
+            bad[1][0] = f64::NAN;
+            let y4 = pack4(&bad);
+            assert_eq!(production_rhs::<M, F64x4, N, NA>(&m, &y4, &mut d4, 1e-12), 0b1101, "{}", m.name());
+            assert_eq!(production_rhs::<M, F64x4, N, NA>(&m, &pack4(&states), &mut d4, 2.0), 0, "{}", m.name());
+        }
+    }
+}
+
+/// `ReducedSystem` through its general (reduction-aware) path: the quaternion block is
+/// recomputed with nalgebra's quaternion product, so this is an independent evaluation of the
+/// same equations.
+struct GeneralOnly<'a, M, const N: usize, const NA: usize>(ReducedSystem<'a, M, N, NA>);
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> OdeSystem for GeneralOnly<'_, M, N, NA> {
+    type Error = rovib::runtime::HamiltonianError;
+    fn dim(&self) -> usize {
+        self.0.dim()
+    }
+    fn rhs(&mut self, _t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), Self::Error> {
+        // The general path: expand the flat state to a body state and evaluate by the fast
+        // Euler-free formulas of ReducedSystem::energy's neighbours (velocities by the solve,
+        // then the rates), here through `expand_body_and_energy` for ω and the molecule's
+        // gradient functions.
+        let n = N;
+        let body = self.0.expand_body(y)?;
+        let mut k = KineticMatrices::default();
+        let m = self.0.molecule();
+        m.kinetic(&body.q, &mut k);
+        let factor = fast::MetricFactor::new(&k, &body.q)?;
+        let (omega, qdot) = factor.solve(&body.j, &body.p);
+        let mut dt = SVector::zeros();
+        m.kinetic_energy_gradient(&body.q, &omega, &qdot, &mut dt);
+        let mut du = SVector::zeros();
+        m.potential_gradient(&body.q, &mut du);
+        let quat = Quaternion::new(y[2 * n], y[2 * n + 1], y[2 * n + 2], y[2 * n + 3]);
+        let dq = quat * Quaternion::from_imag(omega) * 0.5;
+        let dj = body.j.cross(&omega);
+        for i in 0..n {
+            dydt[i] = qdot[i];
+            dydt[n + i] = dt[i] - du[i];
+        }
+        dydt[2 * n..2 * n + 4].copy_from_slice(&[dq.w, dq.i, dq.j, dq.k]);
+        dydt[2 * n + 4..].copy_from_slice(dj.as_slice());
+        Ok(())
+    }
+}
+
+/// The lane-generic production right-hand side at 4 and 2 lanes equals its `f64` instance bit
+/// for bit, lane by lane; the `f64` instance equals an evaluation through nalgebra's metric
+/// factorization and quaternion product to round-off; a non-finite lane or a failed pivot test
+/// clears only its own bit.
+#[test]
+fn production_rhs_lanes_equal_f64_and_the_general_path() {
+    for_each_molecule(ProductionLanesMatch);
+}
+
+/// Which molecules take the lane code: every shipped molecule has exact lane forms (so the
+/// tests above run the generated lane code, not the lane-by-lane defaults), a molecule without
+/// them does not; its nothing-reduced `ReducedSystem` then takes the general path, which gives
+/// the fast path's q̇ and ṗ bit for bit (as the lane path does for molecules with lane forms,
+/// `tests/fast_path.rs`).
+#[derive(Copy, Clone)]
+struct LaneAvailability;
+
+impl MoleculeVisitor for LaneAvailability {
+    type Output = ();
+
+    fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
+    where
+        M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+    {
+        assert!(lanes::available(&m), "{} has exact lane forms", m.name());
+        let scalar = ScalarOnly(&m);
+        assert!(!lanes::available(&scalar), "{}: the trait's defaults are not lane forms", m.name());
+        let mut rng = Rng::new(31);
+        for _ in 0..10 {
+            let s = common::random_state(&m, &mut rng);
+            let mut system = ReducedSystem::new(&scalar, Reduction::none(), &s);
+            let mut y = vec![0.0; system.dim()];
+            system.reduce(&s, &mut y).unwrap();
+            let mut dy = vec![0.0; y.len()];
+            system.rhs(0.0, &y, &mut dy).unwrap();
+            let reference = fast::rhs(&scalar, &s).unwrap();
+            assert_eq!(&dy[..N], reference.q.as_slice(), "{}", m.name());
+            assert_eq!(&dy[N..2 * N], reference.p.as_slice(), "{}", m.name());
+        }
+    }
+}
+
+#[test]
+fn lane_code_only_for_molecules_with_lane_forms() {
+    for_each_molecule(LaneAvailability);
+}
+
+/// What one trajectory produced: every output, then the end.
+#[derive(Clone, Debug, PartialEq)]
+struct Record {
+    outputs: Vec<(f64, Vec<f64>)>,
+    end: Option<Result<Stats, LaneFailure>>,
+}
+
+/// Feeds trajectories `0..states.len()` to the lanes and records them; trajectory `stop_at`
+/// (if any) breaks at its third output.
+struct Feeder {
+    states: Vec<Vec<f64>>,
+    next: usize,
+    lane_job: Vec<usize>,
+    records: Vec<Record>,
+    stop_at: Option<usize>,
+}
+
+impl LaneFeeder for Feeder {
+    fn next(&mut self, lane: usize, y0: &mut [f64]) -> bool {
+        if self.next == self.states.len() {
+            return false;
+        }
+        y0.copy_from_slice(&self.states[self.next]);
+        self.lane_job[lane] = self.next;
+        self.next += 1;
+        true
+    }
+    fn observe(&mut self, lane: usize, t: f64, y: &[f64]) -> ControlFlow<()> {
+        let job = self.lane_job[lane];
+        let r = &mut self.records[job];
+        r.outputs.push((t, y.to_vec()));
+        if Some(job) == self.stop_at && r.outputs.len() == 3 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    }
+    fn finish(&mut self, lane: usize, result: Result<Stats, LaneFailure>) {
+        let job = self.lane_job[lane];
+        assert!(self.records[job].end.is_none(), "trajectory {job} finished twice");
+        self.records[job].end = Some(result);
+    }
+}
+
+/// The batched DOP853 runs eleven water trajectories on four lanes (so lanes take new
+/// trajectories as others finish, at different times) and each one equals the scalar DOP853's
+/// run of the same trajectory bit for bit: every output time and state, the numbers of steps,
+/// rejections and right-hand sides. One trajectory stops at its third output (its observer's
+/// break) and one fails (a state whose stretch flies apart until the metric test fails): the
+/// scalar solver stops at the same time.
+#[test]
+fn batched_dop853_equals_scalar_dop853_trajectory_by_trajectory() {
+    let m = H2o;
+    let mut rng = Rng::new(5);
+    let mut states: Vec<Vec<f64>> = (0..11).map(|_| flat_body(&random_body(&m, &mut rng))).collect();
+    // Trajectory 6 dissociates: a huge stretch momentum drives r1 out until the strict pivot test fails.
+    states[6][3] = 60.0;
+    let options = Dop853Options { rtol: 1e-9, atol: 1e-9, ..Default::default() };
+    let (t_end, interval) = (2000.0, 150.0);
+    let min_pivot = 1e-3;
+
+    let dim = 13;
+    let mut feeder = Feeder {
+        states: states.clone(),
+        next: 0,
+        lane_job: vec![0; 4],
+        records: vec![Record { outputs: vec![], end: None }; 11],
+        stop_at: Some(2),
+    };
+    let mut lanes = Dop853Lanes::<F64x4>::new(dim, options).unwrap();
+    lanes.integrate(&mut ProductionLanes::new(&m, min_pivot), 0.0, t_end, interval, &mut feeder).unwrap();
+
+    let mut failures = 0;
+    for (j, y0) in states.iter().enumerate() {
+        let template = PhaseState::<3> {
+            q: SVector::from_fn(|i, _| y0[i]),
+            p: SVector::zeros(),
+            euler: Vector3::zeros(),
+            pe: Vector3::zeros(),
+        };
+        let mut system = ReducedSystem::new(&m, Reduction::none(), &template).with_min_pivot(min_pivot);
+        let mut scalar = Dop853::new(dim, options).unwrap();
+        let mut outputs = Vec::new();
+        let mut observer = |t: f64, y: &[f64]| {
+            outputs.push((t, y.to_vec()));
+            if j == 2 && outputs.len() == 3 { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+        };
+        let result = scalar.integrate(&mut system, 0.0, y0, t_end, interval, &mut observer);
+        let batched = &feeder.records[j];
+        assert_eq!(batched.outputs.len(), outputs.len(), "trajectory {j}: output count");
+        for ((tb, yb), (ts, ys)) in batched.outputs.iter().zip(&outputs) {
+            assert!(same_bits(*tb, *ts), "trajectory {j}: time {tb} vs {ts}");
+            for (a, b) in yb.iter().zip(ys) {
+                assert!(same_bits(*a, *b), "trajectory {j} at t = {ts}: {a} vs {b}");
+            }
+        }
+        match (batched.end.expect("every trajectory finishes"), result) {
+            (Ok(a), Ok(b)) => assert_eq!(a, b, "trajectory {j}: statistics"),
+            (Err(LaneFailure::Rhs { t }), Err(SolveError::Rhs { t: ts, .. })) => {
+                assert!(same_bits(t, ts), "trajectory {j}: failed at {t} vs {ts}");
+                failures += 1;
+            }
+            (a, b) => panic!("trajectory {j}: batched {a:?}, scalar {b:?}"),
+        }
+    }
+    assert_eq!(failures, 1, "trajectory 6 fails in both");
+    assert_eq!(feeder.records[2].outputs.len(), 3);
+}
