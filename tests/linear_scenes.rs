@@ -13,9 +13,7 @@
 //! computed in whichever chart the run is in) and the lab-frame angular momentum Σ m (x − X) ×
 //! (v − V) of the lab.xyz frames are conserved across every chart switch.
 //!
-//! Each scene takes about a second in a debug build; the long scenes' full 10 ps are not run
-//! here (`cargo run --release -- run scenes/hcn_near_linear.toml` does, BENCHMARKS/STABILITY
-//! give their figures).
+//! The long scenes also run over their full 10 ps (`near_linear_scenes_over_their_full_length`).
 
 mod common;
 
@@ -112,13 +110,25 @@ fn angular_momentum(lab: &LabState<3>, masses: &[f64; 3]) -> Vector3<f64> {
 
 /// Runs `scene` (time unit fs) to T_COMPARE and checks it (module documentation).
 fn check_scene<M: Molecule<3, 3> + Copy>(scene: &str, m: M, q_of_x: QOfX, min_switches: u64) {
+    check_scene_for(scene, m, q_of_x, min_switches, T_COMPARE, 1e-10);
+}
+
+/// [`check_scene`] over `t_compare` ħ/E_h with positions within `max_position_error` bohr.
+fn check_scene_for<M: Molecule<3, 3> + Copy>(
+    scene: &str,
+    m: M,
+    q_of_x: QOfX,
+    min_switches: u64,
+    t_compare: f64,
+    max_position_error: f64,
+) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(root.join("scenes").join(scene)).unwrap();
     assert!(text.contains("time = \"fs\""), "{scene}: the test sets `end` in fs");
     assert!(text.contains(&format!("molecule = \"{}\"", m.name())), "{scene}");
     let dir = std::env::temp_dir().join(format!("rovib-linear-scenes-{}-{scene}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let end_fs = T_COMPARE * AU_TIME_IN_FS;
+    let end_fs = t_compare * AU_TIME_IN_FS;
     let shortened: String = text
         .lines()
         .map(|l| {
@@ -159,7 +169,7 @@ fn check_scene<M: Molecule<3, 3> + Copy>(scene: &str, m: M, q_of_x: QOfX, min_sw
     let mut rows: Vec<(f64, LabState<3>)> = Vec::new();
     Dop853::new(18, options)
         .unwrap()
-        .integrate(&mut reference, 0.0, &y0, T_COMPARE, T_COMPARE / 500.0, &mut |t: f64, y: &[f64]| {
+        .integrate(&mut reference, 0.0, &y0, t_compare, t_compare / 500.0, &mut |t: f64, y: &[f64]| {
             rows.push((t, LabState::<3>::read_from(y)));
             ControlFlow::Continue(())
         })
@@ -196,7 +206,7 @@ fn check_scene<M: Molecule<3, 3> + Copy>(scene: &str, m: M, q_of_x: QOfX, min_sw
         cartesian_fs > 0.0 && cartesian_fs < end_fs,
         "{scene}: {cartesian_fs} fs of {end_fs} in the Cartesian chart"
     );
-    assert!(max_dx <= 1e-10, "{scene}: {max_dx:e} bohr from the Cartesian reference");
+    assert!(max_dx <= max_position_error, "{scene}: {max_dx:e} bohr from the Cartesian reference");
     assert!(dh <= 1e-10, "{scene}: H changes by {dh:e} hartree across the switches");
     assert!(dl <= 1e-9, "{scene}: the lab angular momentum changes by {dl:e} ħ across the switches");
     std::fs::remove_dir_all(&dir).unwrap();
@@ -236,4 +246,16 @@ fn co2_from_linear_with_zero_angular_momentum() {
 #[test]
 fn co2_near_linear() {
     check_scene("co2_near_linear.toml", Co2, internal_coordinates::co2, 4);
+}
+
+/// The long scenes over their full 10 ps (4.1·10⁵ ħ/E_h, hundreds of switches): H and the lab
+/// angular momentum conserved across every switch as over 10⁴ a.u.; the positions, which
+/// separate from the reference as the two integrations' errors grow over 200 bend periods,
+/// within 1e-8 bohr (measured: HCN 865 switches, 7.1e-10 bohr; CO2 296 switches, 1.1e-10 bohr).
+/// Half a second in the test profile.
+#[test]
+fn near_linear_scenes_over_their_full_length() {
+    let t = 10_000.0 / AU_TIME_IN_FS;
+    check_scene_for("hcn_near_linear.toml", Hcn, internal_coordinates::hcn, 500, t, 1e-8);
+    check_scene_for("co2_near_linear.toml", Co2, internal_coordinates::co2, 200, t, 1e-8);
 }
