@@ -210,11 +210,21 @@ pub fn singular_reference_note(def: &Definition, exprs: &kinetic::KineticExprs) 
         .map(|r| norm([r[1] * e[2] - r[2] * e[1], r[2] * e[0] - r[0] * e[2], r[0] * e[1] - r[1] * e[0]]))
         .fold(0.0, f64::max);
     (off_axis <= 1e-8 * size).then(|| {
+        let what_rovib_does = if def.kinds.is_some() {
+            "this is supported, not an error: the coordinates are declared by kind, so `rovib run` (method dop853) \
+             integrates near linear in lab-frame Cartesian coordinates with U(x) and switches back once the molecule \
+             is bent, `rovib eval` at the reference says the chart is singular and prints the energy and the \
+             Cartesian quantities, and `rovib freq` gives the 3N - 5 normal modes from the Cartesian Hessian"
+        } else {
+            "the positions are explicit (no coordinate kinds), so rovib has no Cartesian potential U(x) to continue \
+             in: `rovib eval` at the reference prints only the energy and kinetic matrices, and a run that reaches \
+             linear stops with a singular-metric error; declare each coordinate's kind (distance, angle, dihedral) \
+             to get the Cartesian fallback"
+        };
         format!(
             "note: the reference geometry of molecule `{}` ({}) is linear: internal coordinates plus Euler angles are \
-             singular there (the rotation about the molecular axis moves no atom), so `rovib eval` at the reference \
-             reports a singular metric; `rovib run` (dop853) continues near linear in lab-frame Cartesian \
-             coordinates when the coordinates are declared by kind (see the README, \"Linear molecules\")",
+             singular there (the rotation about the molecular axis moves no atom); {what_rovib_does} (README, \
+             \"Linear molecules\")",
             def.name, def.path
         )
     })
