@@ -437,9 +437,13 @@ impl Validator<'_> {
     /// reported at once; the value is `None` where the problem was.
     /// Adds `e` to the errors found so far and returns them all: for an error after which
     /// validation cannot go on (the coordinates by kind).
+    /// Every problem so far and `e`, in file order: what a definition that cannot be read on
+    /// returns.
     fn fail(&mut self, e: DefinitionError) -> Vec<DefinitionError> {
         self.errors.push(e);
-        std::mem::take(&mut self.errors)
+        let mut errors = std::mem::take(&mut self.errors);
+        errors.sort_by_key(|e| (e.line, e.column));
+        errors
     }
 
     fn check<T>(&mut self, result: Result<T, DefinitionError>) -> Option<T> {
