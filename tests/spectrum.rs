@@ -21,12 +21,12 @@ use std::path::{Path, PathBuf};
 use common::ensemble::{column, options};
 use rovib::cli::freq::frequencies;
 use rovib::ensemble::run_ensemble;
-use rovib::molecules::{H2o, Nh3};
-use rovib::runtime::Molecule;
+use rovib::molecules::{H2o, Hcn, Nh3};
 use rovib::runtime::modes::{NormalModes, stationary_point};
-use rovib::runtime::nalgebra::{Matrix3, SMatrix, SymmetricEigen, Vector3};
+use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
 use rovib::runtime::spectrum::{BOLTZMANN_HARTREE_PER_K, QuantumCorrection, Spectrum, double_harmonic_km_per_mol};
 use rovib::runtime::units::HARTREE_IN_WAVENUMBERS;
+use rovib::runtime::{KineticMatrices, Molecule};
 use rovib::scene::parse_scene;
 
 /// Water's fixed charges from molecules/h2o.toml (O, H1, H2), e.
@@ -345,3 +345,293 @@ fn a_rigid_symmetric_top_follows_the_classical_rotational_envelope() {
     println!("20-380 cm-1: {:.5e}, envelope {:.5e} ± {se:.1e}", total.0, total.1);
     assert!((total.0 - total.1).abs() < 4.0 * se + 0.01 * total.1, "20-380 cm-1: {} against {}", total.0, total.1);
 }
+
+/// HCN (molecules/hcn.toml, which has no dipole surface) with a point-charge dipole of this
+/// test's own, `μ = Σ_i q_i R_i` about the centre of mass: linear at its minimum, so its
+/// stretching bands are parallel bands with a P and an R branch and no Q branch.
+#[derive(Copy, Clone)]
+struct ChargedHcn;
+
+/// The test dipole's charges (H, C, N), e: a model, not HCN's; only the band's shape matters.
+const HCN_CHARGES: [f64; 3] = [0.2, 0.2, -0.4];
+
+impl Molecule<3, 3> for ChargedHcn {
+    fn name(&self) -> &'static str {
+        Hcn.name()
+    }
+    fn source(&self) -> &'static str {
+        Hcn.source()
+    }
+    fn atoms(&self) -> [rovib::runtime::Atom; 3] {
+        Hcn.atoms()
+    }
+    fn coordinates(&self) -> [rovib::runtime::Coordinate; 3] {
+        Hcn.coordinates()
+    }
+    fn positions(&self, q: &SVector<f64, 3>, r: &mut SMatrix<f64, 3, 3>) {
+        Hcn.positions(q, r)
+    }
+    fn positions_jacobian(&self, q: &SVector<f64, 3>, dr: &mut [SMatrix<f64, 3, 3>; 3]) {
+        Hcn.positions_jacobian(q, dr)
+    }
+    fn kinetic(&self, q: &SVector<f64, 3>, k: &mut KineticMatrices<3>) {
+        Hcn.kinetic(q, k)
+    }
+    fn kinetic_energy_gradient(
+        &self,
+        q: &SVector<f64, 3>,
+        omega: &Vector3<f64>,
+        qdot: &SVector<f64, 3>,
+        grad: &mut SVector<f64, 3>,
+    ) -> f64 {
+        Hcn.kinetic_energy_gradient(q, omega, qdot, grad)
+    }
+    fn kinetic_and_gradient<E>(
+        &self,
+        q: &SVector<f64, 3>,
+        k: &mut KineticMatrices<3>,
+        velocities: impl FnOnce(&KineticMatrices<3>) -> Result<(Vector3<f64>, SVector<f64, 3>), E>,
+        grad: &mut SVector<f64, 3>,
+    ) -> Result<(Vector3<f64>, SVector<f64, 3>, f64), E> {
+        Hcn.kinetic_and_gradient(q, k, velocities, grad)
+    }
+    fn potential(&self, q: &SVector<f64, 3>) -> f64 {
+        Hcn.potential(q)
+    }
+    fn potential_gradient(&self, q: &SVector<f64, 3>, grad: &mut SVector<f64, 3>) -> f64 {
+        Hcn.potential_gradient(q, grad)
+    }
+    fn reference_geometry(&self) -> Option<SVector<f64, 3>> {
+        Hcn.reference_geometry()
+    }
+    fn internal_coordinates(&self, x: &SMatrix<f64, 3, 3>, q: &mut SVector<f64, 3>) -> bool {
+        Hcn.internal_coordinates(x, q)
+    }
+    fn cartesian_potential(&self, x: &SMatrix<f64, 3, 3>) -> Option<f64> {
+        Hcn.cartesian_potential(x)
+    }
+    fn cartesian_potential_gradient(&self, x: &SMatrix<f64, 3, 3>, grad: &mut SMatrix<f64, 3, 3>) -> Option<f64> {
+        Hcn.cartesian_potential_gradient(x, grad)
+    }
+    fn has_dipole(&self) -> bool {
+        true
+    }
+    fn dipole(&self, q: &SVector<f64, 3>, mu: &mut Vector3<f64>) {
+        let mut r = SMatrix::<f64, 3, 3>::zeros();
+        Hcn.positions(q, &mut r);
+        *mu = (0..3).map(|i| HCN_CHARGES[i] * r.column(i)).sum();
+    }
+}
+
+/// HCN's rotational constant B_e (cm⁻¹) at its linear minimum, from the masses and bond lengths
+/// alone: `B = 1/(2I)` hartree with `I = Σ m_i z_i²` about the centre of mass.
+fn hcn_rotational_constant() -> f64 {
+    let q = Hcn.reference_geometry().unwrap();
+    let (rch, rcn) = (q[0], q[1]);
+    let m: Vec<f64> = Hcn.atoms().iter().map(|a| a.mass).collect();
+    let z = [0.0, rch, rch + rcn];
+    let com = (0..3).map(|i| m[i] * z[i]).sum::<f64>() / m.iter().sum::<f64>();
+    let inertia: f64 = (0..3).map(|i| m[i] * (z[i] - com).powi(2)).sum();
+    HARTREE_IN_WAVENUMBERS / (2.0 * inertia)
+}
+
+/// The classical P–R separation of a parallel band, `√(8 kT B)` in cm⁻¹ (docs/equations.md,
+/// section 11): `2.3583·√(B·T)` with B in cm⁻¹ and T in K.
+fn classical_pr_separation(b: f64, kelvin: f64) -> f64 {
+    2.3583 * (b * kelvin).sqrt()
+}
+
+/// The Hann taper's power spectrum (the shape of one line), at `x` = (f − f₀)·T.
+fn hann_line(x: f64) -> f64 {
+    if x.abs() < 1e-9 {
+        return 1.0;
+    }
+    if (x.abs() - 1.0).abs() < 1e-9 {
+        return 0.25;
+    }
+    let s = (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x);
+    (s / (1.0 - x * x)).powi(2)
+}
+
+/// The classical contour of a parallel band, `|Δ| exp(−Δ²/2s²)` (Δ = ν − ν₀; maxima at ±s),
+/// seen through the window of resolution `resolution` (FWHM, cm⁻¹), at `nu − nu0`.
+fn windowed_contour(d: f64, s: f64, resolution: f64) -> f64 {
+    let x_per_cm = rovib::runtime::spectrum::HANN_FWHM / resolution;
+    let step = resolution / 40.0;
+    let n = (6.0 * s / step).ceil() as i64;
+    (-n..=n)
+        .map(|i| {
+            let delta = i as f64 * step;
+            delta.abs() * (-delta * delta / (2.0 * s * s)).exp() * hann_line((d - delta) * x_per_cm)
+        })
+        .sum::<f64>()
+        * step
+}
+
+/// What the P–R test reads off one band of a spectrum.
+struct Band {
+    /// The band centre (the centroid), cm⁻¹.
+    centre: f64,
+    /// The width s of the least-squares windowed classical contour: its maxima at centre ± s.
+    fitted: f64,
+    /// The maxima located directly (a parabola through the points within ±`resolution` of the
+    /// highest point of each branch), cm⁻¹.
+    p: f64,
+    r: f64,
+}
+
+/// The band of `s` around `guess` (cm⁻¹), fitted within ±`half` cm⁻¹ of its centroid.
+fn pr_band(s: &Spectrum, guess: f64, half: f64) -> Band {
+    let resolution = s.resolution();
+    let points = |lo: f64, hi: f64| -> Vec<(f64, f64)> {
+        s.wavenumber.iter().zip(&s.lineshape).filter(|(nu, _)| (lo..=hi).contains(*nu)).map(|(&a, &b)| (a, b)).collect()
+    };
+    let wide = points(guess - half, guess + half);
+    let weight: f64 = wide.iter().map(|p| p.1).sum();
+    let centre = wide.iter().map(|p| p.0 * p.1).sum::<f64>() / weight;
+    let band = points(centre - half, centre + half);
+    // The contour's width by least squares with its height free: maximise (Σ y m)² / Σ m², first
+    // on a 0.5 cm⁻¹ grid, then by golden section.
+    let score = |w: f64| {
+        let (mut ym, mut mm) = (0.0, 0.0);
+        for &(nu, y) in &band {
+            let m = windowed_contour(nu - centre, w, resolution);
+            ym += y * m;
+            mm += m * m;
+        }
+        ym * ym / mm
+    };
+    let mut best = 4.0;
+    for i in 0..=150 {
+        let w = 4.0 + 0.5 * i as f64;
+        if score(w) > score(best) {
+            best = w;
+        }
+    }
+    let (mut a, mut b) = (best - 0.5, best + 0.5);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..40 {
+        let (c, d) = (b - g * (b - a), a + g * (b - a));
+        if score(c) > score(d) {
+            b = d;
+        } else {
+            a = c;
+        }
+    }
+    let fitted = 0.5 * (a + b);
+    let vertex = |lo: f64, hi: f64| {
+        let branch = points(lo, hi);
+        let top = branch.iter().copied().max_by(|x, y| x.1.total_cmp(&y.1)).unwrap().0;
+        let near: Vec<(f64, f64)> = branch.iter().copied().filter(|p| (p.0 - top).abs() <= resolution).collect();
+        // y = c0 + c1 u + c2 u², u = ν − top, by the normal equations.
+        let mut m = Matrix3::zeros();
+        let mut v = Vector3::zeros();
+        for (nu, y) in near {
+            let u = nu - top;
+            let basis = Vector3::new(1.0, u, u * u);
+            m += basis * basis.transpose();
+            v += basis * y;
+        }
+        let c = m.try_inverse().unwrap() * v;
+        top - c[1] / (2.0 * c[2])
+    };
+    Band { centre, fitted, p: vertex(centre - half, centre), r: vertex(centre, centre + half) }
+}
+
+const PR_KELVIN: f64 = 300.0;
+const PR_BATCHES: u64 = 8;
+
+fn pr_scene(seed: u64, trajectories: u64) -> String {
+    format!(
+        "molecule = \"hcn\"\n[ensemble]\ntrajectories = {trajectories}\nseed = {seed}\nmethod = \"thermal\"\n\
+         temperature = {PR_KELVIN}\nregion = {{ energy_cap = 0.05 }}\n[statistics]\nmeans = [\"H\"]\n\
+         correlations = [\"mu_x\", \"mu_y\", \"mu_z\"]\n[integrator]\nmethod = \"dop853\"\nrtol = 1e-8\natol = 1e-8\n\
+         [run]\nend = {PR_END}\noutput_interval = 20.0\n"
+    )
+}
+
+const PR_END: f64 = 200000.0;
+const PR_TRAJECTORIES: u64 = 48;
+
+/// The P–R contour of HCN's CN-stretching band (a parallel band) at 300 K from a thermal
+/// ensemble through the spectrum pipeline (`rovib::ensemble`: thermal sampler, chart switch
+/// at the near-linear geometries the bend visits, dipole correlation, spectrum.csv): the
+/// maxima of its P and R branches are `2.3583·√(B·T)` cm⁻¹ apart, B from the masses and bond
+/// lengths alone.
+#[test]
+fn the_p_r_maxima_of_a_linear_molecule_are_classically_separated() {
+    use rovib::ensemble::run_with_sampler;
+    use rovib::runtime::sample::{Region, Thermal};
+    let b = hcn_rotational_constant();
+    let expected = classical_pr_separation(b, PR_KELVIN);
+    let mut bands = Vec::new();
+    for batch in 0..PR_BATCHES {
+        let dir = temp_dir(&format!("pr{batch}"));
+        let scene = parse_scene("pr.toml", &pr_scene(200 + batch, PR_TRAJECTORIES)).unwrap();
+        let region = Region { energy_cap: Some(0.05), limits: [None; 3] };
+        let sampler = Thermal::new(&ChargedHcn, PR_KELVIN, &region, 200 + batch).unwrap();
+        let report = run_with_sampler(&ChargedHcn, &scene, &sampler, "thermal", &options(dir.clone(), 2)).unwrap();
+        assert_eq!(report.outcome.completed, report.requested, "{:?}", report.outcome.first_failures);
+        let csv = std::fs::read_to_string(dir.join("spectrum.csv")).unwrap();
+        let mut lines = csv.lines();
+        let length: f64 = lines.next().unwrap().split_whitespace().nth(10).unwrap().parse().unwrap();
+        let header: Vec<String> = lines.next().unwrap().split(',').map(str::to_owned).collect();
+        let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+        let (nu, shape) = (column(&header, "wavenumber_cm-1"), column(&header, "lineshape_e2bohr2_per_hartree"));
+        let s = Spectrum {
+            wavenumber: rows.iter().map(|r| r[nu]).collect(),
+            lineshape: rows.iter().map(|r| r[shape]).collect(),
+            length,
+        };
+        let band = pr_band(&s, PR_BAND_GUESS, 100.0);
+        println!(
+            "batch {batch}: band centre {:.2} cm-1, fitted contour maxima {:.2} apart, direct maxima {:.2} and {:.2} \
+             ({:.2} apart), resolution {:.2} cm-1, {} switches in {} trajectories",
+            band.centre,
+            2.0 * band.fitted,
+            band.p,
+            band.r,
+            band.r - band.p,
+            s.resolution(),
+            report.outcome.charts.switches,
+            report.outcome.charts.trajectories_switched
+        );
+        bands.push((band, s.resolution()));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let mean_se = |v: &[f64]| {
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        (mean, (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt())
+    };
+    let (fitted, fitted_se) = mean_se(&bands.iter().map(|(b, _)| 2.0 * b.fitted).collect::<Vec<_>>());
+    let (direct, direct_se) = mean_se(&bands.iter().map(|(b, _)| b.r - b.p).collect::<Vec<_>>());
+    let resolution = bands[0].1;
+    println!(
+        "B = {b:.4} cm-1, T = {PR_KELVIN} K: classical P-R separation {expected:.2} cm-1; fitted {fitted:.2} ± \
+         {fitted_se:.2}, direct {direct:.2} ± {direct_se:.2} cm-1 (resolution {resolution:.2} cm-1)"
+    );
+    // Tolerance: 3.5 standard errors of the mean of 8 batches (Student's t with 7 degrees of
+    // freedom exceeds 3.5 with probability 1 %), plus 2 % of the prediction for what the
+    // classical rigid-rotor contour leaves out (vibration–rotation interaction and centrifugal
+    // distortion, ~1 %; the fit of the windowed contour removes the resolution's broadening).
+    let tolerance = 3.5 * fitted_se + 0.02 * expected;
+    assert!(
+        (fitted - expected).abs() < tolerance,
+        "P-R maxima {fitted} cm-1 apart, classical {expected} cm-1 (tolerance {tolerance})"
+    );
+    // The check discriminates: the prediction with B twice as large (separation × √2) is
+    // rejected. (Half as large, × 0.71, is not resolved by this ensemble: the batches scatter by
+    // about 15 % each, and a standard error of 1 cm⁻¹ would take some 2700 trajectories.)
+    let wrong = classical_pr_separation(2.0 * b, PR_KELVIN);
+    println!(
+        "with B x 2: predicted {wrong:.2} cm-1, {:.2} from the spectrum (tolerance {tolerance:.2})",
+        (fitted - wrong).abs()
+    );
+    assert!((fitted - wrong).abs() > tolerance, "B x 2 ({wrong} cm-1) is not rejected");
+    let half = classical_pr_separation(0.5 * b, PR_KELVIN);
+    println!("with B x 0.5: predicted {half:.2} cm-1, {:.2} from the spectrum (not asserted)", (fitted - half).abs());
+}
+
+/// A first look at where the band is, cm⁻¹.
+const PR_BAND_GUESS: f64 = 2100.0;
