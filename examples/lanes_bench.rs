@@ -9,6 +9,10 @@
 //! 2. Ensemble throughput: 64 water trajectories over 10⁴ a.u. at rtol = atol = 1e-8 with 101
 //!    output times (the ensemble bench's settings), by the scalar `Dop853` one after the other and
 //!    by `Dop853Lanes` at 2 and 4 lanes.
+//! 3. One trajectory: `scenes/h2o_1e4au.toml`'s start (BENCHMARKS.md's benchmark trajectory)
+//!    over 10⁴ a.u. at rtol = atol = 1e-10 with 101 output times, by the scalar `Dop853` with
+//!    the production system (what `rovib run` integrates, without its file output), CPU ms
+//!    per trajectory (mean of 8 runs in each round).
 //!
 //! ```sh
 //! cargo run --release --example lanes_bench            # 7 rounds
@@ -32,6 +36,8 @@ use rovib::runtime::hamiltonian::lanes::{ProductionLanes, production_rhs};
 use rovib::runtime::integrate::{Dop853, Dop853Lanes, Dop853Options, LaneFailure, LaneFeeder, OdeSystem, Stats};
 use rovib::runtime::lanes::{F64x2, F64x4, Real};
 use rovib::runtime::nalgebra::{SVector, UnitQuaternion, Vector3};
+use rovib::scene::parse_scene;
+use rovib::start::initial_state;
 use rovib_testkit::Rng;
 
 fn cpu() -> f64 {
@@ -172,6 +178,39 @@ fn ensemble_lanes<T: Real>(starts: &[Vec<f64>]) -> f64 {
     (cpu() - t0) * 1e3 / starts.len() as f64
 }
 
+/// `scenes/h2o_1e4au.toml`'s initial state in the production layout.
+fn scene_start() -> Vec<f64> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/h2o_1e4au.toml");
+    let text = std::fs::read_to_string(path).expect("scenes/h2o_1e4au.toml");
+    let scene = parse_scene(path, &text).expect("a valid scene");
+    let start = initial_state(&H2o, &scene).expect("a valid start");
+    let system = ReducedSystem::from_body(&H2o, Reduction::none(), &start.body);
+    let mut y = vec![0.0; DIM];
+    system.reduce_body(&start.body, &mut y).expect("a regular start");
+    y
+}
+
+/// CPU ms of one scalar DOP853 run from `y0` over 10⁴ a.u. at rtol = atol = 1e-10 (mean of
+/// `reps`), and its right-hand sides.
+fn one_trajectory(y0: &[f64], reps: usize) -> (f64, u64) {
+    let m = H2o;
+    let mut system = ReducedSystem::new(&m, Reduction::none(), &template());
+    let options = Dop853Options { rtol: 1e-10, atol: 1e-10, ..Default::default() };
+    let mut solver = Dop853::new(DIM, options).unwrap();
+    let mut evals = 0;
+    let t0 = cpu();
+    for _ in 0..reps {
+        let mut sink = 0.0;
+        let mut observer = |_t: f64, y: &[f64]| {
+            sink += y[0];
+            ControlFlow::Continue(())
+        };
+        evals = solver.integrate(&mut system, 0.0, y0, T_END, INTERVAL, &mut observer).expect("a valid run").rhs_evals;
+        black_box(sink);
+    }
+    ((cpu() - t0) * 1e3 / reps as f64, evals)
+}
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -201,6 +240,8 @@ fn main() {
         cfg!(target_feature = "avx512f")
     );
     let starts = states(64, 1);
+    let scene_y0 = scene_start();
+    let (mut one, mut one_evals) = (vec![], 0);
     let (mut f, mut x2, mut x4) = (vec![], vec![], vec![]);
     let (mut ef, mut ex2, mut ex4) = (vec![], vec![], vec![]);
     let mut evals = 0.0;
@@ -213,9 +254,13 @@ fn main() {
         ef.push(ms);
         ex2.push(ensemble_lanes::<F64x2>(&starts));
         ex4.push(ensemble_lanes::<F64x4>(&starts));
+        let (ms, e) = one_trajectory(&scene_y0, 8);
+        one.push(ms);
+        one_evals = e;
         println!(
-            "round {round}: rhs ns/eval f64 {:.1}, x2 {:.1}, x4 {:.1}; ensemble ms/trajectory f64 {:.3}, x2 {:.3}, x4 {:.3}",
-            f[round], x2[round], x4[round], ef[round], ex2[round], ex4[round]
+            "round {round}: rhs ns/eval f64 {:.1}, x2 {:.1}, x4 {:.1}; ensemble ms/trajectory f64 {:.3}, x2 {:.3}, x4 {:.3}; \
+             one trajectory at 1e-10 {:.3} ms",
+            f[round], x2[round], x4[round], ef[round], ex2[round], ex4[round], one[round]
         );
     }
     let ratio = |a: &[f64], b: &[f64]| {
@@ -238,5 +283,10 @@ fn main() {
         ratio(&ef, &ex2),
         median(&mut ex4.clone()),
         ratio(&ef, &ex4)
+    );
+    println!(
+        "one trajectory, scenes/h2o_1e4au.toml at rtol 1e-10 ({one_evals} rhs): {:.3} ms ({:.1} ns per rhs, integrator included)",
+        median(&mut one.clone()),
+        median(&mut one.clone()) * 1e6 / one_evals as f64
     );
 }
