@@ -297,3 +297,28 @@ fn cartesian_modes_of_water_equal_its_gf_modes() {
         assert!((a - b).abs() < 1e-6 * b, "Cartesian {w:?} vs GF {:?} cm-1", f.wavenumbers);
     }
 }
+
+/// Normal-mode sampling of a linear minimum is refused with a message that says why and what
+/// to use (it works in the 3N − 6 internal coordinates, singular there).
+#[test]
+fn normal_mode_sampling_of_a_linear_molecule_says_what_to_use() {
+    use rovib::runtime::sample::{ModeEnergies, NormalModeSampler, RotationSampling};
+    for name in ["co2", "hcn"] {
+        struct Try;
+        impl rovib::runtime::MoleculeVisitor for Try {
+            type Output = String;
+            fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> String {
+                let energies = ModeEnergies::Quantum(vec![0; N]);
+                let rotation = RotationSampling::Fixed(Vector3::zeros());
+                match NormalModeSampler::new(&m, &energies, &rotation, 1) {
+                    Ok(_) => panic!("{}: sampled about a linear minimum", m.name()),
+                    Err(e) => e.to_string(),
+                }
+            }
+        }
+        let message = rovib::molecules::visit(name, Try).unwrap();
+        for promise in ["linear", "3N - 5", "rovib freq", "thermal or microcanonical"] {
+            assert!(message.contains(promise), "{name}: `{promise}` missing from: {message}");
+        }
+    }
+}

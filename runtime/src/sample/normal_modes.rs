@@ -72,6 +72,18 @@ where
         })?;
         let q0 = modes::stationary_point(molecule, &reference)
             .map_err(|e| SampleError::Invalid(format!("normal-mode sampling needs a minimum: {e}")))?;
+        let mut x0 = nalgebra::SMatrix::<f64, 3, NA>::zeros();
+        molecule.positions(&q0, &mut x0);
+        if crate::cartesian_modes::is_linear(&x0) {
+            return Err(SampleError::Invalid(format!(
+                "the minimum of {} found from its reference geometry is linear: it has 3N - 5 normal modes with a \
+                 doubly degenerate bend (`rovib freq --molecule {}` lists them), and normal-mode sampling works in the \
+                 3N - 6 internal coordinates, whose chart is singular there; not available yet for linear molecules, \
+                 use thermal or microcanonical sampling",
+                molecule.name(),
+                molecule.name()
+            )));
+        }
         let modes = NormalModes::at(molecule, &q0).map_err(|e| {
             SampleError::Invalid(format!(
                 "normal-mode sampling needs a minimum, but the stationary point found from the reference geometry of {} \
