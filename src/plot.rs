@@ -4,7 +4,7 @@
 //! Measured against the hand-written SVG code this replaced (issue 16; BENCHMARKS.md, "Plots"):
 //! 87 lines of code instead of 153 for three small crates (plotters, plotters-backend,
 //! plotters-svg) and files about twice as large. The linear-axis ensemble panels
-//! (`crate::ensemble::plot`) are still hand-written.
+//! (`crate::ensemble::plot`) are drawn with plotters too.
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -39,12 +39,6 @@ const COLOURS: [RGBColor; 6] = [
 ];
 const W: u32 = 520;
 const H: u32 = 400;
-
-/// `s` with the characters XML gives a meaning to escaped, for SVG text written by hand
-/// (`crate::ensemble::plot`; plotters escapes its own text).
-pub(crate) fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
-}
 
 /// The whole decades that hold `values` (the positive, finite ones), at least one wide.
 fn decades(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {

@@ -13,6 +13,10 @@
 //! `ROVIB_LARGE_MOLECULE_FORMS=expanded` does in a build. The column "dr nz" counts the (atom, coordinate) pairs whose raw
 //! position derivative is not a structural zero, out of atoms × coordinates.
 //!
+//! "max lets" is the largest function's count of `let` temporaries, "let depth" the deepest
+//! chain of nested `let` scopes in the generated file (`rovib_codegen::scopes`: rustc's debug
+//! information overflows its stack at about 2 500).
+//!
 //! Prints one summary row per molecule, then each molecule's per-function table
 //! (`GeneratedMolecule::stats_table`). Codegen time is the wall time of
 //! `rovib_codegen::generate_molecule` (parse, differentiate, CSE, format), taken as the best of
@@ -71,14 +75,26 @@ fn main() -> ExitCode {
     }
 
     println!(
-        "{:<12} {:>3} {:>3} {:>9} {:>11} {:>8} {:>12} {:>14} {:>11}",
-        "molecule", "N", "NA", "dr nz", "codegen ms", "lines", "graph nodes", "ops (each)", "ops (CSE)"
+        "{:<12} {:>3} {:>3} {:>9} {:>11} {:>8} {:>12} {:>14} {:>11} {:>9} {:>9}",
+        "molecule",
+        "N",
+        "NA",
+        "dr nz",
+        "codegen ms",
+        "lines",
+        "graph nodes",
+        "ops (each)",
+        "ops (CSE)",
+        "max lets",
+        "let depth"
     );
     for (m, t) in &generated {
         let per_output: u64 = m.stats.iter().map(|s| s.ops_per_output).sum();
         let emitted: u64 = m.stats.iter().map(|s| s.ops_emitted).sum();
+        let max_lets = m.stats.iter().map(|s| s.temporaries).max().unwrap_or(0);
+        let depth = syn::parse_file(&m.source).map_or(0, |f| rovib_codegen::scopes::max_let_depth(&f));
         println!(
-            "{:<12} {:>3} {:>3} {:>9} {:>11.1} {:>8} {:>12} {:>14} {:>11}",
+            "{:<12} {:>3} {:>3} {:>9} {:>11.1} {:>8} {:>12} {:>14} {:>11} {:>9} {:>9}",
             m.name,
             m.coordinates,
             m.atoms,
@@ -87,7 +103,9 @@ fn main() -> ExitCode {
             m.lines(),
             m.graph_nodes,
             per_output,
-            emitted
+            emitted,
+            max_lets,
+            depth
         );
     }
     for (m, _) in &generated {

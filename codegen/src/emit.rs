@@ -19,6 +19,7 @@ use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 
 use crate::expr::{ExprId, Func, Graph, Node};
+use crate::scopes::{self, Statement};
 
 /// A single-use expression heavier than this many operations gets its own `let`, so that no
 /// line of generated code grows unreadable.
@@ -223,7 +224,7 @@ struct Emitter<'a> {
     /// `trig[x] = [sin(x), cos(x)]` where the function needs them.
     trig: HashMap<ExprId, [Option<ExprId>; 2]>,
     printed: Vec<Option<Printed>>,
-    statements: Vec<TokenStream>,
+    statements: Vec<Statement>,
     temporaries: usize,
     ops_emitted: u64,
     next_temp: usize,
@@ -262,7 +263,7 @@ impl Emitter<'_> {
                     .find(|(v, _)| *v == k)
                     .map(|(_, t)| t.clone())
                     .expect("every variable a function reaches is one of its inputs");
-                self.statements.push(quote!(let #ident = #load;));
+                self.statements.push(Statement::binding(quote!(let #ident = #load;), vec![ident.clone()]));
                 self.printed[i] = Some(atom(ident));
                 return;
             }
@@ -271,7 +272,8 @@ impl Emitter<'_> {
                 let [s, c] = self.trig[&x].map(|id| id.expect("both present"));
                 let (ts, tc) = (self.fresh(), self.fresh());
                 let recv = self.get(x).at_least(4);
-                self.statements.push(quote!(let (#ts, #tc) = #recv.sin_cos();));
+                self.statements
+                    .push(Statement::binding(quote!(let (#ts, #tc) = #recv.sin_cos();), vec![ts.clone(), tc.clone()]));
                 self.temporaries += 2;
                 self.printed[s.index()] = Some(atom(&ts));
                 self.printed[c.index()] = Some(atom(&tc));
@@ -317,7 +319,7 @@ impl Emitter<'_> {
         if self.uses[i] > 1 || expr.weight > MAX_INLINE_WEIGHT {
             let t = self.fresh();
             let tokens = &expr.tokens;
-            self.statements.push(quote!(let #t = #tokens;));
+            self.statements.push(Statement::binding(quote!(let #t = #tokens;), vec![t.clone()]));
             self.temporaries += 1;
             self.printed[i] = Some(atom(&t));
         } else {
@@ -342,14 +344,14 @@ impl Emitter<'_> {
             return;
         }
         if values.iter().any(|&v| self.lg.is_zero(v)) {
-            self.statements.push(quote!(#target.fill(0.0);));
+            self.statements.push(Statement::store(quote!(#target.fill(0.0);)));
         }
         for ((index, _), v) in group.entries.iter().zip(values) {
             if self.lg.is_zero(*v) {
                 continue;
             }
             let value = &self.printed[v.index()].as_ref().expect("outputs are printed").tokens;
-            self.statements.push(quote!(#target #index = #value;));
+            self.statements.push(Statement::store(quote!(#target #index = #value;)));
         }
     }
 }
@@ -434,7 +436,7 @@ pub fn emit_function_as(
         e.store(g, v);
     }
     if let Some(b) = &spec.barrier {
-        e.statements.push(b.statement.clone());
+        e.statements.push(Statement { tokens: b.statement.clone(), defines: Vec::new(), movable: false });
         for i in (0..lg.len()).filter(|&i| reachable[i] && late[i]) {
             e.node(i);
         }
@@ -448,15 +450,16 @@ pub fn emit_function_as(
         outputs += 1;
         let r = lowered_roots[lowered_roots.len() - 1];
         let value = e.printed[r.index()].as_ref().expect("the return value is printed").tokens.clone();
-        e.statements.push(match spec.ret_wrap {
+        let tail = match spec.ret_wrap {
             Some(wrap) => wrap(value),
             None => value,
-        });
+        };
+        e.statements.push(Statement { tokens: tail, defines: Vec::new(), movable: false });
     }
 
     let doc = doc_lines(&spec.doc);
     let signature = &spec.signature;
-    let statements = &e.statements;
+    let statements = scopes::nest(std::mem::take(&mut e.statements));
     let tokens = quote! {
         #doc
         #signature {

@@ -7,7 +7,8 @@
 //! 3. [`diff`]: symbolic derivatives ([`adjoint`]: directional derivatives and gradients);
 //! 4. [`kinetic`]: positions to the kinetic matrices a, A, I and all derivatives ([`dipole`]: the
 //!    dipole moment surface and its derivatives, for a definition with a `[dipole]` table);
-//! 5. [`emit`]: CSE, lowering and printing with quote and prettyplease;
+//! 5. [`emit`]: CSE, lowering and printing with quote and prettyplease ([`scopes`]: long functions
+//!    grouped into blocks so that rustc's debug information never overflows its stack);
 //! 6. [`template`]: what a generated molecule file (and the `molecules.rs` registry) contains.
 //!
 //! This file is the crate's face: [`generate`] runs the pipeline for a directory of definitions
@@ -32,6 +33,7 @@ pub mod kinetic;
 pub mod names;
 pub mod parametric;
 pub mod parse;
+pub mod scopes;
 pub mod template;
 pub mod zmatrix;
 

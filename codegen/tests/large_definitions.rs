@@ -120,6 +120,7 @@ fn ten_thousand_term_polynomial_generates_and_evaluates_correctly() {
         .collect();
     let text = triatomic("big", &terms.join("\n + "), "");
     let m = generate_on_small_stack("molecules/big.toml", text).expect("a valid definition");
+    assert_short_scope_chains(&m);
     for _ in 0..20 {
         let q = [1.81 + 0.4 * rng.symmetric(), 1.81 + 0.4 * rng.symmetric(), 1.82 + 0.4 * rng.symmetric()];
         let d = [q[0] - 1.81, q[1] - 1.81, q[2] - 1.82];
@@ -166,4 +167,27 @@ fn deep_nesting_is_a_located_error() {
     let half = rovib_codegen::parse::MAX_NESTING / 2;
     let ok = format!("{}r1{}", "-(".repeat(half), ")".repeat(half));
     generate_on_small_stack("molecules/deep.toml", triatomic("deep", &ok, "")).expect("nesting at the limit works");
+}
+
+/// The deepest chain of nested `let` scopes in `m`'s generated code stays within
+/// `scopes::MAX_LET_DEPTH` (rustc with debug information overflows its stack at about 2 500,
+/// `rovib_codegen::scopes`), and the largest function is long enough that the grouping was
+/// needed (so this checks the grouping, not a small file).
+fn assert_short_scope_chains(m: &GeneratedMolecule) {
+    use rovib_codegen::scopes::{FLAT_LETS, MAX_LET_DEPTH, max_let_depth};
+    let largest = m.stats.iter().max_by_key(|s| s.temporaries).expect("functions");
+    assert!(largest.temporaries > FLAT_LETS, "{}: {} has only {} lets", m.name, largest.name, largest.temporaries);
+    let depth = max_let_depth(&syn::parse_file(&m.source).expect("generated source parses"));
+    assert!(depth <= MAX_LET_DEPTH, "{}: a chain of {depth} nested let scopes (at most {MAX_LET_DEPTH})", m.name);
+}
+
+/// Hexane (20 atoms, 54 coordinates, issue 17's largest test molecule): its production function
+/// has 4 244 temporaries, which in one flat chain crash rustc in the test profile; grouped, the
+/// deepest chain is a few hundred.
+#[test]
+fn hexane_keeps_its_scope_chains_short() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/alkanes/hexane.toml");
+    let text = std::fs::read_to_string(path).expect("the hexane fixture");
+    let m = generate_on_small_stack("codegen/tests/fixtures/alkanes/hexane.toml", text).expect("a valid definition");
+    assert_short_scope_chains(&m);
 }

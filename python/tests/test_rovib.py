@@ -32,6 +32,14 @@ EULER = ["euler_phi", "euler_theta", "euler_psi"]
 PE = ["pe_phi", "pe_theta", "pe_psi"]
 
 
+def scene_dict(name, end):
+    """The shipped scene `scenes/NAME` as a dict (as `rovib.run` takes it), ending at `end`."""
+    with open(os.path.join(ROOT, "scenes", name), "rb") as f:
+        scene = tomllib.load(f)
+    scene["run"]["end"] = end
+    return scene
+
+
 def state_at(t, k):
     """The phase state (atomic units) of row k of a water trajectory."""
     names = rovib.molecule_info("h2o")["coordinates"]["names"]
@@ -137,9 +145,7 @@ def test_run_conserves_energy_to_the_stated_error_and_matches_output_times(tmp_p
 
 @pytest.mark.skipif(tomllib is None, reason="tomllib needs Python 3.11")
 def test_a_dict_scene_runs_exactly_as_its_file(tmp_path):
-    with open(H2O_SCENE, "rb") as f:
-        scene = tomllib.load(f)
-    scene["run"]["end"] = 100.0
+    scene = scene_dict("h2o.toml", 100.0)
     from_dict = rovib.run(scene, tmp_path / "dict")
     file_scene = tmp_path / "file.toml"
     file_scene.write_text(open(H2O_SCENE).read().replace("end = 1000.0", "end = 100.0"))
@@ -220,11 +226,10 @@ def test_ase_round_trip_with_velocities():
     assert ase.__version__
 
 
+@pytest.mark.skipif(tomllib is None, reason="tomllib needs Python 3.11")
 def test_run_ensemble_means_conserve_energy(tmp_path):
-    with open(os.path.join(ROOT, "scenes", "h2o_thermal.toml"), "rb") as f:
-        scene = tomllib.load(f)
+    scene = scene_dict("h2o_thermal.toml", 500.0)
     scene["ensemble"]["trajectories"] = 1024
-    scene["run"]["end"] = 500.0
     scene["statistics"].pop("histograms", None)
     scene["statistics"].pop("correlations", None)
     e = rovib.run_ensemble(scene, tmp_path / "ens", threads=1)
@@ -274,9 +279,7 @@ def test_lab_xyz_reads_in_ase_with_masses_velocities_and_energies(tmp_path):
 
 @pytest.mark.skipif(tomllib is None, reason="tomllib needs Python 3.11")
 def test_resume_continues_a_run_bit_for_bit(tmp_path):
-    with open(H2O_SCENE, "rb") as f:
-        scene = tomllib.load(f)
-    scene["run"]["end"] = 100.0
+    scene = scene_dict("h2o.toml", 100.0)
     whole = rovib.run(scene, tmp_path / "whole")
     scene["run"]["end"] = 50.0
     first = rovib.run(scene, tmp_path / "split")
