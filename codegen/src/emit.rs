@@ -339,7 +339,7 @@ impl Emitter<'_> {
                     true => quote!(T::splat(0.0)),
                     false => self.printed[v.index()].as_ref().expect("outputs are printed").tokens.clone(),
                 };
-                self.statements.push(quote!(#target #index = #value;));
+                self.statements.push(Statement::store(quote!(#target #index = #value;)));
             }
             return;
         }
