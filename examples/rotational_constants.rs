@@ -17,9 +17,11 @@
 //! cargo run --release --example rotational_constants -- h2o nh3  # some of them
 //! ```
 //!
-//! Not every reference geometry is an equilibrium (co2.toml's is bent on purpose, ch4.toml's has
-//! one angle of 96°; see the comments in those files): the rotational constants are those of
-//! the reference geometry, and the harmonic wavenumbers are skipped where it is not a minimum.
+//! Not every reference geometry is an equilibrium (ch4.toml's has one angle of 96°; see the
+//! comment in that file): the rotational constants are those of the reference geometry, and the
+//! harmonic wavenumbers are skipped where it is not a minimum or, as for the linear references of
+//! hcn.toml and co2.toml, where the GF method's chart is singular (`rovib freq` gives those
+//! molecules' 3N − 5 modes from the Cartesian Hessian).
 
 use std::process::ExitCode;
 

@@ -143,6 +143,33 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Wi
         self.molecule.reference_geometry()
     }
 
+    // The Cartesian chart (`runtime::charts`) with the same parameters: U(q(x), values).
+
+    fn internal_coordinates(&self, x: &SMatrix<f64, 3, NA>, q: &mut SVector<f64, N>) -> bool {
+        self.molecule.internal_coordinates(x, q)
+    }
+
+    fn cartesian_potential(&self, x: &SMatrix<f64, 3, NA>) -> Option<f64> {
+        self.molecule.cartesian_potential_with(x, &self.values)
+    }
+
+    fn cartesian_potential_gradient(&self, x: &SMatrix<f64, 3, NA>, grad: &mut SMatrix<f64, 3, NA>) -> Option<f64> {
+        self.molecule.cartesian_potential_gradient_with(x, &self.values, grad)
+    }
+
+    fn cartesian_potential_with(&self, x: &SMatrix<f64, 3, NA>, params: &[f64]) -> Option<f64> {
+        self.molecule.cartesian_potential_with(x, params)
+    }
+
+    fn cartesian_potential_gradient_with(
+        &self,
+        x: &SMatrix<f64, 3, NA>,
+        params: &[f64],
+        grad: &mut SMatrix<f64, 3, NA>,
+    ) -> Option<f64> {
+        self.molecule.cartesian_potential_gradient_with(x, params, grad)
+    }
+
     fn has_dipole(&self) -> bool {
         self.molecule.has_dipole()
     }

@@ -68,6 +68,18 @@ impl MoleculeVisitor for ClosedForms {
             return;
         }
         let mut rng = Rng::new(31);
+        // At the reference geometry itself, linear ones included (hcn, co2: α = π exactly, where
+        // the Euler chart is singular but q(x) and U(x) are not): q comes back, U(x) = U(q).
+        let reference = m.reference_geometry().expect("a reference geometry");
+        let x = lab_positions(&m, &reference, &mut rng);
+        let mut back = SVector::<f64, N>::zeros();
+        assert!(m.internal_coordinates(&x, &mut back));
+        for k in 0..N {
+            let d = (back[k] - reference[k]).abs();
+            assert!(d < 1e-11 * reference[k].abs().max(1.0), "{name}: at the reference q{k} = {} from x", back[k]);
+        }
+        let (u, uq) = (m.cartesian_potential(&x).expect("closed forms"), m.potential(&reference));
+        assert!((u - uq).abs() <= 1e-12 * uq.abs().max(1e-3), "{name}: at the reference U(x) = {u}, U(q) = {uq}");
         for _ in 0..POINTS {
             let q = random_q(&m, &mut rng);
             let x = lab_positions(&m, &q, &mut rng);

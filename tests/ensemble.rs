@@ -237,12 +237,14 @@ fn every_trajectory_conserves_its_energy_so_the_mean_energy_is_constant() {
 
 #[test]
 fn failed_trajectories_are_recorded_by_reason_and_left_out_of_the_statistics() {
-    let s = scene(70, "[statistics]\nmeans = [\"r1\"]", DOP853, 1000.0);
+    let mut s = scene(70, "[statistics]\nmeans = [\"r1\"]", DOP853, 1000.0);
     let mut sampler = Gaussian::new(4);
     sampler.refuse = Some(3);
     sampler.replace.push((30, |s| s.p[1] = f64::NAN));
-    // A linear geometry: the inertia tensor is singular, the metric fails at t = 0.
+    // A linear geometry: the inertia tensor is singular, the metric fails at t = 0 (without the
+    // Cartesian chart; with it, the trajectory starts there, below).
     sampler.replace.push((65, |s| s.q[2] = std::f64::consts::PI));
+    s.cartesian_fallback = false;
     let report = run_with_sampler(&H2o, &s, &sampler, "gaussian", &options("failures", 2)).unwrap();
     assert_eq!(report.status, Status::Completed);
     assert_eq!(report.outcome.completed, 67, "{:?}", report.outcome.first_failures);
@@ -259,6 +261,23 @@ fn failed_trajectories_are_recorded_by_reason_and_left_out_of_the_statistics() {
     assert_eq!(summary["failures_by_reason"]["singular metric"], 1);
     assert_eq!(summary["first_failures"][2]["index"], 65);
     assert_eq!(summary["status"], "completed");
+
+    // With the Cartesian chart (the default) a linear start runs if its momenta are those of a
+    // motion of the atoms there (66: J = 0), starting in the Cartesian chart and switching once
+    // bent; 65's drawn J has a component along the axis, which a linear molecule cannot carry:
+    // an invalid initial state that says so.
+    s.cartesian_fallback = true;
+    sampler.replace.push((66, |s| {
+        s.q[2] = std::f64::consts::PI;
+        s.j = Vector3::zeros();
+    }));
+    let report = run_with_sampler(&H2o, &s, &sampler, "gaussian", &options("failures-charts", 2)).unwrap();
+    assert_eq!(report.outcome.completed, 67, "{:?}", report.outcome.first_failures);
+    let f = &report.outcome.first_failures[2];
+    assert_eq!((f.index, f.reason.as_str()), (65, "invalid initial state"));
+    assert!(f.detail.contains("no angular momentum about its axis"), "{}", f.detail);
+    let charts = &report.outcome.charts;
+    assert!(charts.first.iter().any(|t| t.index == 66 && t.switches >= 1), "{charts:?}");
 }
 
 #[test]
@@ -411,6 +430,7 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
         correlations: bound.correlations,
         max_energy_error: s.max_energy_error,
         min_pivot: s.min_metric_pivot,
+        cartesian_fallback: s.cartesian_fallback,
         keep: None,
         time_scale: 1.0,
         lanes: false,
@@ -462,7 +482,7 @@ fn a_block_on_lanes_has_the_scalar_outcome_bit_for_bit() {
     let ensemble = parse_ensemble(&s).unwrap();
     let times = output_times(s.t_end, s.output_interval);
     let bound = ensemble.bind(&H2o, &s, &times).unwrap();
-    let plan = |lanes: bool| Plan {
+    let plan = |lanes: bool, cartesian_fallback: bool| Plan {
         molecule: &H2o,
         reduction: Reduction::none(),
         method: s.method,
@@ -475,6 +495,7 @@ fn a_block_on_lanes_has_the_scalar_outcome_bit_for_bit() {
         correlations: bound.correlations.clone(),
         max_energy_error: s.max_energy_error,
         min_pivot: 1e-3,
+        cartesian_fallback,
         keep: None,
         time_scale: 1.0,
         lanes,
@@ -482,12 +503,20 @@ fn a_block_on_lanes_has_the_scalar_outcome_bit_for_bit() {
     let sampler = Troubled(Gaussian::new(37));
     let stop = AtomicBool::new(false);
     let progress = Progress { bar: None, failures: AtomicU64::new(0) };
-    let (scalar, lanes) = (plan(false), plan(true));
+    let (scalar, lanes) = (plan(false, false), plan(true, false));
     assert!(rovib::ensemble::lanes::applies(&lanes) && !rovib::ensemble::lanes::applies(&scalar));
     let a = run_block(&scalar, &sampler, 3..73, &stop, &progress);
     let b = run_block(&lanes, &sampler, 3..73, &stop, &progress);
     assert_eq!(a.failed_count(), 2, "{:?}", a.first_failures);
     assert_eq!(a.completed, 68);
+    assert_eq!(serde_json::to_string(&a).unwrap(), serde_json::to_string(&b).unwrap());
+    assert!(a == b);
+    // With the chart switch (the default): a lane stops where the scalar path would switch,
+    // and that trajectory is run again by the scalar path, so the outcomes still agree.
+    let (scalar, lanes) = (plan(false, true), plan(true, true));
+    let a = run_block(&scalar, &sampler, 3..73, &stop, &progress);
+    let b = run_block(&lanes, &sampler, 3..73, &stop, &progress);
+    eprintln!("with the chart switch: {} completed, failed {:?}, charts {:?}", a.completed, a.failed, a.charts);
     assert_eq!(serde_json::to_string(&a).unwrap(), serde_json::to_string(&b).unwrap());
     assert!(a == b);
 }

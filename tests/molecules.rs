@@ -308,37 +308,36 @@ fn water_harmonic_wavenumbers() {
     assert_wavenumbers("h2o", &w, &[1648.5, 3832.2, 3942.5], 0.02);
 }
 
-/// CO2: the equilibrium (re, re, π) is linear, where G22 cannot be had (the inertia tensor is
-/// singular); G22 is smooth there (Wilson's G of a bent XY2 deviates by O((π − α)²)), so it is
-/// taken at α = π − 10⁻³ rad. F at exactly π. Reference: the harmonic wavenumbers ω2 = 672.85,
-/// ω1 = 1354.31 (Fermi-deperturbed), ω3 = 2396.32 cm-1 the force constants were derived from
-/// (co2.toml), within 0.1 %: this checks the kinetic code path near linearity and the
-/// conversions, not the physics of the constants.
+/// CO2: the equilibrium (re, re, π) is linear and is the reference geometry, where G22 cannot be
+/// had (the inertia tensor is singular); G22 is smooth there (Wilson's G of a bent XY2 deviates
+/// by O((π − α)²)), so it is taken at α = π − 10⁻³ rad. F at exactly π. Reference: the harmonic
+/// wavenumbers ω2 = 672.85, ω1 = 1354.31 (Fermi-deperturbed), ω3 = 2396.32 cm-1 the force
+/// constants were derived from (co2.toml), within 0.1 %: this checks the kinetic code path near
+/// linearity and the conversions, not the physics of the constants. (`rovib freq` gives all
+/// four modes at exactly linear from the Cartesian Hessian, tests/freq.rs.)
 #[test]
 fn co2_is_linear_at_equilibrium_and_has_its_harmonic_wavenumbers() {
     let m = Co2;
-    let reference = m.reference_geometry().unwrap();
-    let linear = SVector::<f64, 3>::new(reference[0], reference[1], std::f64::consts::PI);
+    let linear = m.reference_geometry().unwrap();
+    assert_eq!(linear[2], std::f64::consts::PI, "co2 ships its linear equilibrium as the reference");
     let f = hessian(&m, &linear);
     assert_stationary(&m, &linear, &f, 1e-9);
-    // The reference geometry itself is bent on purpose and is not stationary in α.
-    let mut g = SVector::<f64, 3>::zeros();
-    m.potential_gradient(&reference, &mut g);
-    assert!(g[2] < 0.0, "U decreases towards the linear geometry");
     let mut near = linear;
     near[2] -= 1e-3;
     let w = gf_wavenumbers(&g22(&m, &near), &f);
     assert_wavenumbers("co2", &w, &[672.85, 1354.31, 2396.32], 1e-3);
 }
 
-/// The shared tests draw angles within ±0.15 rad of the reference: co2's reference (130°) keeps
-/// that neighbourhood at least 0.72 rad (41°) from the singular linear geometry, where the
-/// truncation error of the shared tests' central differences of G11 (step 1e-3 α) stays below
-/// ≈ 4e-9 (see co2.toml).
+/// The shared tests draw angles within ±0.15 rad of `chart_centre`: for co2's linear reference
+/// that is 130°, so the neighbourhood stays at least 0.72 rad (41°) from the singular linear
+/// geometry, where the truncation error of the shared tests' central differences of G11 (step
+/// 1e-3 α) stays below ≈ 4e-9; the reference itself is singular for the Euler chart.
 #[test]
-fn co2_reference_neighbourhood_stays_away_from_linear() {
-    let alpha = Co2.reference_geometry().unwrap()[2];
-    assert!(std::f64::consts::PI - (alpha + 0.15) > 0.72);
+fn co2_test_neighbourhood_stays_away_from_linear() {
+    let centre = common::chart_centre(&Co2);
+    assert!(!common::euler_chart_regular(&Co2, &Co2.reference_geometry().unwrap()));
+    assert!((centre[2] - 130f64.to_radians()).abs() < 1e-12, "{}", centre[2]);
+    assert!(std::f64::consts::PI - (centre[2] + 0.15) > 0.72);
 }
 
 /// H2O2: the model's quadratic force field is that of an ab initio surface, so its harmonic

@@ -103,3 +103,39 @@ fn a_scene_overrides_parameters_and_names_an_unknown_one() {
     assert!(err.contains("s.toml:5:"), "located: {err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The Cartesian chart with overridden parameters (`WithParameters::cartesian_potential`, the
+/// generated `cartesian_potential_with`): U(x) equals the hand-written potential at the
+/// distances and angle of x, computed here; ∂U/∂x equals central differences of U(x); and the
+/// override changes U(x).
+#[test]
+fn the_cartesian_potential_runs_with_the_overridden_parameters() {
+    use rovib::runtime::nalgebra::{SMatrix, Vector3};
+    let (m, p) = with(&[("De", 50_000.0), ("re", 1.0), ("fra", -3000.0)]);
+    let positions = [
+        SMatrix::<f64, 3, 3>::from_column_slice(&[0.1, -0.2, 0.05, 1.7, 0.3, -0.4, -0.6, 1.6, 0.2]),
+        SMatrix::<f64, 3, 3>::from_column_slice(&[0.0, 0.0, 0.0, 0.0, 0.0, 1.9, 1.2, 0.1, -1.3]),
+    ];
+    for x in positions {
+        let (o, h1, h2): (Vector3<f64>, Vector3<f64>, Vector3<f64>) =
+            (x.column(0).into(), x.column(1).into(), x.column(2).into());
+        let q = SVector::<f64, 3>::new((h1 - o).norm(), (h2 - o).norm(), (h1 - o).angle(&(h2 - o)));
+        let expected = water(&q, &p);
+        let u = m.cartesian_potential(&x).expect("water has coordinates by kind");
+        assert!((u - expected).abs() <= 1e-13 * expected.abs(), "U(x) = {u}, hand-written {expected}");
+        assert!((u - H2o.cartesian_potential(&x).unwrap()).abs() > 1e-3 * u.abs(), "the override changes U(x)");
+        let mut g = SMatrix::<f64, 3, 3>::zeros();
+        let u2 = m.cartesian_potential_gradient(&x, &mut g).unwrap();
+        assert_eq!(u, u2);
+        for i in 0..3 {
+            for a in 0..3 {
+                let h = 1e-5;
+                let (mut plus, mut minus) = (x, x);
+                plus[(a, i)] += h;
+                minus[(a, i)] -= h;
+                let fd = (m.cartesian_potential(&plus).unwrap() - m.cartesian_potential(&minus).unwrap()) / (2.0 * h);
+                assert!((g[(a, i)] - fd).abs() <= 1e-7 * (1.0 + fd.abs()), "∂U/∂x[{a},{i}] = {}, fd {fd}", g[(a, i)]);
+            }
+        }
+    }
+}

@@ -5,6 +5,7 @@
 //! cargo run --release -p rovib-codegen --example cost -- molecules/*.toml
 //! cargo run --release -p rovib-codegen --example cost -- --kinetic-jacobian molecules/*.toml
 //! cargo run --release -p rovib-codegen --example cost -- --expanded molecules/*.toml
+//! cargo run --release -p rovib-codegen --example cost -- --write DIR molecules/*.toml
 //! ```
 //!
 //! `--kinetic-jacobian` also generates the symbolic `kinetic_jacobian` (off by default, see
@@ -38,6 +39,13 @@ fn main() -> ExitCode {
         options.kinetic_gradient = rovib_codegen::GradientMethod::Direct;
         options.run_time_centre_of_mass_from = usize::MAX;
     }
+    // `--write DIR`: also write each generated source to DIR/NAME.rs (for compiling one molecule
+    // alone, BENCHMARKS.md "Generated code: rustc per molecule").
+    let write_dir = paths.iter().position(|p| p == "--write").map(|i| {
+        let dir = paths.get(i + 1).cloned().unwrap_or_default();
+        paths.drain(i..(i + 2).min(paths.len()));
+        dir
+    });
     paths.retain(|p| p != "--kinetic-jacobian" && p != "--expanded");
     if paths.is_empty() {
         eprintln!(
@@ -107,6 +115,15 @@ fn main() -> ExitCode {
             max_lets,
             depth
         );
+    }
+    if let Some(dir) = &write_dir {
+        for (m, _) in &generated {
+            let path = std::path::Path::new(dir).join(format!("{}.rs", m.name));
+            if let Err(e) = std::fs::write(&path, &m.source) {
+                eprintln!("{}: {e}", path.display());
+                return ExitCode::FAILURE;
+            }
+        }
     }
     for (m, _) in &generated {
         println!("\n{} ({} coordinates, {} atoms, {} lines)", m.name, m.coordinates, m.atoms, m.lines());

@@ -38,6 +38,40 @@ pub struct CartesianExprs {
     pub potential: ExprId,
     /// `gradient[atom][axis] = ∂U/∂x`, hartree per bohr.
     pub gradient: Vec<[ExprId; 3]>,
+    /// The same with the potential's parameters as inputs, for a definition with
+    /// `[potential.parameters]` ([`with_parameters`]).
+    pub parametric: Option<ParametricCartesian>,
+}
+
+/// `U(q(x), params)` and `∂U/∂x` with the parameters as graph variables: what a scene's
+/// `[potential.parameters]` runs with in the Cartesian chart.
+pub struct ParametricCartesian {
+    /// `U(q(x), params)`, hartree.
+    pub potential: ExprId,
+    /// `gradient[atom][axis] = ∂U/∂x`, hartree per bohr.
+    pub gradient: Vec<[ExprId; 3]>,
+    /// The graph variable of parameter 0 (parameter i is `first_var + i`).
+    pub first_var: u32,
+    /// Number of parameters.
+    pub count: usize,
+}
+
+/// Adds the parametric Cartesian potential to `c` (call after [`crate::parametric::build`]):
+/// the parametric `U(q, params)` with every coordinate replaced by its closed form `q(x)`, and
+/// its gradient in x by symbolic differentiation, as [`build`] does for the compiled-in values.
+pub fn with_parameters(def: &mut Definition, c: &mut CartesianExprs, p: &crate::parametric::ParametricExprs) {
+    let g = &mut def.graph;
+    let mut map: Vec<Option<ExprId>> = vec![None; g.var_count()];
+    for (k, &e) in c.coordinates.iter().enumerate() {
+        map[k] = Some(e);
+    }
+    let potential = substitute(g, p.potential, &map);
+    let mut diff = Differentiator::new();
+    let gradient = (0..c.atoms)
+        .map(|i| [0, 1, 2].map(|a| diff.derivative(g, potential, c.first_var + (3 * i + a) as u32)))
+        .collect();
+    c.parametric =
+        Some(ParametricCartesian { potential, gradient, first_var: p.first_var, count: def.parameters.len() });
 }
 
 /// The graph name of position component `axis` of atom `atom` (not an identifier, so no
@@ -69,7 +103,7 @@ pub fn build(def: &mut Definition) -> Option<CartesianExprs> {
     let mut diff = Differentiator::new();
     let gradient =
         (0..na).map(|i| [0, 1, 2].map(|a| diff.derivative(g, potential, first_var + (3 * i + a) as u32))).collect();
-    Some(CartesianExprs { first_var, atoms: na, coordinates, potential, gradient })
+    Some(CartesianExprs { first_var, atoms: na, coordinates, potential, gradient, parametric: None })
 }
 
 /// `e` with every variable `v` for which `map[v]` is `Some(f)` replaced by `f`.
@@ -123,7 +157,7 @@ pub fn specs(c: &CartesianExprs, n: usize, g: &Graph) -> Vec<FunctionSpec> {
             })
         })
         .collect();
-    vec![
+    let mut specs = vec![
         FunctionSpec {
             name: "internal_coordinates",
             doc: "The internal coordinates of Cartesian positions `x` (bohr, column i is atom i, any frame),\n\
@@ -163,11 +197,60 @@ pub fn specs(c: &CartesianExprs, n: usize, g: &Graph) -> Vec<FunctionSpec> {
             signature: quote!(
                 fn cartesian_potential_gradient(&self, x: #x_ty, grad: &mut SMatrix<f64, 3, #nal>) -> Option<f64>
             ),
-            inputs,
+            inputs: inputs.clone(),
             groups: vec![OutputGroup { target: quote!(grad), entries: grad_entries }],
             ret: Some(c.potential),
             ret_wrap: Some(|t| quote!(Some(#t))),
             barrier: None,
         },
-    ]
+    ];
+    if let Some(p) = &c.parametric {
+        let mut inputs = inputs;
+        inputs.extend((0..p.count).map(|i| {
+            let i_lit = index(i);
+            (p.first_var + i as u32, quote!(params[#i_lit]))
+        }));
+        let grad_entries = p
+            .gradient
+            .iter()
+            .enumerate()
+            .flat_map(|(i, row)| {
+                row.iter().enumerate().map(move |(a, &e)| {
+                    let (ai, ii) = (index(a), index(i));
+                    (quote!([(#ai, #ii)]), e)
+                })
+            })
+            .collect();
+        specs.push(FunctionSpec {
+            name: "cartesian_potential_with",
+            doc: "U(q(x)) in hartree at Cartesian positions `x` (bohr) with the parameters `params` (in the order\n\
+                  of `parameters()`) instead of the compiled-in values."
+                .into(),
+            signature: quote!(fn cartesian_potential_with(&self, x: #x_ty, params: &[f64]) -> Option<f64>),
+            inputs: inputs.clone(),
+            groups: vec![],
+            ret: Some(p.potential),
+            ret_wrap: Some(|t| quote!(Some(#t))),
+            barrier: None,
+        });
+        specs.push(FunctionSpec {
+            name: "cartesian_potential_gradient_with",
+            doc: "∂U/∂x (hartree per bohr, column i is atom i) into `grad` with the parameters `params`; returns U."
+                .into(),
+            signature: quote!(
+                fn cartesian_potential_gradient_with(
+                    &self,
+                    x: #x_ty,
+                    params: &[f64],
+                    grad: &mut SMatrix<f64, 3, #nal>,
+                ) -> Option<f64>
+            ),
+            inputs,
+            groups: vec![OutputGroup { target: quote!(grad), entries: grad_entries }],
+            ret: Some(p.potential),
+            ret_wrap: Some(|t| quote!(Some(#t))),
+            barrier: None,
+        });
+    }
+    specs
 }

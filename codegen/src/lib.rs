@@ -96,15 +96,18 @@ impl GeneratedMolecule {
         (lines > WARN_LINES || ops > WARN_OPERATIONS).then(|| {
             format!(
                 "molecule `{}` generates {lines} lines and {ops} operations ({} coordinates, {} atoms; \
-                 generation took {:.1} s): expect rustc to need roughly {:.0} s and {:.1} GB to compile it \
-                 (about 1.2 s and 35 MB per 10,000 lines); fewer coordinates (freeze some) or a simpler \
-                 potential make it smaller",
+                 generation took {:.1} s): expect rustc to need roughly {:.0} s and {:.1} GB to compile it in a \
+                 release build and {:.0} s and {:.1} GB in the test profile (per 10,000 lines about 2.8 s and \
+                 0.11 GB, and 8 s and 0.56 GB, measured for hexane compiled alone); fewer coordinates (freeze \
+                 some) or a simpler potential make it smaller",
                 self.name,
                 self.coordinates,
                 self.atoms,
                 self.codegen_time.as_secs_f64(),
-                lines as f64 * 1.2e-4,
-                lines as f64 * 3.5e-6,
+                lines as f64 * 2.8e-4,
+                lines as f64 * 1.1e-5,
+                lines as f64 * 8e-4,
+                lines as f64 * 5.6e-5,
             )
         })
     }
@@ -148,9 +151,12 @@ pub fn generate_molecule_with(
     let notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
     // Variables: coordinates, ω, velocities (kinetic), then positions (cartesian), then the
     // parameters (parametric, last); the dipole adds none.
-    let cartesian = cartesian::build(&mut def);
+    let mut cartesian = cartesian::build(&mut def);
     let dipole = dipole::build(&mut def, &exprs.positions);
     let parametric = parametric::build(&mut def);
+    if let (Some(c), Some(p)) = (&mut cartesian, &parametric) {
+        cartesian::with_parameters(&mut def, c, p);
+    }
     let (items, stats) =
         template::molecule_items(&def, &exprs, cartesian.as_ref(), parametric.as_ref(), dipole.as_ref());
     let header = format!(
@@ -204,11 +210,21 @@ pub fn singular_reference_note(def: &Definition, exprs: &kinetic::KineticExprs) 
         .map(|r| norm([r[1] * e[2] - r[2] * e[1], r[2] * e[0] - r[0] * e[2], r[0] * e[1] - r[1] * e[0]]))
         .fold(0.0, f64::max);
     (off_axis <= 1e-8 * size).then(|| {
+        let what_rovib_does = if def.kinds.is_some() {
+            "this is supported, not an error: the coordinates are declared by kind, so `rovib run` (method dop853) \
+             integrates near linear in lab-frame Cartesian coordinates with U(x) and switches back once the molecule \
+             is bent, `rovib eval` at the reference says the chart is singular and prints the energy and the \
+             Cartesian quantities, and `rovib freq` gives the 3N - 5 normal modes from the Cartesian Hessian"
+        } else {
+            "the positions are explicit (no coordinate kinds), so rovib has no Cartesian potential U(x) to continue \
+             in: `rovib eval` at the reference prints only the energy and kinetic matrices, and a run that reaches \
+             linear stops with a singular-metric error; declare each coordinate's kind (distance, angle, dihedral) \
+             to get the Cartesian fallback"
+        };
         format!(
             "note: the reference geometry of molecule `{}` ({}) is linear: internal coordinates plus Euler angles are \
-             singular there (the rotation about the molecular axis moves no atom), so `rovib eval` at the reference \
-             reports a singular metric; `rovib run` (dop853) continues near linear in lab-frame Cartesian \
-             coordinates when the coordinates are declared by kind (see the README, \"Linear molecules\")",
+             singular there (the rotation about the molecular axis moves no atom); {what_rovib_does} (README, \
+             \"Linear molecules\")",
             def.name, def.path
         )
     })
@@ -361,7 +377,7 @@ mod tests {
             w.starts_with("molecule `big` generates 680000 lines and 1000 operations (84 coordinates, 30 atoms"),
             "{w}"
         );
-        assert!(w.contains("roughly 82 s and 2.4 GB"), "{w}");
+        assert!(w.contains("roughly 190 s and 7.5 GB to compile it in a release build and 544 s and 38.1 GB"), "{w}");
         assert!(molecule(10, WARN_OPERATIONS + 1).size_warning().is_some());
     }
 }

@@ -338,9 +338,34 @@ expression = "pow(rch - 2, 2) + pow(rcn - 2.2, 2) + 0.1 * pow(alpha - pi, 2)"
     };
     let linear = generate_molecule("molecules/hcn.toml", &hcn("3.141592653589793")).expect("a note, not an error");
     assert_eq!(linear.notes.len(), 1, "{:?}", linear.notes);
+    let note = &linear.notes[0];
     assert!(
-        linear.notes[0].starts_with("note: the reference geometry of molecule `hcn` (molecules/hcn.toml) is linear")
+        note.starts_with("note: the reference geometry of molecule `hcn` (molecules/hcn.toml) is linear"),
+        "{note}"
     );
+    // What rovib will do there, for a definition with kinds: the Cartesian chart, eval, freq.
+    for promise in ["not an error", "rovib run", "lab-frame Cartesian coordinates", "rovib eval", "3N - 5"] {
+        assert!(note.contains(promise), "the note does not say `{promise}`: {note}");
+    }
     let bent = generate_molecule("molecules/hcn.toml", &hcn("3.1")).expect("valid");
     assert!(bent.notes.is_empty(), "{:?}", bent.notes);
+    // The same linear molecule with explicit positions and no kinds: the note says a run stops
+    // there and how to get the Cartesian chart.
+    let explicit = hcn("3.141592653589793")
+        .replace("kind = \"distance(H, C)\"\n", "")
+        .replace("kind = \"distance(C, N)\"\n", "")
+        .replace("kind = \"angle(H, C, N)\"\n", "")
+        .replace(
+            "label = \"H\"",
+            "label = \"H\"\nposition = [\"rch * sin(pi - alpha)\", 0, \"-rch * cos(pi - alpha)\"]",
+        )
+        .replace("label = \"C\"", "label = \"C\"\nposition = [0, 0, 0]")
+        .replace("label = \"N\"", "label = \"N\"\nposition = [0, 0, \"rcn\"]");
+    let m = generate_molecule("molecules/hcn.toml", &explicit).expect("a note, not an error");
+    assert_eq!(m.notes.len(), 1, "{:?}", m.notes);
+    for promise in
+        ["is linear", "no coordinate kinds", "stops with a singular-metric error", "declare each coordinate's kind"]
+    {
+        assert!(m.notes[0].contains(promise), "the note does not say `{promise}`: {}", m.notes[0]);
+    }
 }

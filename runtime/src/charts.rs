@@ -24,7 +24,7 @@ use crate::cartesian_system::{CartesianError, CartesianSystem};
 use crate::frames::{CentreOfMass, body_of_lab_exact, lab_of_body_any};
 use crate::hamiltonian::BodyState;
 use crate::hamiltonian::{HamiltonianError, ReducedSystem, RotationPart};
-use crate::integrate::{Dop853, Dop853Options, Dop853Resume, OdeSystem, SolveError, Stats};
+use crate::integrate::{Dop853, Dop853Options, Dop853Resume, InvalidInput, OdeSystem, SolveError, Stats};
 use crate::molecule::Molecule;
 use nalgebra::Vector3;
 
@@ -216,12 +216,72 @@ where
     M: Molecule<N, NA> + ?Sized,
     O: ChartObserver + ?Sized,
 {
+    ChartIntegrator::new(system.dim(), NA, options)?.integrate(system, t0, start, t_end, interval, observer, report)
+}
+
+/// The two DOP853 integrators of a run with chart switching (one per chart), made once and
+/// reused for many runs (an ensemble's trajectories), so that a run allocates nothing but the
+/// states it hands over at a switch.
+pub struct ChartIntegrator {
+    internal: Dop853,
+    cartesian: Dop853,
+}
+
+impl ChartIntegrator {
+    /// For systems of `internal_dim` internal-chart components and `atoms` atoms.
+    pub fn new(internal_dim: usize, atoms: usize, options: Dop853Options) -> Result<Self, InvalidInput> {
+        Ok(Self { internal: Dop853::new(internal_dim, options)?, cartesian: Dop853::new(6 * atoms, options)? })
+    }
+
+    /// [`integrate`] with these integrators (`system.dim()` and the atom count as made).
+    #[allow(clippy::too_many_arguments)]
+    pub fn integrate<M, O, const N: usize, const NA: usize>(
+        &mut self,
+        system: &ReducedSystem<'_, M, N, NA>,
+        t0: f64,
+        start: ChartStart<'_, N>,
+        t_end: f64,
+        interval: f64,
+        observer: &mut O,
+        report: &mut ChartReport,
+    ) -> Result<(), SolveError<ChartError>>
+    where
+        M: Molecule<N, NA> + ?Sized,
+        O: ChartObserver + ?Sized,
+    {
+        if self.internal.dim() != system.dim() || self.cartesian.dim() != 6 * NA {
+            return Err(SolveError::InvalidInput(format!(
+                "chart integrators made for {} and {} components, the system has {} and {}",
+                self.internal.dim(),
+                self.cartesian.dim(),
+                system.dim(),
+                6 * NA
+            )));
+        }
+        run(&mut self.internal, &mut self.cartesian, system, t0, start, t_end, interval, observer, report)
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run<M, O, const N: usize, const NA: usize>(
+    dop_i: &mut Dop853,
+    dop_c: &mut Dop853,
+    system: &ReducedSystem<'_, M, N, NA>,
+    t0: f64,
+    start: ChartStart<'_, N>,
+    t_end: f64,
+    interval: f64,
+    observer: &mut O,
+    report: &mut ChartReport,
+) -> Result<(), SolveError<ChartError>>
+where
+    M: Molecule<N, NA> + ?Sized,
+    O: ChartObserver + ?Sized,
+{
     let m = system.molecule();
     let mut internal = system.with_min_pivot(SWITCH_PIVOT);
     let mut cartesian =
         CartesianSystem::new(m).map_err(|e| SolveError::InvalidInput(e.to_string()))?.with_return_pivot(RETURN_PIVOT);
-    let mut dop_i = Dop853::new(internal.dim(), options)?;
-    let mut dop_c = Dop853::new(6 * NA, options)?;
     let mut served: Option<u64> = None;
     let mut last_q = nalgebra::SVector::<f64, N>::zeros();
     let mut entered = t0;

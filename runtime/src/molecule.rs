@@ -302,6 +302,25 @@ pub trait Molecule<const N: usize, const NA: usize> {
         let _ = (x, grad);
         None
     }
+
+    /// [`Molecule::cartesian_potential`] with the parameters `params` (see
+    /// [`Molecule::potential_with`]). Generated for definitions with coordinates by kind and
+    /// parameters; the default (no parameters, or no closed form) ignores `params`.
+    fn cartesian_potential_with(&self, x: &SMatrix<f64, 3, NA>, params: &[f64]) -> Option<f64> {
+        let _ = params;
+        self.cartesian_potential(x)
+    }
+
+    /// [`Molecule::cartesian_potential_gradient`] with the parameters `params`.
+    fn cartesian_potential_gradient_with(
+        &self,
+        x: &SMatrix<f64, 3, NA>,
+        params: &[f64],
+        grad: &mut SMatrix<f64, 3, NA>,
+    ) -> Option<f64> {
+        let _ = params;
+        self.cartesian_potential_gradient(x, grad)
+    }
 }
 
 /// Something to do with a molecule chosen at run time by name, for code that is generic over

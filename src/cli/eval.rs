@@ -8,9 +8,15 @@ use serde_json::{Value, json};
 
 use super::{CliError, unknown_molecule};
 use crate::molecules;
-use crate::runtime::hamiltonian::{PhaseState, evaluate};
+use crate::runtime::cartesian_system::CartesianSystem;
+use crate::runtime::charts::SWITCH_PIVOT;
+use crate::runtime::frames::{CentreOfMass, lab_of_body_any};
+use crate::runtime::hamiltonian::{
+    BodyState, HamiltonianError, MetricFactor, PhaseState, body_angular_momentum, evaluate,
+};
+use crate::runtime::integrate::OdeSystem;
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
-use crate::runtime::{Molecule, MoleculeVisitor};
+use crate::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
 
 /// The state file: atomic units; `p` and `pe` default to zero, `euler` to [0, π/2, 0].
 #[derive(Debug, Deserialize)]
@@ -92,36 +98,176 @@ impl MoleculeVisitor for Eval<'_> {
                 ..PhaseState::zeros()
             },
         };
-        let e = evaluate(&m, &state).map_err(|e| CliError::context(format!("cannot evaluate {}", m.name()), e))?;
         let atoms = m.atoms();
-        let coordinates = m.coordinates();
-        Ok(vec![
+        let mut fields = vec![
             ("molecule", json!(m.name())),
             ("units", json!("atomic units: bohr, rad, hartree, electron masses, time in hbar/E_h; masses in Da")),
             ("atoms", json!(atoms.iter().map(|a| a.label).collect::<Vec<_>>())),
-            ("coordinates", json!(coordinates.iter().map(|c| c.name).collect::<Vec<_>>())),
+            ("coordinates", json!(m.coordinates().iter().map(|c| c.name).collect::<Vec<_>>())),
             ("masses", json!(atoms.iter().map(|a| a.mass_da).collect::<Vec<_>>())),
-            ("positions", rows(&e.positions.transpose())),
-            ("H", json!(e.hamiltonian)),
-            ("U", json!(e.potential)),
-            ("a", rows(&e.kinetic.a)),
-            ("A", rows(&e.kinetic.coriolis)),
-            ("I", rows(&e.kinetic.inertia)),
-            ("G11", rows(&e.g.g11)),
-            ("G12", rows(&e.g.g12)),
-            ("G22", rows(&e.g.g22)),
-            ("J", json!(e.angular_momentum.as_slice())),
-            (
-                "rhs",
-                json!({
-                    "q": e.rhs.q.as_slice(),
-                    "p": e.rhs.p.as_slice(),
-                    "euler": e.rhs.euler.as_slice(),
-                    "pe": e.rhs.pe.as_slice(),
-                }),
-            ),
-        ])
+        ];
+        let mut kinetic = KineticMatrices::<N>::default();
+        m.kinetic(&state.q, &mut kinetic);
+        let chart = EulerChart::of(&kinetic);
+        match evaluate(&m, &state) {
+            Ok(e) => {
+                fields.extend([
+                    ("euler_chart", json!(chart.name())),
+                    ("positions", rows(&e.positions.transpose())),
+                    ("H", json!(e.hamiltonian)),
+                    ("U", json!(e.potential)),
+                    ("a", rows(&e.kinetic.a)),
+                    ("A", rows(&e.kinetic.coriolis)),
+                    ("I", rows(&e.kinetic.inertia)),
+                    ("G11", rows(&e.g.g11)),
+                    ("G12", rows(&e.g.g12)),
+                    ("G22", rows(&e.g.g22)),
+                    ("J", json!(e.angular_momentum.as_slice())),
+                    (
+                        "rhs",
+                        json!({
+                            "q": e.rhs.q.as_slice(),
+                            "p": e.rhs.p.as_slice(),
+                            "euler": e.rhs.euler.as_slice(),
+                            "pe": e.rhs.pe.as_slice(),
+                        }),
+                    ),
+                ]);
+                if chart != EulerChart::Regular {
+                    fields.push(("note", json!(chart.note(m.name(), false))));
+                }
+            }
+            Err(err @ (HamiltonianError::SingularMetric { .. } | HamiltonianError::IllConditionedMetric { .. })) => {
+                // The chart of internal coordinates and Euler angles is singular here (a linear
+                // geometry): H, G and Hamilton's equations do not exist in it. Print what does.
+                let mut positions = SMatrix::<f64, 3, NA>::zeros();
+                m.positions(&state.q, &mut positions);
+                let u = m.potential(&state.q);
+                fields.extend([
+                    ("euler_chart", json!(EulerChart::Singular.name())),
+                    (
+                        "note",
+                        json!(EulerChart::Singular.note(m.name(), state.p.iter().chain(&state.pe).any(|&x| x != 0.0))),
+                    ),
+                    ("reason", json!(err.to_string())),
+                    ("positions", rows(&positions.transpose())),
+                    ("U", json!(u)),
+                    ("a", rows(&kinetic.a)),
+                    ("A", rows(&kinetic.coriolis)),
+                    ("I", rows(&kinetic.inertia)),
+                ]);
+                if let Ok(j) = body_angular_momentum(&state) {
+                    fields.push(("J", json!(j.as_slice())));
+                }
+            }
+            Err(e) => return Err(CliError::context(format!("cannot evaluate {}", m.name()), e)),
+        }
+        if let Some(cartesian) = cartesian(&m, &state)? {
+            fields.push(("cartesian", cartesian));
+        }
+        Ok(fields)
     }
+}
+
+/// What the chart of internal coordinates and Euler angles is like at a geometry, judged by the
+/// kinetic metric's relative pivots as `rovib run` judges them (`runtime::charts`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum EulerChart {
+    /// Every relative pivot above `charts::SWITCH_PIVOT`: `rovib run` integrates here.
+    Regular,
+    /// Invertible but some relative pivot below `charts::SWITCH_PIVOT`: `rovib run` would
+    /// integrate this state in the Cartesian chart.
+    IllConditioned,
+    /// Not invertible (a linear geometry).
+    Singular,
+}
+
+impl EulerChart {
+    fn of<const N: usize>(k: &KineticMatrices<N>) -> Self {
+        if MetricFactor::is_regular(k, SWITCH_PIVOT) {
+            Self::Regular
+        } else if MetricFactor::is_regular(k, 0.0) {
+            Self::IllConditioned
+        } else {
+            Self::Singular
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Self::Regular => "regular",
+            Self::IllConditioned => "ill-conditioned",
+            Self::Singular => "singular",
+        }
+    }
+
+    /// What this means and what to do, for `molecule`; `moving` if the state has momenta.
+    fn note(self, molecule: &str, moving: bool) -> String {
+        let what = match self {
+            Self::Regular => return String::new(),
+            Self::IllConditioned => format!(
+                "the chart of internal coordinates and Euler angles is ill-conditioned at this geometry of {molecule} \
+                 (a relative pivot of the kinetic metric below {SWITCH_PIVOT:e}, nearly linear): H, G and Hamilton's \
+                 equations below are accurate only to about the inverse of that pivot times rounding"
+            ),
+            Self::Singular => format!(
+                "the chart of internal coordinates and Euler angles is singular at this geometry of {molecule} (linear: \
+                 the rotation about the molecular axis moves no atom, so the kinetic metric M = [[I, A], [A^T, a]] has \
+                 no inverse and there is no H(q, p, euler, pe), G or Hamilton's equations in this chart); printed are \
+                 what exists: the positions, U and the kinetic matrices a, A, I{}",
+                if moving {
+                    " (the momenta give lab velocities only if J has no component along the axis)"
+                } else {
+                    ""
+                }
+            ),
+        };
+        format!(
+            "{what}; `cartesian` holds the state in lab-frame Cartesian coordinates where the molecule's coordinates \
+             are declared by kind (energy, forces, Newton's equations). `rovib run` (method dop853) integrates such \
+             states in that Cartesian chart and switches back once the molecule is bent (README, \"Linear \
+             molecules\"); for the internal-chart quantities give a bent geometry in --state (e.g. the angle a few \
+             degrees from 180)"
+        )
+    }
+}
+
+/// The state in lab-frame Cartesian coordinates (centre of mass at rest at the origin), with
+/// the energy, the gradient of U and Newton's equations there, from the closed forms of a
+/// definition whose coordinates are declared by kind; `None` for a definition with explicit
+/// positions only. At a singular geometry the velocities come from the metric's pseudo-inverse
+/// (`frames::lab_of_body_any`); momenta with a component it cannot carry (J along a linear
+/// molecule's axis) are an error that says so.
+fn cartesian<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    state: &PhaseState<N>,
+) -> Result<Option<Value>, CliError> {
+    let Ok(system) = CartesianSystem::<M, N, NA>::new(m) else { return Ok(None) };
+    let body = BodyState::from_phase(state).map_err(|e| CliError::context("cannot evaluate the orientation", e))?;
+    let lab = lab_of_body_any(m, &body, &CentreOfMass::AT_REST).map_err(|e| {
+        CliError::context(format!("cannot express this state of {} in lab-frame Cartesian coordinates", m.name()), e)
+    })?;
+    let mut y = vec![0.0; 6 * NA];
+    CartesianSystem::<M, N, NA>::flat(&lab, &mut y);
+    let mut system = system;
+    let energy = system.energy(&y).map_err(|e| CliError::context("cannot evaluate the Cartesian energy", e))?;
+    let mut dy = vec![0.0; 6 * NA];
+    system.rhs(0.0, &y, &mut dy).map_err(|e| CliError::context("cannot evaluate Newton's equations", e))?;
+    let masses = m.masses();
+    let acceleration = SMatrix::<f64, 3, NA>::from_column_slice(&dy[3 * NA..]);
+    let gradient = SMatrix::<f64, 3, NA>::from_fn(|a, i| -masses[i] * acceleration[(a, i)]);
+    let u = m.cartesian_potential(&lab.positions).unwrap_or(f64::NAN);
+    Ok(Some(json!({
+        "frame": "lab, centre of mass at rest at the origin, rotated by the state's Euler angles",
+        "positions": rows(&lab.positions.transpose()),
+        "velocities": rows(&lab.velocities.transpose()),
+        "H": energy,
+        "U": u,
+        "T": energy - u,
+        "J_lab": system.angular_momentum(&y).as_slice(),
+        "gradient_U": rows(&gradient.transpose()),
+        "acceleration": rows(&acceleration.transpose()),
+    })))
 }
 
 /// Evaluates `molecule` at the state in `state_path` (or its default state) and returns one

@@ -150,6 +150,9 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             failure: None,
             interrupted: false,
             csv: None,
+            cartesian: None,
+            // Lanes hold internal-chart states only: no Cartesian state, so no branch to follow.
+            last_q: crate::runtime::nalgebra::SVector::zeros(),
         };
         let flow = crate::runtime::integrate::Observer::observe(&mut watch, t, y);
         (slot.k, slot.initial_energy, slot.interrupted) = (watch.k, watch.initial_energy, watch.interrupted);
@@ -200,7 +203,12 @@ where
         first: indices.start,
         panic_at: super::runner::panic_hook(),
     };
-    let mut system = ProductionLanes::new(plan.molecule, plan.min_pivot);
+    // A plan that switches charts: a lane stops where the scalar path would switch (its internal
+    // chart's pivot threshold), and the scalar path runs that trajectory again with the switch,
+    // so the outcome stays the scalar path's bit for bit.
+    let switching = plan.switches_charts();
+    let min_pivot = if switching { plan.min_pivot.max(crate::runtime::charts::SWITCH_PIVOT) } else { plan.min_pivot };
+    let mut system = ProductionLanes::new(plan.molecule, min_pivot);
     if solver.integrate(&mut system, 0.0, plan.t_end, plan.interval, &mut feeder).is_err() {
         return run_block_scalar(plan, sampler, indices, stop, progress);
     }
@@ -219,6 +227,10 @@ where
                 outcome.completed += 1;
                 outcome.steps += stats.steps;
                 outcome.rhs_evaluations += stats.rhs_evals;
+                if switching {
+                    // Never below the switch threshold: no switch, as the scalar path counts it.
+                    outcome.charts.add(index, &crate::runtime::charts::ChartReport::default());
+                }
                 fold(plan, &mut outcome.statistics, &buffer, workspace.as_mut(), &mut series, &mut correlation);
                 progress.done();
             }

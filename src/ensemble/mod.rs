@@ -332,6 +332,7 @@ where
         correlations: bound.correlations.clone(),
         max_energy_error: scene.max_energy_error,
         min_pivot: scene.min_metric_pivot,
+        cartesian_fallback: scene.cartesian_fallback,
         keep: ensemble.keep_trajectories.map(|k| (k, options.out_dir.join("trajectories"))),
         time_scale: scene.time_unit.in_au(),
         lanes: options.lanes,

@@ -190,10 +190,48 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                 "not_a_number": (0..plan.histograms[i].3.len()).map(|t| acc.histograms[first + t].not_a_number()).collect::<Vec<_>>(),
             })
         }).collect::<Vec<_>>(),
+        "charts": charts_json(plan, &o.charts, ts),
         "correlation": "C(tau) = sum_t dx(t) dx(t+tau) / (n - tau), dx = x - (time mean of x along the trajectory), averaged over trajectories",
     });
     files.push(write_summary(dir, &summary)?);
     Ok(files)
+}
+
+/// The chart switches of the completed trajectories (times in the scene's unit, `ts` a.u. per
+/// unit), or why the trajectories do not switch.
+fn charts_json<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    c: &super::runner::ChartCounts,
+    ts: f64,
+) -> serde_json::Value {
+    use crate::runtime::charts::{RETURN_PIVOT, SWITCH_PIVOT};
+    if !plan.switches_charts() {
+        let why = if !plan.cartesian_fallback {
+            "run.cartesian_fallback = false"
+        } else if !matches!(plan.method, crate::runtime::integrate::Method::Dop853(_)) {
+            "only dop853 switches charts (the fixed-step methods stop at a singular geometry)"
+        } else if !plan.reduction.active.iter().all(|&a| a) {
+            "frozen coordinates have no Cartesian counterpart"
+        } else {
+            "the molecule has no Cartesian potential (its definition gives positions, not coordinates by kind)"
+        };
+        return json!({ "switching": false, "why": why });
+    }
+    json!({
+        "switching": true,
+        "switch_pivot": SWITCH_PIVOT,
+        "return_pivot": RETURN_PIVOT,
+        "counted": "completed trajectories",
+        "trajectories_switched": c.trajectories_switched,
+        "switches": c.switches,
+        "cartesian_time": c.cartesian_time / ts,
+        "trajectories_by_switches": c.by_switches.iter().map(|[k, v]| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
+        "first_switching": c.first.iter().map(|t| json!({
+            "index": t.index,
+            "switches": t.switches,
+            "cartesian_time": t.cartesian_time / ts,
+        })).collect::<Vec<_>>(),
+    })
 }
 
 fn tick_time(t: f64) -> String {

@@ -20,7 +20,11 @@ use super::quantity::Quantity;
 use crate::output::TrajectoryCsv;
 use crate::runtime::HamiltonianError;
 use crate::runtime::Molecule;
+use crate::runtime::cartesian_system::{CartesianError, CartesianSystem};
+use crate::runtime::charts::{ChartError, ChartIntegrator, ChartObserver, ChartReport, ChartStart, ChartState};
 use crate::runtime::ensemble::{CorrelationWorkspace, Histogram, Moments};
+use crate::runtime::frames::body_of_lab_exact;
+use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use crate::runtime::integrate::{Dop853, GaussLegendre, InvalidInput, Method, Observer, Rk4, SolveError, Stats};
 use crate::runtime::nalgebra::Vector3;
@@ -60,6 +64,10 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     pub max_energy_error: f64,
     /// The smallest relative pivot of the metric.
     pub min_pivot: f64,
+    /// `run.cartesian_fallback`: trajectories that reach a singular geometry of the internal
+    /// chart continue in the Cartesian chart (`runtime::charts`) where that is possible
+    /// ([`Plan::switches_charts`]), instead of failing as "ill-conditioned metric".
+    pub cartesian_fallback: bool,
     /// Keep the trajectory of every k-th index in `dir/trajectories/INDEX/trajectory.csv`.
     pub keep: Option<(u64, PathBuf)>,
     /// Scale from a.u. of time to the scene's time unit, for kept trajectories.
@@ -67,6 +75,91 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     /// Run the trajectories on SIMD lanes where the plan allows it (DOP853, nothing frozen, no
     /// kept trajectories): the same results, bit for bit, faster (see `super::lanes`).
     pub lanes: bool,
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Plan<'_, M, N, NA> {
+    /// Whether the trajectories switch charts: `cartesian_fallback`, DOP853 (an adaptive method
+    /// restarts at any time), no frozen coordinates (they have no Cartesian counterpart) and a
+    /// molecule with a Cartesian potential (coordinates declared by kind).
+    pub fn switches_charts(&self) -> bool {
+        self.cartesian_fallback
+            && matches!(self.method, Method::Dop853(_))
+            && self.reduction.active.iter().all(|&a| a)
+            && CartesianSystem::new(self.molecule).is_ok()
+    }
+}
+
+/// How many listed trajectories [`ChartCounts`] keeps (the first, by index).
+pub const LISTED_SWITCHING: usize = 10;
+
+/// One trajectory that switched charts.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SwitchingTrajectory {
+    /// Trajectory index.
+    pub index: u64,
+    /// Chart switches (each way counts one).
+    pub switches: u64,
+    /// Time in the Cartesian chart, a.u.
+    pub cartesian_time: f64,
+}
+
+/// The chart switches of the completed trajectories (`runtime::charts`), mergeable in block
+/// order.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ChartCounts {
+    /// Completed trajectories that switched at least once.
+    pub trajectories_switched: u64,
+    /// Switches in all.
+    pub switches: u64,
+    /// Time spent in the Cartesian chart, summed over trajectories, a.u.
+    pub cartesian_time: f64,
+    /// Completed trajectories by their number of switches (0 included): `[switches, count]`
+    /// pairs in increasing order of switches (a list, not a map: the checkpoint's untagged
+    /// records cannot read integer map keys back).
+    pub by_switches: Vec<[u64; 2]>,
+    /// The first [`LISTED_SWITCHING`] trajectories that switched, by index.
+    pub first: Vec<SwitchingTrajectory>,
+}
+
+impl ChartCounts {
+    /// Adds `count` trajectories with `switches` switches to `by_switches`.
+    fn count(&mut self, switches: u64, count: u64) {
+        match self.by_switches.binary_search_by_key(&switches, |p| p[0]) {
+            Ok(i) => self.by_switches[i][1] += count,
+            Err(i) => self.by_switches.insert(i, [switches, count]),
+        }
+    }
+
+    pub(super) fn add(&mut self, index: u64, report: &ChartReport) {
+        self.count(report.switches, 1);
+        if report.switches == 0 {
+            return;
+        }
+        self.trajectories_switched += 1;
+        self.switches += report.switches;
+        self.cartesian_time += report.cartesian_time;
+        if self.first.len() < LISTED_SWITCHING {
+            self.first.push(SwitchingTrajectory {
+                index,
+                switches: report.switches,
+                cartesian_time: report.cartesian_time,
+            });
+        }
+    }
+
+    fn merge(&mut self, other: &ChartCounts) {
+        self.trajectories_switched += other.trajectories_switched;
+        self.switches += other.switches;
+        self.cartesian_time += other.cartesian_time;
+        for &[k, v] in &other.by_switches {
+            self.count(k, v);
+        }
+        for t in &other.first {
+            if self.first.len() < LISTED_SWITCHING {
+                self.first.push(t.clone());
+            }
+        }
+    }
 }
 
 /// Sums over the trajectories of a block (or of the whole ensemble), mergeable.
@@ -152,6 +245,9 @@ pub struct Outcome {
     pub steps: u64,
     /// Right-hand-side evaluations of the completed trajectories.
     pub rhs_evaluations: u64,
+    /// Chart switches of the completed trajectories (all zero for a plan that does not switch).
+    #[serde(default)]
+    pub charts: ChartCounts,
 }
 
 impl Outcome {
@@ -165,6 +261,7 @@ impl Outcome {
             interrupted: 0,
             steps: 0,
             rhs_evaluations: 0,
+            charts: ChartCounts::default(),
         }
     }
 
@@ -183,6 +280,7 @@ impl Outcome {
         self.interrupted += other.interrupted;
         self.steps += other.steps;
         self.rhs_evaluations += other.rhs_evaluations;
+        self.charts.merge(&other.charts);
     }
 
     /// Failed trajectories in all.
@@ -246,11 +344,14 @@ enum Integrator {
     Dop853(Dop853),
     GaussLegendre(GaussLegendre),
     Rk4(Rk4),
+    /// DOP853 with the chart switch.
+    Charts(Box<ChartIntegrator>),
 }
 
 impl Integrator {
-    fn new(method: &Method, dim: usize) -> Result<Self, InvalidInput> {
+    fn new(method: &Method, dim: usize, atoms: usize, charts: bool) -> Result<Self, InvalidInput> {
         Ok(match method {
+            Method::Dop853(o) if charts => Self::Charts(Box::new(ChartIntegrator::new(dim, atoms, *o)?)),
             Method::Dop853(o) => Self::Dop853(Dop853::new(dim, *o)?),
             Method::GaussLegendre(o) => Self::GaussLegendre(GaussLegendre::new(dim, *o)?),
             Method::Rk4(o) => Self::Rk4(Rk4::new(dim, *o)?),
@@ -269,6 +370,7 @@ impl Integrator {
             Self::Dop853(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
             Self::GaussLegendre(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
             Self::Rk4(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
+            Self::Charts(_) => Err(SolveError::InvalidInput("the chart integrator runs through `Charts`".into())),
         }
     }
 }
@@ -282,15 +384,29 @@ fn hamiltonian_reason(e: &HamiltonianError) -> &'static str {
     }
 }
 
-fn solve_reason(e: &SolveError<HamiltonianError>) -> (&'static str, String) {
+fn chart_reason(e: &ChartError) -> &'static str {
     match e {
-        SolveError::Rhs { source, .. } => (hamiltonian_reason(source), format!("{e}: {source}")),
+        ChartError::Internal(h) => hamiltonian_reason(h),
+        ChartError::Cartesian(CartesianError::NonFinite { .. }) => "non-finite",
+        ChartError::Cartesian(_) => "right-hand side",
+        ChartError::Switch { .. } => "chart switch",
+    }
+}
+
+/// A failed solve's category, message and time.
+fn solve_reason<E: std::error::Error>(
+    e: &SolveError<E>,
+    reason: impl Fn(&E) -> &'static str,
+) -> (&'static str, String, Option<f64>) {
+    let (category, detail) = match e {
+        SolveError::Rhs { source, .. } => (reason(source), format!("{e}: {source}")),
         SolveError::NonFinite { .. } => ("non-finite", e.to_string()),
         SolveError::StepSizeTooSmall { .. } => ("step size too small", e.to_string()),
         SolveError::TooManySteps { .. } => ("too many steps", e.to_string()),
         SolveError::NotConverged { .. } => ("not converged", e.to_string()),
         SolveError::InvalidInput(_) => ("invalid integrator settings", e.to_string()),
-    }
+    };
+    (category, detail, e.time())
 }
 
 /// Observes one trajectory at the output times into `buffer` (`[time][quantity]`).
@@ -306,27 +422,64 @@ pub(super) struct Watch<'a, 'm, M, const N: usize, const NA: usize> {
     pub(super) failure: Option<(&'static str, f64, String)>,
     pub(super) interrupted: bool,
     pub(super) csv: Option<TrajectoryCsv>,
+    /// The Cartesian chart, for a plan that switches charts.
+    pub(super) cartesian: Option<CartesianSystem<'m, M, N, NA>>,
+    /// q at the last output (the branch for the closed-form coordinates of a Cartesian state).
+    pub(super) last_q: crate::runtime::nalgebra::SVector<f64, N>,
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_, '_, M, N, NA> {
     fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
+        ChartObserver::observe(self, t, ChartState::Internal(y))
+    }
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> ChartObserver for Watch<'_, '_, M, N, NA> {
+    fn observe(&mut self, t: f64, state: ChartState<'_>) -> ControlFlow<()> {
         if self.stop.load(Ordering::Relaxed) {
             self.interrupted = true;
             return ControlFlow::Break(());
         }
-        let nq = self.plan.quantities.len();
         if self.k >= self.plan.times.len() {
             self.failure =
                 Some(("output", t, format!("an output at t = {t} beyond the {} expected", self.plan.times.len())));
             return ControlFlow::Break(());
         }
-        let (body, h) = match self.system.expand_body_and_energy(y) {
+        // A Cartesian-chart state (near a linear geometry) gives the same quantities through the
+        // closed-form q(x), the exact body frame and the Cartesian H (as `rovib run` records it).
+        let expanded = match state {
+            ChartState::Internal(y) => {
+                self.system.expand_body_and_energy(y).map_err(|e| (hamiltonian_reason(&e), e.to_string()))
+            }
+            ChartState::Cartesian(y) => self.cartesian_body(y),
+        };
+        let (body, h) = match expanded {
             Ok(x) => x,
-            Err(e) => {
-                self.failure = Some((hamiltonian_reason(&e), t, e.to_string()));
+            Err((reason, detail)) => {
+                self.failure = Some((reason, t, detail));
                 return ControlFlow::Break(());
             }
         };
+        self.last_q = body.q;
+        self.record(t, &body, h)
+    }
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA> {
+    /// The body state and H of a Cartesian-chart state.
+    fn cartesian_body(&self, y: &[f64]) -> Result<(BodyState<N>, f64), (&'static str, String)> {
+        let chart =
+            self.cartesian.as_ref().ok_or(("chart switch", "a Cartesian state without a Cartesian chart".into()))?;
+        let lab = CartesianSystem::<M, N, NA>::lab(y);
+        let (body, _) = body_of_lab_exact(self.plan.molecule, &lab, &self.last_q)
+            .map_err(|e| ("chart switch", format!("the body frame of a Cartesian state: {e}")))?;
+        let h = chart.energy(y).map_err(|e| ("non-finite", e.to_string()))?;
+        Ok((body, h))
+    }
+
+    /// Records the quantities of output `self.k` (time `t`, a.u.) from the body state and H.
+    fn record(&mut self, t: f64, body: &BodyState<N>, h: f64) -> ControlFlow<()> {
+        let nq = self.plan.quantities.len();
         if self.k == 0 {
             self.initial_energy = h;
         }
@@ -345,7 +498,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
         }
         let row = &mut self.buffer[self.k * nq..(self.k + 1) * nq];
         for (v, q) in row.iter_mut().zip(&self.plan.quantities) {
-            *v = q.value(&body, h, u, &rotation, &mu);
+            *v = q.value(body, h, u, &rotation, &mu);
         }
         if let Some(csv) = &mut self.csv {
             let phase = body.to_phase();
@@ -397,7 +550,8 @@ where
 {
     let mut outcome = Outcome::new(Accumulators::new(plan));
     let dim = plan.reduction.dim();
-    let mut integrator = match Integrator::new(&plan.method, dim) {
+    let switching = plan.switches_charts();
+    let mut integrator = match Integrator::new(&plan.method, dim, NA, switching) {
         Ok(i) => i,
         Err(e) => {
             for index in indices {
@@ -447,7 +601,11 @@ where
         }
         // The sampled state is the template: frozen coordinates stay at its values.
         let mut system = ReducedSystem::from_body(plan.molecule, plan.reduction, &state).with_min_pivot(plan.min_pivot);
-        if let Err(e) = system.reduce_body(&state, &mut y0) {
+        // A state at a singular geometry starts in the Cartesian chart when the plan switches
+        // (the chart integrator checks it: an `InvalidInput` there is an invalid initial state).
+        if let Err(e) = system.reduce_body(&state, &mut y0)
+            && !switching
+        {
             outcome.fail(failure("invalid initial state", Some(0.0), e.to_string()), progress);
             progress.done();
             continue;
@@ -482,18 +640,49 @@ where
             failure: None,
             interrupted: false,
             csv,
+            cartesian: if switching { CartesianSystem::new(plan.molecule).ok() } else { None },
+            last_q: state.q,
         };
-        let result = integrator.integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch);
+        let mut chart_report = ChartReport::default();
+        let result = match &mut integrator {
+            Integrator::Charts(charts) => charts
+                .integrate(
+                    &system,
+                    0.0,
+                    ChartStart::Fresh(&state),
+                    plan.t_end,
+                    plan.interval,
+                    &mut watch,
+                    &mut chart_report,
+                )
+                .map(|()| chart_report.stats)
+                .map_err(|e| match e {
+                    // The settings were checked when the integrators were made: what is left is
+                    // a start that neither chart can hold.
+                    SolveError::InvalidInput(why) => ("invalid initial state", why, Some(0.0)),
+                    e => solve_reason(&e, chart_reason),
+                }),
+            other => other
+                .integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch)
+                .map_err(|e| solve_reason(&e, hamiltonian_reason)),
+        };
         if let Some(csv) = &mut watch.csv
             && let Err(e) = csv.flush()
         {
             watch.failure.get_or_insert(("output", plan.t_end, e));
         }
+        // A kept trajectory's chart switches beside its trajectory.csv.
+        if switching
+            && watch.csv.is_some()
+            && let Some((_, dir)) = &plan.keep
+            && let Err(e) = write_chart_report(&dir.join(index.to_string()), &chart_report, plan.time_scale)
+        {
+            watch.failure.get_or_insert(("output", plan.t_end, e));
+        }
         let (k, interrupted, observed) = (watch.k, watch.interrupted, watch.failure.take());
         match (result, observed) {
-            (Err(e), _) => {
-                let (reason, detail) = solve_reason(&e);
-                outcome.fail(failure(reason, e.time(), detail), progress);
+            (Err((reason, detail, time)), _) => {
+                outcome.fail(failure(reason, time, detail), progress);
             }
             (Ok(_), Some((reason, t, detail))) => outcome.fail(failure(reason, Some(t), detail), progress),
             (Ok(_), None) if interrupted => {
@@ -508,12 +697,31 @@ where
                 outcome.completed += 1;
                 outcome.steps += stats.steps;
                 outcome.rhs_evaluations += stats.rhs_evals;
+                if switching {
+                    outcome.charts.add(index, &chart_report);
+                }
                 fold(plan, &mut outcome.statistics, &buffer, workspace.as_mut(), &mut series, &mut correlation);
             }
         }
         progress.done();
     }
     outcome
+}
+
+/// Writes `charts.json` (switches, time in the Cartesian chart in the scene's unit, the chart at
+/// the end) of one kept trajectory into `dir`.
+fn write_chart_report(dir: &std::path::Path, r: &ChartReport, time_scale: f64) -> Result<(), String> {
+    let json = serde_json::json!({
+        "switches": r.switches,
+        "cartesian_time": r.cartesian_time / time_scale,
+        "last_chart": r.last_chart.map(|c| match c {
+            crate::runtime::charts::Chart::Internal => "internal",
+            crate::runtime::charts::Chart::Cartesian => "cartesian",
+        }),
+    });
+    let mut f = crate::output::OutputFile::create(dir, "charts.json")?;
+    f.line(&json.to_string())?;
+    f.flush()
 }
 
 /// Folds one completed trajectory's observations into the accumulators.

@@ -9,22 +9,96 @@ use rovib::runtime::nalgebra::{SMatrix, SVector};
 use rovib::runtime::units::CoordinateUnit;
 use rovib::runtime::{Molecule, MoleculeVisitor};
 
-/// Runs `check` on every shipped molecule (there must be at least one).
+/// Runs `check` on every shipped molecule (there must be at least one), each to its end even
+/// if an earlier one fails, and fails naming every molecule that failed with its message: a
+/// bare `unwrap` inside a check still reports which molecule it was.
 pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
     assert!(!rovib::molecules::NAMES.is_empty());
+    let mut failures = Vec::new();
     for name in rovib::molecules::NAMES {
-        rovib::molecules::visit(name, check).expect("every listed molecule can be visited");
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| rovib::molecules::visit(name, check)));
+        match outcome {
+            Ok(Some(())) => {}
+            Ok(None) => failures.push(format!("{name}: listed in molecules::NAMES but cannot be visited")),
+            Err(payload) => failures.push(format!("{name}: {}", panic_message(payload.as_ref()))),
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "failed for {} of {} molecules:\n{}",
+        failures.len(),
+        rovib::molecules::NAMES.len(),
+        failures.join("\n")
+    );
+}
+
+/// The text of a panic's payload (a `&str` or `String` message; anything else is named so).
+pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_owned()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "a panic without a message".to_owned()
     }
 }
 
+/// How far (rad) [`chart_centre`] moves a bond angle in from the end of its range when the
+/// reference geometry is singular for the chart of internal coordinates and Euler angles (a
+/// linear reference, α = π): 50°, so the random geometries of [`random_q`] (±0.15 rad) stay at
+/// least 41° from linear, where the central differences of G (step 1e-3 α, truncation error
+/// relative to |G11| about 24 h⁴/(π − α)⁵) stay below 4e-9 (near linear G11 grows like
+/// 1/(π − α)²; at 20° from linear the shared 1e-8 tolerances fail from truncation alone).
+pub const BEND_AWAY_FROM_LINEAR: f64 = 50.0 * std::f64::consts::PI / 180.0;
+
+/// Whether the chart of internal coordinates and Euler angles is regular at `q`: every relative
+/// pivot of the kinetic metric above `charts::RETURN_PIVOT` (where `rovib run` would use it).
+pub fn euler_chart_regular<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, q: &SVector<f64, N>) -> bool {
+    let mut k = rovib::runtime::KineticMatrices::<N>::default();
+    m.kinetic(q, &mut k);
+    rovib::runtime::hamiltonian::MetricFactor::is_regular(&k, rovib::runtime::charts::RETURN_PIVOT)
+}
+
+/// The geometry the generic tests draw their random geometries around: the reference geometry
+/// where the Euler chart is regular there; at a singular reference (a linear molecule at its
+/// linear equilibrium, where the chart is singular whatever the body frame) the reference with
+/// every angle within [`BEND_AWAY_FROM_LINEAR`] of an end of its range moved to that distance
+/// from the end (HCN and CO2: α = 130°). The generic tests check the chart's quantities, which
+/// exist only where it is regular; the linear geometry itself is covered by the Cartesian chart
+/// (tests/linear_charts.rs, tests/cartesian_potential.rs, `rovib freq`).
+pub fn chart_centre<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M) -> SVector<f64, N> {
+    let reference = m.reference_geometry().unwrap_or_else(|| panic!("{} has no reference geometry", m.name()));
+    if euler_chart_regular(m, &reference) {
+        return reference;
+    }
+    let coords = m.coordinates();
+    let bent = SVector::from_fn(|k, _| match coords[k].unit {
+        CoordinateUnit::Angle(_) => {
+            let (low, high) = coords[k].range;
+            let (low, high) = (low + BEND_AWAY_FROM_LINEAR, high - BEND_AWAY_FROM_LINEAR);
+            if low <= high { reference[k].clamp(low, high) } else { reference[k] }
+        }
+        CoordinateUnit::Length(_) => reference[k],
+    });
+    assert!(
+        euler_chart_regular(m, &bent),
+        "{}: the Euler chart is singular at the reference geometry {:?} and still at {:?} (every bounded angle \
+         moved {BEND_AWAY_FROM_LINEAR} rad in from the ends of its range): the generic tests need a regular geometry \
+         near the reference (tests/common/mod.rs, chart_centre)",
+        m.name(),
+        reference.as_slice(),
+        bent.as_slice()
+    );
+    bent
+}
 #[allow(unused_imports)]
 pub use rovib_testkit::Rng;
 
-/// A random geometry near the reference: lengths within ±8 %, angles within ±0.15 rad, reflected
-/// back into the coordinate's range at its ends (a linear reference, α = π, gives α in
-/// [π − 0.15, π]).
+/// A random geometry near the reference ([`chart_centre`]: the reference, or for a linear
+/// reference the same geometry bent by 50°): lengths within ±8 %, angles within ±0.15 rad,
+/// reflected back into the coordinate's range at its ends.
 pub fn random_q<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, rng: &mut Rng) -> SVector<f64, N> {
-    let reference = m.reference_geometry().unwrap_or_else(|| panic!("{} has no reference geometry", m.name()));
+    let reference = chart_centre(m);
     let coords = m.coordinates();
     SVector::from_fn(|k, _| match coords[k].unit {
         CoordinateUnit::Length(_) => reference[k] * rng.uniform(0.92, 1.08),
