@@ -126,7 +126,13 @@ fn check_scene_for<M: Molecule<3, 3> + Copy>(
     let text = std::fs::read_to_string(root.join("scenes").join(scene)).unwrap();
     assert!(text.contains("time = \"fs\""), "{scene}: the test sets `end` in fs");
     assert!(text.contains(&format!("molecule = \"{}\"", m.name())), "{scene}");
-    let dir = std::env::temp_dir().join(format!("rovib-linear-scenes-{}-{scene}", std::process::id()));
+    // One directory per scene and length: two tests run the same scene over different lengths,
+    // concurrently.
+    let dir = std::env::temp_dir().join(format!(
+        "rovib-linear-scenes-{}-{scene}-{}",
+        std::process::id(),
+        t_compare.to_bits()
+    ));
     std::fs::create_dir_all(&dir).unwrap();
     let end_fs = t_compare * AU_TIME_IN_FS;
     let shortened: String = text
