@@ -214,10 +214,10 @@ fn rank_0_killed_with_sigkill_ends_the_job_and_the_run_resumes_to_the_same_bytes
 #[test]
 fn sigterm_to_mpirun_ends_the_job_and_the_run_resumes_to_the_same_bytes() {
     let n = SIGNALLED_TRAJECTORIES;
-    // Trajectories 16 times longer than the other tests' (a run of about 5 s): `mpirun` passes
-    // the signal on to the ranks only after 1-2 s here, and a run that finishes before that
-    // completes (correctly, but untested).
-    let (scene, reference, out, checkpoint, child) = job_under_way("sigterm", 8000.0);
+    // Trajectories 64 times longer than the other tests' (a run of several seconds): `mpirun`
+    // passes the signal on to the ranks only after 1-2 s here, and a run that finishes before
+    // that completes (correctly, but untested; with 16 times, the lane integrator finished first).
+    let (scene, reference, out, checkpoint, child) = job_under_way("sigterm", 32000.0);
     let term = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
     assert!(term.success());
     let (status, err) = finish(child, Duration::from_secs(60));
