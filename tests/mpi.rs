@@ -75,7 +75,9 @@ fn finish(mut child: Child, limit: Duration) -> (std::process::ExitStatus, Strin
 fn one_two_and_three_ranks_write_the_single_process_statistics_byte_for_byte() {
     let d = dir("ranks");
     let n = 640;
-    let scene = thermal_scene(&d, n, 500.0);
+    // Trajectories of 2000 a.u. (with 500, the lane integrator let rank 0 run all 10 blocks
+    // before another rank had read the scene).
+    let scene = thermal_scene(&d, n, 2000.0);
     let reference = d.join("single");
     ok(&single(&scene, &reference, &[]));
     for (k, threads) in [(1, 1), (2, 1), (3, 1), (2, 2)] {
@@ -92,7 +94,7 @@ fn one_two_and_three_ranks_write_the_single_process_statistics_byte_for_byte() {
         let by_rank: Vec<u64> = s["blocks_by_rank"].as_array().unwrap().iter().map(|b| b.as_u64().unwrap()).collect();
         assert_eq!(by_rank.len(), k);
         assert_eq!(by_rank.iter().sum::<u64>(), n / 64, "{by_rank:?}");
-        // Every rank took part (10 blocks of a few tenths of a second each; every rank asks as
+        // Every rank took part (10 blocks of 64 trajectories of 2000 a.u.; every rank asks as
         // soon as it has read the scene). Not asserted with 2 threads per rank: rank 0's two
         // threads may run all 10 blocks before a rank slowed by a loaded machine asks.
         assert!(threads > 1 || by_rank.iter().all(|&b| b > 0), "{by_rank:?}");

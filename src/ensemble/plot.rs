@@ -76,12 +76,14 @@ fn range(values: impl Iterator<Item = f64>, padding: f64) -> Option<(f64, f64)> 
     if !lo.is_finite() {
         return None;
     }
-    if hi - lo <= 1e-12 * hi.abs().max(lo.abs()).max(1e-300) {
-        let pad = if lo == 0.0 { 1.0 } else { 1e-6 * lo.abs() };
-        return Some((lo - pad, hi + pad));
-    }
-    let pad = padding * (hi - lo);
-    Some((lo - pad, hi + pad))
+    let pad = if hi - lo <= 1e-12 * hi.abs().max(lo.abs()).max(1e-300) {
+        if lo == 0.0 { 1.0 } else { 1e-6 * lo.abs() }
+    } else {
+        padding * (hi - lo)
+    };
+    // Values near f64::MAX have no finite width to draw (plotters' tick search would not end).
+    let (lo, hi) = (lo - pad, hi + pad);
+    (lo.is_finite() && hi.is_finite() && (hi - lo).is_finite()).then_some((lo, hi))
 }
 
 /// The power of ten that brings values as large as `lo` and `hi` to order one, if they are
@@ -89,7 +91,8 @@ fn range(values: impl Iterator<Item = f64>, padding: f64) -> Option<(f64, f64)> 
 /// 1e-18 cm²), so such values are drawn scaled, with the scale in the axis label.
 fn y_scale(lo: f64, hi: f64) -> (f64, Option<i32>) {
     let largest = lo.abs().max(hi.abs());
-    if largest == 0.0 || largest >= 1e-6 {
+    // Below 1e-300 the scale itself would overflow: such values are drawn as they are.
+    if !(1e-300..1e-6).contains(&largest) {
         return (1.0, None);
     }
     let exponent = largest.log10().floor() as i32;
@@ -232,5 +235,20 @@ mod tests {
     fn titles_are_escaped() {
         let s = svg(&[band_panel("a < b & c", 1.0)]);
         assert!(s.contains("a &lt; b &amp; c") && !s.contains("a < b"), "{s}");
+    }
+
+    /// Values no ensemble should produce, but might: drawn or reported as "no data", without a
+    /// panic (plotters asserts on NaN ranges) or a hang (its tick search on an infinite width).
+    #[test]
+    fn extreme_values_draw_without_panic_or_hang() {
+        for values in [[1e-320, 2e-320], [-1.7e308, 1.7e308], [f64::MAX, f64::MAX], [0.0, 5e-324], [f64::NAN, 1.0]] {
+            let band = values.iter().enumerate().map(|(i, &v)| (i as f64, v, 0.0)).collect();
+            let bars = values.iter().enumerate().map(|(i, &v)| (i as f64, i as f64 + 1.0, v)).collect();
+            let panels = [
+                Panel { title: "band".into(), x_label: "x".into(), y_label: "y".into(), content: Content::Band(band) },
+                Panel { title: "bars".into(), x_label: "x".into(), y_label: "y".into(), content: Content::Bars(bars) },
+            ];
+            assert!(svg(&panels).contains("</svg>"), "{values:?}");
+        }
     }
 }
