@@ -27,7 +27,7 @@ use crate::molecule::Molecule;
 /// `f64` path's numbers bit for bit: the molecule has generated lane forms
 /// ([`Molecule::has_lane_forms`]: not a large molecule with the centre-of-mass term of `a` at run
 /// time) and its vibrational block is factorized by [`super::factor`]'s small-block `L D Lᵀ`
-/// (fewer than [`super::factor_large::LARGE_BLOCK`] coordinates), which [`solve`] repeats
+/// (fewer than `factor_large::LARGE_BLOCK` = 24 coordinates), which this module's `solve` repeats
 /// operation for operation. Otherwise [`super::ReducedSystem`] takes its general path and the
 /// ensemble runner runs one trajectory at a time.
 pub fn available<M, const N: usize, const NA: usize>(molecule: &M) -> bool
