@@ -133,6 +133,20 @@ pub fn substitute(g: &mut Graph, e: ExprId, map: &[Option<ExprId>]) -> ExprId {
     image[e.index()].expect("the root is reachable")
 }
 
+/// The entries `grad[(a, i)]` of a 3 × atoms gradient, one per atom `i` and axis `a`.
+fn gradient_entries(gradient: &[[ExprId; 3]]) -> Vec<(TokenStream, ExprId)> {
+    gradient
+        .iter()
+        .enumerate()
+        .flat_map(|(i, row)| {
+            row.iter().enumerate().map(move |(a, &e)| {
+                let (ai, ii) = (index(a), index(i));
+                (quote!([(#ai, #ii)]), e)
+            })
+        })
+        .collect()
+}
+
 /// The generated functions: `internal_coordinates`, `cartesian_potential` and
 /// `cartesian_potential_gradient`, all taking `x: &SMatrix<f64, 3, NA>` (column i is atom i).
 pub fn specs(c: &CartesianExprs, n: usize, g: &Graph) -> Vec<FunctionSpec> {
@@ -146,17 +160,7 @@ pub fn specs(c: &CartesianExprs, n: usize, g: &Graph) -> Vec<FunctionSpec> {
         })
         .collect();
     let x_ty = quote!(&SMatrix<f64, 3, #nal>);
-    let grad_entries = c
-        .gradient
-        .iter()
-        .enumerate()
-        .flat_map(|(i, row)| {
-            row.iter().enumerate().map(move |(a, &e)| {
-                let (ai, ii) = (index(a), index(i));
-                (quote!([(#ai, #ii)]), e)
-            })
-        })
-        .collect();
+    let grad_entries = gradient_entries(&c.gradient);
     let mut specs = vec![
         FunctionSpec {
             name: "internal_coordinates",
@@ -210,17 +214,7 @@ pub fn specs(c: &CartesianExprs, n: usize, g: &Graph) -> Vec<FunctionSpec> {
             let i_lit = index(i);
             (p.first_var + i as u32, quote!(params[#i_lit]))
         }));
-        let grad_entries = p
-            .gradient
-            .iter()
-            .enumerate()
-            .flat_map(|(i, row)| {
-                row.iter().enumerate().map(move |(a, &e)| {
-                    let (ai, ii) = (index(a), index(i));
-                    (quote!([(#ai, #ii)]), e)
-                })
-            })
-            .collect();
+        let grad_entries = gradient_entries(&p.gradient);
         specs.push(FunctionSpec {
             name: "cartesian_potential_with",
             doc: "U(q(x)) in hartree at Cartesian positions `x` (bohr) with the parameters `params` (in the order\n\
