@@ -179,7 +179,9 @@ const SIGNALLED_TRAJECTORIES: u64 = 5120;
 /// single-process run.
 fn kill_rank_and_resume(victim: u32) {
     let n = SIGNALLED_TRAJECTORIES;
-    let (scene, reference, out, checkpoint, child) = job_under_way(&format!("dead{victim}"), 500.0);
+    // Trajectories of 2000 a.u.: with 500, an idle machine let the surviving ranks finish every
+    // block before mpirun had noticed the lost one.
+    let (scene, reference, out, checkpoint, child) = job_under_way(&format!("dead{victim}"), 2000.0);
     let ranks = ranks_of(child.id());
     let &(pid, _) =
         ranks.iter().find(|(_, r)| *r == victim).unwrap_or_else(|| panic!("no rank {victim} among {ranks:?}"));
