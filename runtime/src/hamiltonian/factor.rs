@@ -47,8 +47,8 @@ pub struct MetricFactor<const N: usize> {
     i_inv: Matrix3<f64>,
     /// `Y = I⁻¹ A` (3 × N).
     y: SMatrix<f64, 3, N>,
-    /// `S = L₂ D₂ L₂ᵀ`: `L₂` in the strict lower triangle (the rest is never read); for
-    /// `N ≥ LARGE_BLOCK`, transposed in the strict upper triangle (`factor_large`).
+    /// `S = L₂ D₂ L₂ᵀ`: `L₂` in the strict lower triangle (the rest is never read; for
+    /// `N ≥ LARGE_BLOCK` computed by columns, `factor_large`).
     l2: SMatrix<f64, N, N>,
     /// `1 / D₂`.
     d2_inv: SVector<f64, N>,
@@ -210,7 +210,7 @@ fn inverse_spd3(m: &Matrix3<f64>, tol: f64) -> Option<Matrix3<f64>> {
 /// `D_j = m_jj − Σ_{k<j} L_jk v_k`. Hand-written rather than `nalgebra::Cholesky` because with
 /// constant bounds it unrolls into straight-line code, and for the reciprocal pivots. Blocks of
 /// [`factor_large::LARGE_BLOCK`] and more go to [`factor_large::ldl_in_place`] instead, which
-/// stores `L` transposed (strict upper triangle).
+/// computes the same `L` (same storage) column by column.
 #[inline]
 fn ldl_in_place<const D: usize>(
     m: &mut SMatrix<f64, D, D>,

@@ -1,23 +1,32 @@
 //! The `L D Lᵀ` factorization and solve of [`super::factor`] for large blocks (molecules with
 //! at least [`LARGE_BLOCK`] internal coordinates), laid out for throughput rather than latency.
 //!
-//! The small-block version stores `L` in the strict lower triangle and reads its rows, which
-//! in nalgebra's column-major storage are strided: for water's 3 × 3 block that costs nothing,
-//! but for hexane's 54 × 54 Schur complement (`N³/6 ≈ 26 000` multiply-adds) the inner
-//! products ran as one long dependent chain of strided loads. Here `L_jk` is stored
-//! transposed, at `(k, j)` in the strict upper triangle, so that row `k` of `L` is the
-//! contiguous column `k`; each inner product runs over two contiguous slices with four
-//! independent partial sums, and the back substitution is a sequence of contiguous
-//! `x ← x − x_k L_k·` updates. Same algorithm (row-by-row `L D Lᵀ`, the same pivots and tests),
+//! The small-block version goes row by row: row `j` of `L` is a forward substitution with the
+//! rows above, each entry an inner product that needs the entry before it. For water's 3 × 3
+//! block that costs nothing, but for hexane's 54 × 54 Schur complement (`N³/6 ≈ 26 000`
+//! multiply-adds) it is one long dependent chain. Here `L` is computed column by column
+//! (left-looking): the entries of column `j` below the diagonal, `L_ij = (m_ij − Σ_{k<j} L_ik
+//! L_jk D_k) / D_j`, are independent of each other, so [`ROWS`] consecutive ones are
+//! accumulated at once in registers while the columns to their left are read as contiguous
+//! slices of nalgebra's column-major storage (`L` in the strict lower triangle, as in the
+//! small-block version). The solve runs over contiguous columns too. Same pivots and tests,
 //! different summation order: results agree with the small-block version to rounding (unit
-//! test against nalgebra's Cholesky below). Measured: about 3 % of hexane's right-hand side
-//! gained, while ethane (18 coordinates) was slower with it than with the unrolled small-block
-//! version, hence the threshold; no shipped molecule reaches it.
+//! tests against nalgebra's Cholesky below).
+//!
+//! Measured (BENCHMARKS.md, "Large molecules, fourth step"): the factorization of a 54 × 54
+//! matrix alone 7.8 → 4.0 µs against the previous version (`L` transposed, row by row with
+//! four partial sums per inner product), which was itself about 3 % faster than the
+//! small-block version on hexane. Ethane (18 coordinates) was slower with that previous
+//! version than with the unrolled small-block one, hence the threshold; no shipped molecule
+//! reaches it.
 
 use nalgebra::{SMatrix, SVector};
 
 /// From this block size on, [`super::factor`] uses this module.
 pub const LARGE_BLOCK: usize = 24;
+
+/// Rows of a column of `L` computed together in registers by [`ldl_in_place`].
+const ROWS: usize = 8;
 
 /// `Σ a_i b_i` with four partial sums.
 #[inline(always)]
@@ -37,9 +46,31 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     s
 }
 
-/// [`super::factor`]'s `ldl_in_place` with `L` written transposed into the strict upper
-/// triangle (reads the lower triangle of `m` only); returns `1 / D`, or `None` unless every
-/// pivot `D_jj` exceeds `tol · scale(j)` (NaN fails too).
+/// `acc_t ← (m_{i+t, j} − Σ_{k<j} L_{i+t, k} c_k) / D_j` for `t < R`, written to `L_{i+t, j}`: `R`
+/// consecutive entries of column `j` of `L`, each a contiguous slice of the columns to its left,
+/// accumulated in `R` independent registers (vectorised by LLVM over `t`).
+#[inline(always)]
+fn column_block<const D: usize, const R: usize>(m: &mut [f64], c: &[f64; D], j: usize, i: usize, d_inv: f64) {
+    let mut acc: [f64; R] = m[j * D + i..j * D + i + R].try_into().expect("R rows");
+    for (k, &ck) in c[..j].iter().enumerate() {
+        let column: &[f64; R] = m[k * D + i..k * D + i + R].try_into().expect("R rows");
+        for t in 0..R {
+            acc[t] -= column[t] * ck;
+        }
+    }
+    for a in &mut acc {
+        *a *= d_inv;
+    }
+    m[j * D + i..j * D + i + R].copy_from_slice(&acc);
+}
+
+/// [`super::factor`]'s `ldl_in_place` by columns (left-looking): `L` in the strict lower
+/// triangle as there (reads the lower triangle of `m` only); returns `1 / D`, or `None` unless
+/// every pivot `D_jj` exceeds `tol · scale(j)` (NaN fails too).
+///
+/// Column `j`: `c_k = L_jk D_k` (`k < j`), `D_j = m_jj − Σ_k L_jk c_k`, and for `i > j`
+/// `L_ij = (m_ij − Σ_{k<j} L_ik c_k) / D_j`; the entries of a column are independent of each
+/// other, so they are computed [`ROWS`] at a time by [`column_block`].
 #[inline]
 pub(super) fn ldl_in_place<const D: usize>(
     m: &mut SMatrix<f64, D, D>,
@@ -47,27 +78,42 @@ pub(super) fn ldl_in_place<const D: usize>(
     tol: f64,
 ) -> Option<SVector<f64, D>> {
     let mut d_inv = SVector::<f64, D>::zeros();
-    let mut v = [0.0f64; D];
+    let mut pivots = [0.0f64; D];
+    let mut c = [0.0f64; D];
+    let m = m.as_mut_slice();
     for j in 0..D {
-        let mut d = m[(j, j)];
+        let mut partial = [0.0f64; 4];
         for k in 0..j {
-            // v_k = L_jk D_k = m_jk − Σ_{l<k} L_kl v_l; row k of L is column k above the diagonal.
-            let column = &m.as_slice()[k * D..k * D + k];
-            let vk = m[(j, k)] - dot(column, &v[..k]);
-            v[k] = vk;
-            let ljk = vk * d_inv[k];
-            m[(k, j)] = ljk;
-            d -= ljk * vk;
+            let ljk = m[k * D + j];
+            let ck = ljk * pivots[k];
+            c[k] = ck;
+            partial[k % 4] += ljk * ck;
         }
+        let d = m[j * D + j] - ((partial[0] + partial[1]) + (partial[2] + partial[3]));
         if d.is_nan() || d <= tol * scale(j) {
             return None;
         }
-        d_inv[j] = 1.0 / d;
+        let r = 1.0 / d;
+        d_inv[j] = r;
+        pivots[j] = d;
+        let mut i = j + 1;
+        while i + ROWS <= D {
+            column_block::<D, ROWS>(m, &c, j, i, r);
+            i += ROWS;
+        }
+        while i + 2 <= D {
+            column_block::<D, 2>(m, &c, j, i, r);
+            i += 2;
+        }
+        if i < D {
+            column_block::<D, 1>(m, &c, j, i, r);
+        }
     }
     Some(d_inv)
 }
 
-/// `x = L⁻ᵀ D⁻¹ L⁻¹ b` for a factor from [`ldl_in_place`] (`L` in the strict upper triangle).
+/// `x = L⁻ᵀ D⁻¹ L⁻¹ b` for a factor from [`ldl_in_place`] (`L` in the strict lower triangle), by
+/// contiguous columns: `x ← x − x_k L_·k` forward, `x_i −= L_·i · x` backward.
 #[inline]
 pub(super) fn ldl_solve<const D: usize>(
     l: &SMatrix<f64, D, D>,
@@ -75,20 +121,20 @@ pub(super) fn ldl_solve<const D: usize>(
     mut x: SVector<f64, D>,
 ) -> SVector<f64, D> {
     let s = l.as_slice();
-    for i in 1..D {
-        let xs = x.as_slice();
-        let t = dot(&s[i * D..i * D + i], &xs[..i]);
-        x[i] -= t;
-    }
-    for i in 0..D {
-        x[i] *= d_inv[i];
-    }
-    for k in (1..D).rev() {
-        let xk = x[k];
-        let column = &s[k * D..k * D + k];
-        for (xi, lki) in x.as_mut_slice()[..k].iter_mut().zip(column) {
-            *xi -= lki * xk;
+    let xs = x.as_mut_slice();
+    for k in 0..D {
+        let (head, tail) = xs.split_at_mut(k + 1);
+        let xk = head[k];
+        for (xi, lik) in tail.iter_mut().zip(&s[k * D + k + 1..(k + 1) * D]) {
+            *xi -= lik * xk;
         }
+    }
+    for (xi, r) in xs.iter_mut().zip(d_inv.iter()) {
+        *xi *= r;
+    }
+    for i in (0..D).rev() {
+        let t = dot(&s[i * D + i + 1..(i + 1) * D], &xs[i + 1..]);
+        xs[i] -= t;
     }
     x
 }
@@ -97,27 +143,40 @@ pub(super) fn ldl_solve<const D: usize>(
 mod tests {
     use super::*;
 
-    /// Against nalgebra's Cholesky of the same matrix: the solve, and `D` (the squared
-    /// Cholesky diagonal), for a 20 × 20 symmetric positive definite matrix.
-    #[test]
-    fn matches_cholesky() {
-        const D: usize = 20;
+    /// Against nalgebra's Cholesky `C Cᵀ` of the same matrix: the solve, `D` (the squared
+    /// diagonal of `C`) and `L` (`C` with its columns divided by their diagonal), for symmetric
+    /// positive definite matrices of 20, 27 and 54 rows (every path of the column blocks:
+    /// [`ROWS`] at a time, pairs, single rows). The strict upper triangle of the input is NaN,
+    /// so reading it anywhere would show.
+    fn matches_cholesky<const D: usize>() {
         let b = SMatrix::<f64, D, D>::from_fn(|i, j| ((i * 7 + j * 13) % 11) as f64 / 11.0 - 0.45);
         let m = b * b.transpose() + SMatrix::<f64, D, D>::identity() * 0.5;
         let rhs = SVector::<f64, D>::from_fn(|i, _| (i as f64 * 0.37).sin());
-        let mut f = m;
+        let mut f = SMatrix::<f64, D, D>::from_fn(|i, j| if i >= j { m[(i, j)] } else { f64::NAN });
         let d_inv = ldl_in_place(&mut f, |_| 1.0, 1e-14).expect("positive definite");
         let chol = m.cholesky().expect("positive definite");
         let expected = chol.solve(&rhs);
         let x = ldl_solve(&f, &d_inv, rhs);
-        assert!((x - expected).amax() < 1e-10 * expected.amax(), "{x} vs {expected}");
+        assert!((x - expected).amax() < 1e-10 * expected.amax(), "{D}: {x} vs {expected}");
         let l = chol.l();
         for j in 0..D {
-            assert!((1.0 / d_inv[j] - l[(j, j)] * l[(j, j)]).abs() < 1e-12 * m[(j, j)]);
+            assert!((1.0 / d_inv[j] - l[(j, j)] * l[(j, j)]).abs() < 1e-12 * m[(j, j)], "{D}: D_{j}");
+            for i in j + 1..D {
+                assert!((f[(i, j)] - l[(i, j)] / l[(j, j)]).abs() < 1e-12, "{D}: L_{i}{j}");
+            }
         }
-        // A matrix that is not positive definite fails.
-        let mut bad = m;
-        bad[(D - 1, D - 1)] = -1.0;
-        assert!(ldl_in_place(&mut bad, |_| 1.0, 1e-14).is_none());
+        // A matrix that is not positive definite fails, at its first or its last pivot.
+        for p in [0, D - 1] {
+            let mut bad = m;
+            bad[(p, p)] = -1.0;
+            assert!(ldl_in_place(&mut bad, |_| 1.0, 1e-14).is_none(), "{D}: pivot {p}");
+        }
+    }
+
+    #[test]
+    fn matches_cholesky_20_27_54() {
+        matches_cholesky::<20>();
+        matches_cholesky::<27>();
+        matches_cholesky::<54>();
     }
 }
