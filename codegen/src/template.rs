@@ -288,22 +288,24 @@ pub(crate) fn molecule_items(
         inherent_specs.push(FunctionSpec {
             name: "kinetic_and_gradient",
             doc: "[`Molecule::kinetic_and_gradient`] with ∂c/∂q in `dc`: `a` is completed by the runtime's\n\
-                  centre-of-mass update before `velocities(k)` is called."
+                  centre-of-mass update before `velocities(k)` is called; `None` if `velocities` returns `None`.\n\
+                  Not generic (`velocities` is `dyn`), so that its large body is compiled once, not once per\n\
+                  caller."
                 .into(),
             signature: quote!(
-                fn kinetic_and_gradient_sparse<E>(
+                fn kinetic_and_gradient_sparse(
                     &self,
                     q: #q_ty,
                     k: &mut KineticMatrices<#n>,
                     dc: #dc_ty,
-                    velocities: impl FnOnce(&KineticMatrices<#n>) -> Result<(Vector3<f64>, SVector<f64, #n>), E>,
+                    velocities: &mut dyn FnMut(&KineticMatrices<#n>) -> Option<(Vector3<f64>, SVector<f64, #n>)>,
                     grad: &mut SVector<f64, #n>,
-                ) -> Result<(Vector3<f64>, SVector<f64, #n>, f64), E>
+                ) -> Option<(Vector3<f64>, SVector<f64, #n>, f64)>
             ),
             inputs: velocity_inputs.clone(),
             groups,
             ret: Some(e.kinetic_energy),
-            ret_wrap: Some(|t| quote!(Ok((omega, qdot, #t)))),
+            ret_wrap: Some(|t| quote!(Some((omega, qdot, #t)))),
             barrier: Some(Barrier {
                 groups_before: 4,
                 statement: quote! {
@@ -323,7 +325,8 @@ pub(crate) fn molecule_items(
             }
 
             /// The kinetic matrices into `k`, then (ω, q̇) from `velocities(k)`, then ∂T/∂q at those
-            /// velocities into `grad`. Returns (ω, q̇, T).
+            /// velocities into `grad`. Returns (ω, q̇, T). `velocities` goes to the one
+            /// non-generic `kinetic_and_gradient_sparse` as `dyn`, its error through `failure`.
             fn kinetic_and_gradient<E>(
                 &self,
                 q: #q_ty,
@@ -332,7 +335,26 @@ pub(crate) fn molecule_items(
                 grad: &mut SVector<f64, #n>,
             ) -> Result<(Vector3<f64>, SVector<f64, #n>, f64), E> {
                 let mut dc = SMatrix::<f64, 3, #n>::zeros();
-                self.kinetic_and_gradient_sparse(q, k, &mut dc, velocities, grad)
+                let mut velocities = Some(velocities);
+                let mut failure = None;
+                let done = self.kinetic_and_gradient_sparse(
+                    q,
+                    k,
+                    &mut dc,
+                    &mut |k| match velocities.take()?(k) {
+                        Ok(v) => Some(v),
+                        Err(e) => {
+                            failure = Some(e);
+                            None
+                        }
+                    },
+                    grad,
+                );
+                match (done, failure) {
+                    (Some(out), _) => Ok(out),
+                    (None, Some(e)) => Err(e),
+                    (None, None) => unreachable!("kinetic_and_gradient_sparse fails only where velocities does"),
+                }
             }
         };
     }

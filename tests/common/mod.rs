@@ -9,14 +9,29 @@ use rovib::runtime::nalgebra::{SMatrix, SVector};
 use rovib::runtime::units::CoordinateUnit;
 use rovib::runtime::{Molecule, MoleculeVisitor};
 
-/// Runs `check` on every shipped molecule (there must be at least one), each to its end even
-/// if an earlier one fails, and fails naming every molecule that failed with its message: a
-/// bare `unwrap` inside a check still reports which molecule it was.
-pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
+/// The stack of the thread [`for_each_molecule`] runs each check on. The test harness's
+/// threads have 2 MiB, which a molecule of 54 coordinates (hexane, added through
+/// `ROVIB_MOLECULES_DIR`) overflows: the G-matrix path's `Workspace` holds `N + 1` kinetic
+/// matrices, 1.4 MB for `N = 54`, and the test profile keeps temporary copies of such values
+/// on the stack. The memory is reserved, not touched, unless a check needs it.
+pub const CHECK_STACK_BYTES: usize = 256 << 20;
+
+/// Runs `check` on every molecule of the build (there must be at least one), each on its own
+/// thread with a [`CHECK_STACK_BYTES`] stack and to its end even if an earlier one fails, and
+/// fails naming every molecule that failed with its message: a bare `unwrap` inside a check
+/// still reports which molecule it was.
+pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy + Send) {
     assert!(!rovib::molecules::NAMES.is_empty());
     let mut failures = Vec::new();
     for name in rovib::molecules::NAMES {
-        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| rovib::molecules::visit(name, check)));
+        let outcome = std::thread::scope(|scope| {
+            std::thread::Builder::new()
+                .name(format!("check of {name}"))
+                .stack_size(CHECK_STACK_BYTES)
+                .spawn_scoped(scope, move || rovib::molecules::visit(name, check))
+                .expect("a thread for the check")
+                .join()
+        });
         match outcome {
             Ok(Some(())) => {}
             Ok(None) => failures.push(format!("{name}: listed in molecules::NAMES but cannot be visited")),
@@ -30,6 +45,20 @@ pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy) {
         rovib::molecules::NAMES.len(),
         failures.join("\n")
     );
+}
+
+/// The definition file of the molecule called `name` as the build names it:
+/// `molecules/NAME.toml`, or its path under `ROVIB_MOLECULES_DIR` when that is set.
+pub fn source_of(name: &str) -> &'static str {
+    #[derive(Copy, Clone)]
+    struct Source;
+    impl MoleculeVisitor for Source {
+        type Output = &'static str;
+        fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> &'static str {
+            m.source()
+        }
+    }
+    rovib::molecules::visit(name, Source).unwrap_or_else(|| panic!("{name} is not a molecule of this build"))
 }
 
 /// The text of a panic's payload (a `&str` or `String` message; anything else is named so).
