@@ -9,16 +9,17 @@
 //! L_jk D_k) / D_j`, are independent of each other, so [`ROWS`] consecutive ones are
 //! accumulated at once in registers while the columns to their left are read as contiguous
 //! slices of nalgebra's column-major storage (`L` in the strict lower triangle, as in the
-//! small-block version). The solve runs over contiguous columns too. Same pivots and tests,
-//! different summation order: results agree with the small-block version to rounding (unit
-//! tests against nalgebra's Cholesky below).
+//! small-block version, plus a transposed copy in the strict upper triangle for the pivots).
+//! The solve runs over contiguous columns too. Same pivots and tests, different summation
+//! order: results agree with the small-block version to rounding (unit tests against
+//! nalgebra's Cholesky below).
 //!
-//! Measured (BENCHMARKS.md, "Large molecules, fourth step"): the factorization of a 54 × 54
-//! matrix alone 7.8 → 4.0 µs against the previous version (`L` transposed, row by row with
-//! four partial sums per inner product), which was itself about 3 % faster than the
-//! small-block version on hexane. Ethane (18 coordinates) was slower with that previous
-//! version than with the unrolled small-block one, hence the threshold; no shipped molecule
-//! reaches it.
+//! Measured (`benches/size/ldl_variants.rs`, BENCHMARKS.md "Large molecules, fourth step"): a
+//! 54 × 54 factorization 7.1 µs with the previous version (`L` transposed, row by row with four
+//! partial sums per inner product), 3.4 µs with this one. The previous version was itself
+//! about 3 % faster than the small-block version on hexane, but ethane (18 coordinates) was
+//! slower with it than with the unrolled small-block one, hence the threshold; no shipped
+//! molecule reaches it.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -62,15 +63,23 @@ fn column_block<const D: usize, const R: usize>(m: &mut [f64], c: &[f64; D], j: 
         *a *= d_inv;
     }
     m[j * D + i..j * D + i + R].copy_from_slice(&acc);
+    // And transposed, into row j of the strict upper triangle, where the pivot of column i + t
+    // reads it as part of a contiguous row.
+    for (t, &a) in acc.iter().enumerate() {
+        m[(i + t) * D + j] = a;
+    }
 }
 
 /// [`super::factor`]'s `ldl_in_place` by columns (left-looking): `L` in the strict lower
-/// triangle as there (reads the lower triangle of `m` only); returns `1 / D`, or `None` unless
-/// every pivot `D_jj` exceeds `tol · scale(j)` (NaN fails too).
+/// triangle as there, and a copy of it transposed in the strict upper triangle (reads the lower
+/// triangle of `m` only); returns `1 / D`, or `None` unless every pivot `D_jj` exceeds
+/// `tol · scale(j)` (NaN fails too).
 ///
 /// Column `j`: `c_k = L_jk D_k` (`k < j`), `D_j = m_jj − Σ_k L_jk c_k`, and for `i > j`
 /// `L_ij = (m_ij − Σ_{k<j} L_ik c_k) / D_j`; the entries of a column are independent of each
-/// other, so they are computed [`ROWS`] at a time by [`column_block`].
+/// other, so they are computed [`ROWS`] at a time by [`column_block`]. The transposed copy
+/// makes row `j` of `L`, which the pivot needs, contiguous (measured: 3.66 → 3.35 µs for 54
+/// rows).
 #[inline]
 pub(super) fn ldl_in_place<const D: usize>(
     m: &mut SMatrix<f64, D, D>,
@@ -82,14 +91,12 @@ pub(super) fn ldl_in_place<const D: usize>(
     let mut c = [0.0f64; D];
     let m = m.as_mut_slice();
     for j in 0..D {
-        let mut partial = [0.0f64; 4];
-        for k in 0..j {
-            let ljk = m[k * D + j];
-            let ck = ljk * pivots[k];
-            c[k] = ck;
-            partial[k % 4] += ljk * ck;
+        // Row j of L, contiguous in the upper triangle (column j of the storage).
+        let row = &m[j * D..j * D + j];
+        for ((ck, &ljk), &dk) in c.iter_mut().zip(row).zip(&pivots) {
+            *ck = ljk * dk;
         }
-        let d = m[j * D + j] - ((partial[0] + partial[1]) + (partial[2] + partial[3]));
+        let d = m[j * D + j] - dot(row, &c[..j]);
         if d.is_nan() || d <= tol * scale(j) {
             return None;
         }
