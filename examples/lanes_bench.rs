@@ -34,7 +34,7 @@ use rovib::runtime::hamiltonian::PhaseState;
 use rovib::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use rovib::runtime::hamiltonian::lanes::{ProductionLanes, production_rhs};
 use rovib::runtime::integrate::{Dop853, Dop853Lanes, Dop853Options, LaneFailure, LaneFeeder, OdeSystem, Stats};
-use rovib::runtime::lanes::{F64x2, F64x4, Real};
+use rovib::runtime::lanes::{F64x2, F64x4, F64x8, Real};
 use rovib::runtime::nalgebra::{SVector, UnitQuaternion, Vector3};
 use rovib::scene::parse_scene;
 use rovib::start::initial_state;
@@ -242,25 +242,27 @@ fn main() {
     let starts = states(64, 1);
     let scene_y0 = scene_start();
     let (mut one, mut one_evals) = (vec![], 0);
-    let (mut f, mut x2, mut x4) = (vec![], vec![], vec![]);
-    let (mut ef, mut ex2, mut ex4) = (vec![], vec![], vec![]);
+    let (mut f, mut x2, mut x4, mut x8) = (vec![], vec![], vec![], vec![]);
+    let (mut ef, mut ex2, mut ex4, mut ex8) = (vec![], vec![], vec![], vec![]);
     let mut evals = 0.0;
     for round in 0..rounds {
         f.push(rhs_f64(&starts, 2000));
         x2.push(rhs_lanes::<F64x2>(&starts, 2000));
         x4.push(rhs_lanes::<F64x4>(&starts, 2000));
+        x8.push(rhs_lanes::<F64x8>(&starts, 2000));
         let (ms, e) = ensemble_scalar(&starts);
         evals = e;
         ef.push(ms);
         ex2.push(ensemble_lanes::<F64x2>(&starts));
         ex4.push(ensemble_lanes::<F64x4>(&starts));
+        ex8.push(ensemble_lanes::<F64x8>(&starts));
         let (ms, e) = one_trajectory(&scene_y0, 8);
         one.push(ms);
         one_evals = e;
         println!(
-            "round {round}: rhs ns/eval f64 {:.1}, x2 {:.1}, x4 {:.1}; ensemble ms/trajectory f64 {:.3}, x2 {:.3}, x4 {:.3}; \
-             one trajectory at 1e-10 {:.3} ms",
-            f[round], x2[round], x4[round], ef[round], ex2[round], ex4[round], one[round]
+            "round {round}: rhs ns/eval f64 {:.1}, x2 {:.1}, x4 {:.1}, x8 {:.1}; ensemble ms/trajectory f64 {:.3}, x2 {:.3}, \
+             x4 {:.3}, x8 {:.3}; one trajectory at 1e-10 {:.3} ms",
+            f[round], x2[round], x4[round], x8[round], ef[round], ex2[round], ex4[round], ex8[round], one[round]
         );
     }
     let ratio = |a: &[f64], b: &[f64]| {
@@ -269,20 +271,25 @@ fn main() {
     };
     println!("\nmedians over {rounds} interleaved rounds (thread CPU time):");
     println!(
-        "rhs per trajectory-evaluation: f64 {:.1} ns, F64x2 {:.1} ns ({:.2}x), F64x4 {:.1} ns ({:.2}x)",
+        "rhs per trajectory-evaluation: f64 {:.1} ns, F64x2 {:.1} ns ({:.2}x), F64x4 {:.1} ns ({:.2}x), F64x8 {:.1} ns ({:.2}x)",
         median(&mut f.clone()),
         median(&mut x2.clone()),
         ratio(&f, &x2),
         median(&mut x4.clone()),
-        ratio(&f, &x4)
+        ratio(&f, &x4),
+        median(&mut x8.clone()),
+        ratio(&f, &x8)
     );
     println!(
-        "ensemble, water 1e4 a.u. rtol 1e-8 ({evals:.0} rhs per trajectory): f64 {:.3} ms, F64x2 {:.3} ms ({:.2}x), F64x4 {:.3} ms ({:.2}x) per trajectory",
+        "ensemble, water 1e4 a.u. rtol 1e-8 ({evals:.0} rhs per trajectory): f64 {:.3} ms, F64x2 {:.3} ms ({:.2}x), F64x4 {:.3} ms ({:.2}x), \
+         F64x8 {:.3} ms ({:.2}x) per trajectory",
         median(&mut ef.clone()),
         median(&mut ex2.clone()),
         ratio(&ef, &ex2),
         median(&mut ex4.clone()),
-        ratio(&ef, &ex4)
+        ratio(&ef, &ex4),
+        median(&mut ex8.clone()),
+        ratio(&ef, &ex8)
     );
     println!(
         "one trajectory, scenes/h2o_1e4au.toml at rtol 1e-10 ({one_evals} rhs): {:.3} ms ({:.1} ns per rhs, integrator included)",
