@@ -20,7 +20,9 @@
 //! ```
 //!
 //! `lanes_bench profile-scalar` and `lanes_bench profile-x2` run only one ensemble pass of that
-//! contender (64 trajectories), to be profiled (`valgrind --tool=callgrind`).
+//! contender (64 trajectories), to be profiled (`valgrind --tool=callgrind`). `lanes_bench
+//! checksum` prints the bits of a checksum of the lanes' outputs at 2, 4 and 8 lanes, to compare
+//! builds (baseline against `-C target-cpu=native`).
 //!
 //! Built for the default target (baseline x86-64: SSE2, no AVX, no FMA) unless RUSTFLAGS say
 //! otherwise; the program prints which vector features the build has.
@@ -148,6 +150,10 @@ struct Feed<'a> {
     starts: &'a [Vec<f64>],
     next: usize,
     sink: f64,
+    checksum: bool,
+    /// XOR of the bits of every output's state and time: a checksum independent of the order in
+    /// which the lanes deliver their outputs.
+    xor: u64,
     evals: u64,
 }
 
@@ -158,8 +164,16 @@ impl LaneFeeder for Feed<'_> {
         self.next += 1;
         true
     }
-    fn observe(&mut self, _lane: usize, _t: f64, y: &[f64]) -> ControlFlow<()> {
+    fn observe(&mut self, _lane: usize, t: f64, y: &[f64]) -> ControlFlow<()> {
         self.sink += y[0];
+        if self.checksum {
+            // Each value's bits rotated by its component, so equal values do not cancel.
+            let mut h = t.to_bits();
+            for (i, v) in y.iter().enumerate() {
+                h ^= v.to_bits().rotate_left(i as u32 * 5 + 1);
+            }
+            self.xor ^= h.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
         ControlFlow::Continue(())
     }
     fn finish(&mut self, _lane: usize, result: Result<Stats, LaneFailure>) {
@@ -169,13 +183,19 @@ impl LaneFeeder for Feed<'_> {
 
 /// CPU ms per trajectory of the batched DOP853 at `T`.
 fn ensemble_lanes<T: Real>(starts: &[Vec<f64>]) -> f64 {
+    ensemble_lanes_run::<T>(starts, false).0
+}
+
+/// CPU ms per trajectory of the batched DOP853 at `T`, and (with `checksum`) a checksum of every
+/// output of every trajectory that does not depend on the order of the outputs.
+fn ensemble_lanes_run<T: Real>(starts: &[Vec<f64>], checksum: bool) -> (f64, u64) {
     let m = H2o;
     let mut solver = Dop853Lanes::<T>::new(DIM, options()).unwrap();
-    let mut feed = Feed { starts, next: 0, sink: 0.0, evals: 0 };
+    let mut feed = Feed { starts, next: 0, sink: 0.0, checksum, xor: 0, evals: 0 };
     let t0 = cpu();
     solver.integrate(&mut ProductionLanes::new(&m, 1e-12), 0.0, T_END, INTERVAL, &mut feed).unwrap();
     black_box(feed.sink);
-    (cpu() - t0) * 1e3 / starts.len() as f64
+    ((cpu() - t0) * 1e3 / starts.len() as f64, feed.xor)
 }
 
 /// `scenes/h2o_1e4au.toml`'s initial state in the production layout.
@@ -222,6 +242,21 @@ fn main() {
         Some("profile-scalar") => {
             let (ms, _) = ensemble_scalar(&states(64, 1));
             println!("scalar ensemble: {ms:.3} ms per trajectory");
+            return;
+        }
+        Some("checksum") => {
+            // The lanes' results do not depend on the vector width or the build's target
+            // features: the same bits here for a baseline and a `-C target-cpu=native` build.
+            let starts = states(64, 1);
+            let sums = [
+                ensemble_lanes_run::<F64x2>(&starts, true).1,
+                ensemble_lanes_run::<F64x4>(&starts, true).1,
+                ensemble_lanes_run::<F64x8>(&starts, true).1,
+            ];
+            println!(
+                "checksum of the lanes' outputs (F64x2, F64x4, F64x8): {:016x} {:016x} {:016x}",
+                sums[0], sums[1], sums[2]
+            );
             return;
         }
         Some("profile-x2") => {

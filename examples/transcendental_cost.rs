@@ -1,6 +1,6 @@
-//! What `sin_cos` and `exp` cost: libm (one number per call) against `runtime::transcendental`
-//! (the polynomial written once over `Real`) at `f64` and per lane of `F64x2`, `F64x4`,
-//! `F64x8`. Thread CPU time per evaluation, the contenders interleaved round by round in one
+//! What `sin_cos` and `exp` cost: libm (one number per call; what the one-trajectory `f64`
+//! path calls) against `runtime::transcendental` (the polynomial written once over `Real`) at
+//! `f64` and per lane of `F64x2`, `F64x4`, `F64x8` (what the lanes call). Thread CPU time per evaluation, the contenders interleaved round by round in one
 //! process; chained (each argument depends on the previous result), over arguments in
 //! `[−3, 3]` (angles, Morse exponents). BENCHMARKS.md, "Many trajectories per core".
 //!
@@ -12,6 +12,7 @@ use std::hint::black_box;
 
 use nix::time::{ClockId, clock_gettime};
 use rovib::runtime::lanes::{F64x2, F64x4, F64x8, Real};
+use rovib::runtime::transcendental;
 
 fn cpu() -> f64 {
     let t = clock_gettime(ClockId::CLOCK_THREAD_CPUTIME_ID).expect("thread CPU clock");
@@ -58,7 +59,7 @@ fn main() {
             s + c
         }));
         sc[1].push(chained::<f64>(|x| {
-            let (s, c) = Real::sin_cos(x);
+            let (s, c) = transcendental::sin_cos(x);
             s + c
         }));
         sc[2].push(chained::<F64x2>(|x| {
@@ -74,7 +75,7 @@ fn main() {
             s + c
         }));
         ex[0].push(chained::<f64>(f64::exp));
-        ex[1].push(chained::<f64>(Real::exp));
+        ex[1].push(chained::<f64>(transcendental::exp));
         ex[2].push(chained::<F64x2>(Real::exp));
         ex[3].push(chained::<F64x4>(Real::exp));
         ex[4].push(chained::<F64x8>(Real::exp));
