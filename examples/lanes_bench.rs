@@ -20,7 +20,9 @@
 //! ```
 //!
 //! `lanes_bench profile-scalar` and `lanes_bench profile-x2` run only one ensemble pass of that
-//! contender (64 trajectories), to be profiled (`valgrind --tool=callgrind`).
+//! contender (64 trajectories), to be profiled (`valgrind --tool=callgrind`). `lanes_bench
+//! checksum` prints the bits of a checksum of the lanes' outputs at 2, 4 and 8 lanes, to compare
+//! builds (baseline against `-C target-cpu=native`).
 //!
 //! Built for the default target (baseline x86-64: SSE2, no AVX, no FMA) unless RUSTFLAGS say
 //! otherwise; the program prints which vector features the build has.
@@ -34,7 +36,7 @@ use rovib::runtime::hamiltonian::PhaseState;
 use rovib::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use rovib::runtime::hamiltonian::lanes::{ProductionLanes, production_rhs};
 use rovib::runtime::integrate::{Dop853, Dop853Lanes, Dop853Options, LaneFailure, LaneFeeder, OdeSystem, Stats};
-use rovib::runtime::lanes::{F64x2, F64x4, Real};
+use rovib::runtime::lanes::{F64x2, F64x4, F64x8, Real};
 use rovib::runtime::nalgebra::{SVector, UnitQuaternion, Vector3};
 use rovib::scene::parse_scene;
 use rovib::start::initial_state;
@@ -148,6 +150,10 @@ struct Feed<'a> {
     starts: &'a [Vec<f64>],
     next: usize,
     sink: f64,
+    checksum: bool,
+    /// XOR of the bits of every output's state and time: a checksum independent of the order in
+    /// which the lanes deliver their outputs.
+    xor: u64,
     evals: u64,
 }
 
@@ -158,8 +164,16 @@ impl LaneFeeder for Feed<'_> {
         self.next += 1;
         true
     }
-    fn observe(&mut self, _lane: usize, _t: f64, y: &[f64]) -> ControlFlow<()> {
+    fn observe(&mut self, _lane: usize, t: f64, y: &[f64]) -> ControlFlow<()> {
         self.sink += y[0];
+        if self.checksum {
+            // Each value's bits rotated by its component, so equal values do not cancel.
+            let mut h = t.to_bits();
+            for (i, v) in y.iter().enumerate() {
+                h ^= v.to_bits().rotate_left(i as u32 * 5 + 1);
+            }
+            self.xor ^= h.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
         ControlFlow::Continue(())
     }
     fn finish(&mut self, _lane: usize, result: Result<Stats, LaneFailure>) {
@@ -169,13 +183,19 @@ impl LaneFeeder for Feed<'_> {
 
 /// CPU ms per trajectory of the batched DOP853 at `T`.
 fn ensemble_lanes<T: Real>(starts: &[Vec<f64>]) -> f64 {
+    ensemble_lanes_run::<T>(starts, false).0
+}
+
+/// CPU ms per trajectory of the batched DOP853 at `T`, and (with `checksum`) a checksum of every
+/// output of every trajectory that does not depend on the order of the outputs.
+fn ensemble_lanes_run<T: Real>(starts: &[Vec<f64>], checksum: bool) -> (f64, u64) {
     let m = H2o;
     let mut solver = Dop853Lanes::<T>::new(DIM, options()).unwrap();
-    let mut feed = Feed { starts, next: 0, sink: 0.0, evals: 0 };
+    let mut feed = Feed { starts, next: 0, sink: 0.0, checksum, xor: 0, evals: 0 };
     let t0 = cpu();
     solver.integrate(&mut ProductionLanes::new(&m, 1e-12), 0.0, T_END, INTERVAL, &mut feed).unwrap();
     black_box(feed.sink);
-    (cpu() - t0) * 1e3 / starts.len() as f64
+    ((cpu() - t0) * 1e3 / starts.len() as f64, feed.xor)
 }
 
 /// `scenes/h2o_1e4au.toml`'s initial state in the production layout.
@@ -224,6 +244,21 @@ fn main() {
             println!("scalar ensemble: {ms:.3} ms per trajectory");
             return;
         }
+        Some("checksum") => {
+            // The lanes' results do not depend on the vector width or the build's target
+            // features: the same bits here for a baseline and a `-C target-cpu=native` build.
+            let starts = states(64, 1);
+            let sums = [
+                ensemble_lanes_run::<F64x2>(&starts, true).1,
+                ensemble_lanes_run::<F64x4>(&starts, true).1,
+                ensemble_lanes_run::<F64x8>(&starts, true).1,
+            ];
+            println!(
+                "checksum of the lanes' outputs (F64x2, F64x4, F64x8): {:016x} {:016x} {:016x}",
+                sums[0], sums[1], sums[2]
+            );
+            return;
+        }
         Some("profile-x2") => {
             println!("F64x2 ensemble: {:.3} ms per trajectory", ensemble_lanes::<F64x2>(&states(64, 1)));
             return;
@@ -242,25 +277,27 @@ fn main() {
     let starts = states(64, 1);
     let scene_y0 = scene_start();
     let (mut one, mut one_evals) = (vec![], 0);
-    let (mut f, mut x2, mut x4) = (vec![], vec![], vec![]);
-    let (mut ef, mut ex2, mut ex4) = (vec![], vec![], vec![]);
+    let (mut f, mut x2, mut x4, mut x8) = (vec![], vec![], vec![], vec![]);
+    let (mut ef, mut ex2, mut ex4, mut ex8) = (vec![], vec![], vec![], vec![]);
     let mut evals = 0.0;
     for round in 0..rounds {
         f.push(rhs_f64(&starts, 2000));
         x2.push(rhs_lanes::<F64x2>(&starts, 2000));
         x4.push(rhs_lanes::<F64x4>(&starts, 2000));
+        x8.push(rhs_lanes::<F64x8>(&starts, 2000));
         let (ms, e) = ensemble_scalar(&starts);
         evals = e;
         ef.push(ms);
         ex2.push(ensemble_lanes::<F64x2>(&starts));
         ex4.push(ensemble_lanes::<F64x4>(&starts));
+        ex8.push(ensemble_lanes::<F64x8>(&starts));
         let (ms, e) = one_trajectory(&scene_y0, 8);
         one.push(ms);
         one_evals = e;
         println!(
-            "round {round}: rhs ns/eval f64 {:.1}, x2 {:.1}, x4 {:.1}; ensemble ms/trajectory f64 {:.3}, x2 {:.3}, x4 {:.3}; \
-             one trajectory at 1e-10 {:.3} ms",
-            f[round], x2[round], x4[round], ef[round], ex2[round], ex4[round], one[round]
+            "round {round}: rhs ns/eval f64 {:.1}, x2 {:.1}, x4 {:.1}, x8 {:.1}; ensemble ms/trajectory f64 {:.3}, x2 {:.3}, \
+             x4 {:.3}, x8 {:.3}; one trajectory at 1e-10 {:.3} ms",
+            f[round], x2[round], x4[round], x8[round], ef[round], ex2[round], ex4[round], ex8[round], one[round]
         );
     }
     let ratio = |a: &[f64], b: &[f64]| {
@@ -269,20 +306,25 @@ fn main() {
     };
     println!("\nmedians over {rounds} interleaved rounds (thread CPU time):");
     println!(
-        "rhs per trajectory-evaluation: f64 {:.1} ns, F64x2 {:.1} ns ({:.2}x), F64x4 {:.1} ns ({:.2}x)",
+        "rhs per trajectory-evaluation: f64 {:.1} ns, F64x2 {:.1} ns ({:.2}x), F64x4 {:.1} ns ({:.2}x), F64x8 {:.1} ns ({:.2}x)",
         median(&mut f.clone()),
         median(&mut x2.clone()),
         ratio(&f, &x2),
         median(&mut x4.clone()),
-        ratio(&f, &x4)
+        ratio(&f, &x4),
+        median(&mut x8.clone()),
+        ratio(&f, &x8)
     );
     println!(
-        "ensemble, water 1e4 a.u. rtol 1e-8 ({evals:.0} rhs per trajectory): f64 {:.3} ms, F64x2 {:.3} ms ({:.2}x), F64x4 {:.3} ms ({:.2}x) per trajectory",
+        "ensemble, water 1e4 a.u. rtol 1e-8 ({evals:.0} rhs per trajectory): f64 {:.3} ms, F64x2 {:.3} ms ({:.2}x), F64x4 {:.3} ms ({:.2}x), \
+         F64x8 {:.3} ms ({:.2}x) per trajectory",
         median(&mut ef.clone()),
         median(&mut ex2.clone()),
         ratio(&ef, &ex2),
         median(&mut ex4.clone()),
-        ratio(&ef, &ex4)
+        ratio(&ef, &ex4),
+        median(&mut ex8.clone()),
+        ratio(&ef, &ex8)
     );
     println!(
         "one trajectory, scenes/h2o_1e4au.toml at rtol 1e-10 ({one_evals} rhs): {:.3} ms ({:.1} ns per rhs, integrator included)",

@@ -6,6 +6,7 @@
 //! Hamilton's equations and trajectories. The [`cli`] is the `rovib` command.
 
 pub mod cli;
+pub mod cpu;
 pub mod dir_lock;
 pub mod ensemble;
 pub mod interrupt;

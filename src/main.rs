@@ -6,6 +6,11 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // First, before any code built for the CPU features runs.
+    if let Some(e) = rovib::cpu::check() {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     let cli = rovib::cli::Cli::parse();
     match rovib::cli::execute(cli) {
         Ok(()) => ExitCode::SUCCESS,

@@ -8,10 +8,11 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use rand_distr::{Distribution, StandardNormal};
+use rovib::ensemble::runner::Outcome;
 use rovib::ensemble::{EnsembleOptions, Status, run_ensemble, run_with_sampler};
 use rovib::molecules::H2o;
 use rovib::runtime::Molecule;
-use rovib::runtime::ensemble::autocorrelation_direct;
+use rovib::runtime::ensemble::{Moments, autocorrelation_direct};
 use rovib::runtime::hamiltonian::fast::{BodyState, ReducedSystem, Reduction};
 use rovib::runtime::integrate::solve;
 use rovib::runtime::nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
@@ -336,8 +337,8 @@ fn the_energy_guard_near_zero_energy_uses_the_absolute_floor_like_rovib_run() {
 fn an_interrupt_keeps_consistent_outputs_for_the_trajectories_that_finished() {
     let s = scene(1000, "[statistics]\nmeans = [\"r1\", \"H\"]", DOP853, 500.0);
     let mut o = options("interrupt", 1);
-    // One trajectory at a time: on lanes, the (up to three) trajectories running beside the
-    // one that raises the flag are cut short too, so fewer than 100 finish.
+    // One trajectory at a time: on lanes, the trajectories running in the other lanes beside
+    // the one that raises the flag are cut short too, so fewer than 100 finish.
     o.lanes = false;
     let mut sampler = Gaussian::new(9);
     // Drawing trajectory 100 raises the flag: with one thread, 0..100 have finished, 100 is cut
@@ -410,7 +411,7 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
     use std::sync::atomic::AtomicU64;
 
     use rovib::ensemble::output_times;
-    use rovib::ensemble::runner::{Outcome, Plan, Progress, run_block};
+    use rovib::ensemble::runner::{Plan, Progress, run_block};
     use rovib::ensemble::scene::parse_ensemble;
 
     let s = scene(120, STATISTICS, DOP853, 1000.0);
@@ -464,14 +465,16 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
     }
 }
 
-/// A block on SIMD lanes (two trajectories per vector, each lane taking the next trajectory
-/// when its own ends) has the outcome of the same block run one trajectory at a time, exactly:
-/// counts, work and every accumulator bit for bit (the lanes compute each trajectory's numbers
-/// bit for bit and the observations are folded in index order). Among the 70 trajectories, one
-/// starts with a non-finite state and one dissociates until the strict pivot test stops it, so
-/// failures are reported identically too.
+/// A block on SIMD lanes (each lane taking the next trajectory when its own ends) has the
+/// outcome of the same block run one trajectory at a time: the same counts, failures (index,
+/// category) and histogram counts, and means and correlations equal to round-off. The lanes'
+/// `sin_cos` and `exp` are vector polynomials within 2 ulp of libm's (runtime/src/
+/// transcendental.rs), so a lane's trajectory is the scalar one up to round-off, not bit for
+/// bit; 10⁻¹¹ relative over these 1000 a.u. is far above that round-off (10⁻¹⁴ measured) and
+/// far below any real difference. Among the 70 trajectories one starts with a non-finite state and one dissociates
+/// until the strict pivot test stops it, so failures are compared too.
 #[test]
-fn a_block_on_lanes_has_the_scalar_outcome_bit_for_bit() {
+fn a_block_on_lanes_has_the_scalar_outcome_to_round_off() {
     use std::sync::atomic::AtomicU64;
 
     use rovib::ensemble::output_times;
@@ -509,16 +512,56 @@ fn a_block_on_lanes_has_the_scalar_outcome_bit_for_bit() {
     let b = run_block(&lanes, &sampler, 3..73, &stop, &progress);
     assert_eq!(a.failed_count(), 2, "{:?}", a.first_failures);
     assert_eq!(a.completed, 68);
-    assert_eq!(serde_json::to_string(&a).unwrap(), serde_json::to_string(&b).unwrap());
-    assert!(a == b);
+    let worst = same_outcome_to_round_off(&a, &b, 1e-11);
+    eprintln!("lanes against one at a time: largest relative difference of a mean {worst:.1e}");
     // With the chart switch (the default): a lane stops where the scalar path would switch,
     // and that trajectory is run again by the scalar path, so the outcomes still agree.
     let (scalar, lanes) = (plan(false, true), plan(true, true));
     let a = run_block(&scalar, &sampler, 3..73, &stop, &progress);
     let b = run_block(&lanes, &sampler, 3..73, &stop, &progress);
     eprintln!("with the chart switch: {} completed, failed {:?}, charts {:?}", a.completed, a.failed, a.charts);
-    assert_eq!(serde_json::to_string(&a).unwrap(), serde_json::to_string(&b).unwrap());
-    assert!(a == b);
+    same_outcome_to_round_off(&a, &b, 1e-11);
+    assert_eq!(a.charts, b.charts);
+}
+
+/// Asserts that two outcomes of the same block agree: counts, failures by index and category,
+/// histogram counts exactly, work within 0.1 % (a step accepted or rejected on round-off), means
+/// and correlations within `rel` of their scale. Returns the largest relative difference seen.
+fn same_outcome_to_round_off(a: &Outcome, b: &Outcome, rel: f64) -> f64 {
+    assert_eq!((a.completed, a.interrupted, &a.failed), (b.completed, b.interrupted, &b.failed));
+    let failures = |o: &Outcome| o.first_failures.iter().map(|f| (f.index, f.reason.clone())).collect::<Vec<_>>();
+    assert_eq!(failures(a), failures(b));
+    for (x, y) in [(a.steps, b.steps), (a.rhs_evaluations, b.rhs_evaluations)] {
+        assert!(x.abs_diff(y) as f64 <= 1e-3 * x as f64, "work {x} vs {y}");
+    }
+    let (sa, sb) = (&a.statistics, &b.statistics);
+    assert_eq!(sa.histograms.len(), sb.histograms.len());
+    for (ha, hb) in sa.histograms.iter().zip(&sb.histograms) {
+        assert_eq!(ha.counts(), hb.counts());
+        assert_eq!((ha.below(), ha.above(), ha.not_a_number()), (hb.below(), hb.above(), hb.not_a_number()));
+    }
+    let mut worst: f64 = 0.0;
+    let mut compare = |ma: &[Moments], mb: &[Moments]| {
+        assert_eq!(ma.len(), mb.len());
+        let scale = ma.iter().fold(f64::MIN_POSITIVE, |s, m| s.max(m.mean().abs()));
+        for (x, y) in ma.iter().zip(mb) {
+            assert_eq!(x.count(), y.count());
+            let d = (x.mean() - y.mean()).abs() / scale;
+            assert!(d <= rel, "mean {} vs {} (scale {scale})", x.mean(), y.mean());
+            worst = worst.max(d);
+        }
+    };
+    // Per quantity over all times (each quantity has its own scale).
+    let nq = sa.n_means.max(1);
+    for j in 0..sa.n_means {
+        let pick = |s: &[Moments]| s.iter().skip(j).step_by(nq).copied().collect::<Vec<_>>();
+        compare(&pick(&sa.means), &pick(&sb.means));
+    }
+    assert_eq!(sa.correlations.len(), sb.correlations.len());
+    for (ca, cb) in sa.correlations.iter().zip(&sb.correlations) {
+        compare(ca, cb);
+    }
+    worst
 }
 
 /// The Gaussian sampler with two troubled trajectories: 10 starts with a NaN momentum, 20 with a

@@ -73,7 +73,7 @@ pub enum Flavor {
     F64,
     /// Code generic over `T: rovib_runtime::lanes::Real` (`T::splat(2.0) * x`; structural zeros
     /// stored entry by entry as `T::splat(0.0)`); the same operations in the same order as
-    /// [`Flavor::F64`], so every lane computes the `f64` code's numbers bit for bit.
+    /// [`Flavor::F64`] (the transcendental functions are `T`'s: see `rovib_runtime::transcendental`).
     Lanes,
 }
 

@@ -6,8 +6,9 @@
 //! `kinetic_and_gradient` and `potential_gradient` ([`crate::template`]), with
 //! [`Flavor::Lanes`]: constants become `T::splat(c)` and the outputs are fixed-size arrays
 //! (`k.a[j][l]`, `grad[l]`) instead of nalgebra matrices. Every node is the same operation on
-//! the same operands, so each lane computes the `f64` function's numbers bit for bit. The code
-//! has no branches.
+//! the same operands: each lane computes the `f64` function's numbers, except that `sin_cos` and
+//! `exp` are `T`'s (for the vector types, polynomials within 2 ulp of libm, identical for every
+//! lane width: `rovib_runtime::transcendental`). The code has no branches.
 
 use proc_macro2::{Ident, TokenStream};
 use quote::quote;
@@ -65,8 +66,8 @@ pub(crate) fn lane_functions(
     let specs = [
         FunctionSpec {
             name: "kinetic_and_gradient_lanes",
-            doc: "[`Molecule::kinetic_and_gradient`] for `T::LANES` states at once (lane-generic, branch-free; each\n\
-                  lane bit for bit the `f64` function's numbers)."
+            doc: "[`Molecule::kinetic_and_gradient`] for `T::LANES` states at once (lane-generic, branch-free; the\n\
+                  `f64` function's operations, with `T`'s `sin_cos` and `exp`)."
                 .into(),
             signature: quote!(
                 fn kinetic_and_gradient_lanes<T: Real>(

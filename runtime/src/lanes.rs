@@ -1,26 +1,35 @@
 //! Lane types: one number type for the code that evaluates one trajectory (`f64`) and for the
 //! code that evaluates several independent trajectories at once, one per SIMD lane
-//! ([`F64x2`], [`F64x4`]).
+//! ([`F64x2`], [`F64x4`], [`F64x8`]).
 //!
 //! The generated molecule code has a lane-generic form (`Molecule::kinetic_and_gradient_lanes`
 //! and `Molecule::potential_gradient_lanes`) written over [`Real`], and the production right-hand
 //! side ([`crate::hamiltonian::lanes`]) is written once over [`Real`]: instantiated with `f64` it
 //! is the one-trajectory production path, with a vector type it evaluates `LANES` trajectories.
 //!
-//! # Bitwise equality with `f64`
+//! # What a lane computes
 //!
-//! Every lane computes exactly what the `f64` instance computes on that lane's numbers, bit for
-//! bit: `+ − × ÷`, negation and `sqrt` are IEEE operations lane by lane (no fused multiply-add is
-//! ever formed: Rust does not contract), and the transcendental functions (`sin_cos`, `exp`, ...)
-//! call the same `f64` method (the platform's libm) on each lane. So a batched trajectory is
-//! the one-trajectory trajectory, to the last bit; `tests/lanes.rs` checks this.
+//! `+ − × ÷`, negation and `sqrt` are IEEE operations lane by lane (no fused multiply-add is
+//! ever formed: Rust does not contract), so on them every lane computes exactly what the `f64`
+//! instance computes. `sin_cos` and `exp`, the generated code's frequent transcendental calls,
+//! are the vector polynomials of [`crate::transcendental`] (within 2 ulp of libm, which the `f64`
+//! instance calls); the rarer ones (`acos`, `atan2`, `powf`, ...) call libm lane by lane. So:
+//! - lanes of every width ([`F64x2`], [`F64x4`], [`F64x8`]) compute the same bits, on every
+//!   build (baseline or `-C target-cpu=native`: nothing here depends on FMA);
+//! - a lane's trajectory is the one-trajectory (`f64`) trajectory to round-off.
+//!
+//! `tests/lanes.rs` checks both. libm lane by lane would make the lanes equal `f64` bit for
+//! bit, but it costs a third of the lanes' gain on AVX-512 (BENCHMARKS.md, "Many trajectories
+//! per core").
 //!
 //! # Target features
 //!
-//! The vector types are `wide`'s `f64x2`/`f64x4`, which use whatever the build's target features
-//! allow: for the default target (baseline x86-64, SSE2) an `F64x4` is two 128-bit registers; a
-//! build with AVX (`RUSTFLAGS="-C target-cpu=native"` on an AVX machine) uses 256-bit ones.
-//! There is no run-time detection (it would need `unsafe`, which the workspace forbids).
+//! The vector types are `wide`'s `f64x2`/`f64x4`/`f64x8`, which use whatever the build's target
+//! features allow: for the default target (baseline x86-64, SSE2) an `F64x4` is two 128-bit
+//! registers; a build with AVX2 or AVX-512 (`RUSTFLAGS="-C target-cpu=native"`) uses 256- or
+//! 512-bit ones. There is no run-time detection (calling code compiled for a feature the build
+//! lacks needs `unsafe`, which the workspace forbids); the binary checks at start that the CPU
+//! has the features it was built for (`rovib::cpu`).
 
 use core::fmt::Debug;
 use core::ops::{Add, Div, Mul, Neg, Sub};
@@ -88,9 +97,20 @@ pub trait Real:
     fn gt_mask(self, other: Self) -> u32;
     /// Bit `i` set where lane `i` is not NaN.
     fn not_nan_mask(self) -> u32;
+    /// `self` with its sign flipped in the lanes where `x` has its sign bit set (`−0` included).
+    fn flip_sign_where_negative(self, x: Self) -> Self;
+    /// `2ᵏ` for each lane's `k = self`, which must be an integer in `[−1022, 1023]` (any other
+    /// lane gives an unspecified number, never a panic): built from the exponent bits.
+    fn pow2(self) -> Self;
     /// All lanes' bits.
     const ALL: u32 = if Self::LANES >= 32 { u32::MAX } else { (1u32 << Self::LANES) - 1 };
 }
+
+/// The sign bit of an `f64`.
+const SIGN_BIT: u64 = 1 << 63;
+/// `2⁵² + 1023`: added to an integer `k`, it leaves `k + 1023` (the biased exponent of `2ᵏ`) in
+/// the low bits of the mantissa, from where a shift by 52 moves it into the exponent field.
+const POW2_BIAS: f64 = 4_503_599_627_371_519.0;
 
 impl Real for f64 {
     const LANES: usize = 1;
@@ -182,12 +202,20 @@ impl Real for f64 {
     fn not_nan_mask(self) -> u32 {
         u32::from(!self.is_nan())
     }
+    #[inline(always)]
+    fn flip_sign_where_negative(self, x: Self) -> Self {
+        f64::from_bits(self.to_bits() ^ (x.to_bits() & SIGN_BIT))
+    }
+    #[inline(always)]
+    fn pow2(self) -> Self {
+        f64::from_bits((self + POW2_BIAS).to_bits() << 52)
+    }
 }
 
 /// Defines a lane vector type around a `wide` vector: arithmetic by `wide` (IEEE, lane-wise),
 /// transcendental functions by the `f64` method on each lane.
 macro_rules! lane_type {
-    ($name:ident, $wide:ty, $lanes:expr, $doc:literal) => {
+    ($name:ident, $wide:ty, $int:ty, $lanes:expr, $doc:literal) => {
         #[doc = $doc]
         #[derive(Copy, Clone, Debug, Default, PartialEq)]
         #[repr(transparent)]
@@ -275,23 +303,18 @@ macro_rules! lane_type {
                 a[i] = x;
                 *self = Self::from_array(a);
             }
+            /// [`crate::transcendental::sin_cos`]: the same bits as the `f64` instance per lane.
             #[inline(always)]
             fn sin_cos(self) -> (Self, Self) {
-                let a = self.to_array();
-                let mut s = [0.0; $lanes];
-                let mut c = [0.0; $lanes];
-                for i in 0..$lanes {
-                    (s[i], c[i]) = a[i].sin_cos();
-                }
-                (Self::from_array(s), Self::from_array(c))
+                crate::transcendental::sin_cos(self)
             }
             #[inline(always)]
             fn sin(self) -> Self {
-                self.map(f64::sin)
+                Real::sin_cos(self).0
             }
             #[inline(always)]
             fn cos(self) -> Self {
-                self.map(f64::cos)
+                Real::sin_cos(self).1
             }
             #[inline(always)]
             fn tan(self) -> Self {
@@ -309,9 +332,10 @@ macro_rules! lane_type {
             fn atan(self) -> Self {
                 self.map(f64::atan)
             }
+            /// [`crate::transcendental::exp`]: the same bits as the `f64` instance per lane.
             #[inline(always)]
             fn exp(self) -> Self {
-                self.map(f64::exp)
+                crate::transcendental::exp(self)
             }
             #[inline(always)]
             fn ln(self) -> Self {
@@ -358,16 +382,33 @@ macro_rules! lane_type {
             fn not_nan_mask(self) -> u32 {
                 self.0.simd_eq(self.0).to_bitmask()
             }
+            #[inline(always)]
+            fn flip_sign_where_negative(self, x: Self) -> Self {
+                Self(self.0 ^ (x.0 & <$wide>::splat(-0.0)))
+            }
+            #[inline(always)]
+            fn pow2(self) -> Self {
+                let biased = self.0 + <$wide>::splat(POW2_BIAS);
+                Self(wide::bytemuck::cast(wide::bytemuck::cast::<$wide, $int>(biased) << 52))
+            }
         }
     };
 }
 
-lane_type!(F64x2, wide::f64x2, 2, "Two `f64` lanes (one SSE2 register on baseline x86-64).");
+lane_type!(F64x2, wide::f64x2, wide::i64x2, 2, "Two `f64` lanes (one SSE2 register on baseline x86-64).");
 lane_type!(
     F64x4,
     wide::f64x4,
+    wide::i64x4,
     4,
     "Four `f64` lanes (two SSE2 registers on baseline x86-64, one AVX register with AVX)."
+);
+lane_type!(
+    F64x8,
+    wide::f64x8,
+    wide::i64x8,
+    8,
+    "Eight `f64` lanes (four SSE2 registers on baseline x86-64, two with AVX, one with AVX-512)."
 );
 
 /// The kinetic matrices `a` (N × N), `A` (3 × N) and `I` (3 × 3) of `T::LANES` states, as
@@ -447,9 +488,10 @@ mod tests {
             same(v / u, &|a, b| a / b);
             same(-v, &|a, _| -a);
             same(v.sqrt(), &|a, _| a.sqrt());
-            same(v.sin_cos().0, &|a, _| a.sin());
-            same(v.sin_cos().1, &|a, _| a.cos());
-            same(v.exp(), &|a, _| a.exp());
+            // sin_cos and exp: the polynomials of crate::transcendental (tested there against libm).
+            same(v.sin_cos().0, &|a, _| crate::transcendental::sin_cos(a).0);
+            same(v.sin_cos().1, &|a, _| crate::transcendental::sin_cos(a).1);
+            same(v.exp(), &|a, _| crate::transcendental::exp(a));
             same(v.atan2(u), &|a, b| a.atan2(b));
             same(v.powf(u), &|a, b| a.powf(b));
             same(v.abs(), &|a, _| a.abs());

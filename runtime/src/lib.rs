@@ -24,6 +24,7 @@ pub mod molecule;
 pub mod polarization;
 pub mod sample;
 pub mod spectrum;
+pub mod transcendental;
 pub mod units;
 
 pub use frames::{

@@ -166,8 +166,9 @@ pub trait Molecule<const N: usize, const NA: usize> {
     /// ([`crate::lanes`]), with no error path: `velocities` returns `(ω, q̇)` for every lane.
     ///
     /// Generated molecules override this with lane-generic straight-line code (the same
-    /// operations as their `kinetic_and_gradient`, so every lane's numbers are the `f64`
-    /// function's, bit for bit); the default calls the `f64` methods lane by lane.
+    /// operations as their `kinetic_and_gradient`, with `T`'s `sin_cos` and `exp`: the vector
+    /// polynomials of [`crate::transcendental`], so a lane's numbers are the `f64` function's to
+    /// round-off); the default calls the `f64` methods lane by lane.
     fn kinetic_and_gradient_lanes<T: Real>(
         &self,
         q: &[T; N],

@@ -84,8 +84,8 @@ pub enum Command {
         /// No progress bar and no report on stdout.
         #[arg(long, short)]
         quiet: bool,
-        /// One trajectory at a time instead of two per SIMD vector (the results are the same,
-        /// bit for bit; lanes are used only with DOP853, no frozen coordinate and no kept
+        /// One trajectory at a time instead of several per SIMD vector (the results agree to
+        /// round-off; lanes are used only with DOP853, no frozen coordinate and no kept
         /// trajectories).
         #[arg(long)]
         no_lanes: bool,

@@ -2,11 +2,20 @@
 //! the batched DOP853 ([`Dop853Lanes`]) and the lane-generic production right-hand side
 //! ([`ProductionLanes`]), each lane taking the next trajectory as soon as its own ends.
 //!
-//! Every lane computes its trajectory exactly as the one-trajectory path does, bit for bit
-//! (`tests/lanes.rs`), so the outcome is the scalar [`super::runner::run_block`]'s: the
-//! observations are kept per trajectory and folded into the accumulators in index order at the
-//! end of the block (`tests/ensemble.rs` compares the two block outcomes). A trajectory whose
-//! lane fails is run again by the scalar path, which reports its failure with the full error.
+//! Every lane computes its trajectory as the one-trajectory path does, with the same steps, to
+//! round-off: the arithmetic is the same IEEE operations in the same order, but the lanes'
+//! `sin_cos` and `exp` are vector polynomials within 2 ulp of libm's
+//! ([`crate::runtime::transcendental`]), which is what makes wide vectors pay (BENCHMARKS.md,
+//! "Many trajectories per core"). Lanes of every width compute the same bits, so a block's
+//! outcome does not depend on the build's vector width. The observations are kept per
+//! trajectory and folded into the accumulators in index order at the end of the block, so the
+//! outcome is the scalar [`super::runner::run_block`]'s to round-off (`tests/ensemble.rs`
+//! compares the two block outcomes). A trajectory whose lane fails is run again by the scalar
+//! path, which reports its failure with the full error.
+//!
+//! The lane width is the build's: [`Lanes`] is [`runtime::lanes::F64x8`](crate::runtime::lanes::F64x8)
+//! when the build has AVX-512 (`RUSTFLAGS="-C target-cpu=native"` on such a CPU), else `F64x4`
+//! (one AVX2 register, or two SSE2 registers on the default baseline x86-64 build).
 //!
 //! Used by [`super::runner::run_block`] when the plan asks for lanes and the run allows them:
 //! DOP853, no frozen coordinate, no kept trajectory files.
@@ -19,12 +28,22 @@ use crate::runtime::Molecule;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
 use crate::runtime::integrate::{Dop853Lanes, LaneFailure, LaneFeeder, Method, Stats};
-use crate::runtime::lanes::{F64x2, Real};
+#[cfg(not(target_feature = "avx512f"))]
+use crate::runtime::lanes::F64x4;
+#[cfg(target_feature = "avx512f")]
+use crate::runtime::lanes::F64x8;
+use crate::runtime::lanes::Real;
 use crate::runtime::sample::Sampler;
 
-/// The lane type of ensembles: two `f64` lanes, which measured faster per trajectory than four
-/// on the baseline x86-64 build (BENCHMARKS.md, "Many trajectories per core").
-pub type Lanes = F64x2;
+/// The lane type of ensembles without AVX-512: four `f64` lanes, two 128-bit registers on a
+/// baseline x86-64 build (SSE2; 1.49× the one-trajectory throughput against 1.45× with two
+/// lanes, BENCHMARKS.md, "Many trajectories per core"), one 256-bit register with AVX2.
+#[cfg(not(target_feature = "avx512f"))]
+pub type Lanes = F64x4;
+/// The lane type of ensembles on an AVX-512 build: eight `f64` lanes, one 512-bit register
+/// (3.0× the one-trajectory ensemble's throughput for water, against 2.25× with four lanes).
+#[cfg(target_feature = "avx512f")]
+pub type Lanes = F64x8;
 /// Trajectories per vector.
 pub const LANES: usize = <Lanes as Real>::LANES;
 
@@ -205,7 +224,7 @@ where
     };
     // A plan that switches charts: a lane stops where the scalar path would switch (its internal
     // chart's pivot threshold), and the scalar path runs that trajectory again with the switch,
-    // so the outcome stays the scalar path's bit for bit.
+    // so that trajectory is the scalar path's.
     let switching = plan.switches_charts();
     let min_pivot = if switching { plan.min_pivot.max(crate::runtime::charts::SWITCH_PIVOT) } else { plan.min_pivot };
     let mut system = ProductionLanes::new(plan.molecule, min_pivot);

@@ -67,8 +67,8 @@ pub struct EnsembleOptions {
     /// When set, no new trajectory starts and running ones stop at their next output time;
     /// the outputs then cover the trajectories that finished (status "interrupted").
     pub stop: Arc<AtomicBool>,
-    /// Run trajectories on SIMD lanes where possible (default; the results are the same bit
-    /// for bit, see `lanes`); `false` runs one trajectory at a time.
+    /// Run trajectories on SIMD lanes where possible (default; the results agree with one
+    /// trajectory at a time to round-off, see `lanes`); `false` runs one trajectory at a time.
     pub lanes: bool,
     /// Record finished blocks in `out_dir/checkpoint.jsonl` (removed when the ensemble
     /// completes). A run without `resume` refuses to start over an existing checkpoint.

@@ -73,7 +73,7 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     /// Scale from a.u. of time to the scene's time unit, for kept trajectories.
     pub time_scale: f64,
     /// Run the trajectories on SIMD lanes where the plan allows it (DOP853, nothing frozen, no
-    /// kept trajectories): the same results, bit for bit, faster (see `super::lanes`).
+    /// kept trajectories): the same results to round-off, faster (see `super::lanes`).
     pub lanes: bool,
 }
 

@@ -2,7 +2,8 @@
 //! `T = f64` it is what [`super::ReducedSystem`] evaluates when every coordinate is active and
 //! the rotation is free (no index maps, one finiteness test per evaluation); with a vector
 //! type it evaluates `T::LANES` independent trajectories at once ([`ProductionLanes`]), each lane
-//! bit for bit the `f64` evaluation of that lane's state.
+//! the `f64` evaluation of that lane's state to round-off (the lanes' `sin_cos` and `exp` are
+//! vector polynomials, [`crate::lanes`]).
 //!
 //! The equations are [`super::ReducedSystem`]'s (see there): on the flat layout
 //! `[q (N), p (N), ς_w ς_x ς_y ς_z, J_x J_y J_z]` (dimension `2N + 7`),
@@ -24,7 +25,7 @@ use crate::lanes::{KineticLanes, Real};
 use crate::molecule::Molecule;
 
 /// Whether `molecule`'s production system runs on this module's lane-generic code with the
-/// `f64` path's numbers bit for bit: the molecule has generated lane forms
+/// `f64` path's operations: the molecule has generated lane forms
 /// ([`Molecule::has_lane_forms`]: not a large molecule with the centre-of-mass term of `a` at run
 /// time) and its vibrational block is factorized by [`super::factor`]'s small-block `L D Lᵀ`
 /// (fewer than `factor_large::LARGE_BLOCK` = 24 coordinates), which this module's `solve` repeats

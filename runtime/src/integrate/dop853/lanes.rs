@@ -6,8 +6,11 @@
 //! output times and the bookkeeping run per lane in plain `f64`, in the same order of
 //! operations as [`super::Dop853::integrate`]. Every lane therefore computes exactly what the
 //! scalar solver computes for that trajectory, bit for bit, provided the lane system computes
-//! the scalar system's numbers bit for bit (as [`crate::hamiltonian::lanes::ProductionLanes`]
-//! does): the same steps, rejections, outputs and counts (`tests/lanes.rs` checks this).
+//! the scalar system's numbers bit for bit: the same steps, rejections, outputs and counts
+//! (`tests/lanes.rs` checks this with the scalar solver on the lane right-hand side, one
+//! trajectory in every lane). [`crate::hamiltonian::lanes::ProductionLanes`] computes the scalar
+//! production system's numbers to round-off (its `sin_cos` and `exp` are vector polynomials),
+//! so its trajectories are the scalar ones to round-off.
 //!
 //! When a lane's trajectory ends (its end time, its observer's break, or a failure) the lane
 //! takes the next trajectory from the [`LaneFeeder`] at once; the run ends when the feeder has
