@@ -47,8 +47,8 @@ pub struct MetricFactor<const N: usize> {
     i_inv: Matrix3<f64>,
     /// `Y = I⁻¹ A` (3 × N).
     y: SMatrix<f64, 3, N>,
-    /// `S = L₂ D₂ L₂ᵀ`: `L₂` in the strict lower triangle (the solve reads nothing else; for
-    /// `N ≥ LARGE_BLOCK` computed by columns, with a transposed copy above, `factor_large`).
+    /// `S = L₂ D₂ L₂ᵀ`: `L₂` in the strict lower triangle (for `N ≥ LARGE_BLOCK` computed by
+    /// columns, with a transposed copy in the strict upper triangle, `factor_large`).
     l2: SMatrix<f64, N, N>,
     /// `1 / D₂`.
     d2_inv: SVector<f64, N>,

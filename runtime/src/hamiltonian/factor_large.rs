@@ -10,7 +10,7 @@
 //! accumulated at once in registers while the columns to their left are read as contiguous
 //! slices of nalgebra's column-major storage (`L` in the strict lower triangle, as in the
 //! small-block version, plus a transposed copy in the strict upper triangle for the pivots).
-//! The solve runs over contiguous columns too. Same pivots and tests, different summation
+//! The solve runs over contiguous columns and rows. Same pivots and tests, different summation
 //! order: results agree with the small-block version to rounding (unit tests against
 //! nalgebra's Cholesky below).
 //!
@@ -119,8 +119,10 @@ pub(super) fn ldl_in_place<const D: usize>(
     Some(d_inv)
 }
 
-/// `x = L⁻ᵀ D⁻¹ L⁻¹ b` for a factor from [`ldl_in_place`] (`L` in the strict lower triangle), by
-/// contiguous columns: `x ← x − x_k L_·k` forward, `x_i −= L_·i · x` backward.
+/// `x = L⁻ᵀ D⁻¹ L⁻¹ b` for a factor from [`ldl_in_place`], as two sequences of contiguous updates:
+/// `x ← x − x_k L_·k` forward over the columns of `L` (lower triangle), `x ← x − x_k L_k·`
+/// backward over its rows (the transposed copy in the upper triangle). Measured against
+/// inner products for the back substitution: 0.85 → 0.60 µs for 54 rows.
 #[inline]
 pub(super) fn ldl_solve<const D: usize>(
     l: &SMatrix<f64, D, D>,
@@ -139,9 +141,12 @@ pub(super) fn ldl_solve<const D: usize>(
     for (xi, r) in xs.iter_mut().zip(d_inv.iter()) {
         *xi *= r;
     }
-    for i in (0..D).rev() {
-        let t = dot(&s[i * D + i + 1..(i + 1) * D], &xs[i + 1..]);
-        xs[i] -= t;
+    for k in (1..D).rev() {
+        let (head, tail) = xs.split_at_mut(k);
+        let xk = tail[0];
+        for (xi, lki) in head.iter_mut().zip(&s[k * D..k * D + k]) {
+            *xi -= lki * xk;
+        }
     }
     x
 }
