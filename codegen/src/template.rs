@@ -298,7 +298,7 @@ pub(crate) fn molecule_items(
                     q: #q_ty,
                     k: &mut KineticMatrices<#n>,
                     dc: #dc_ty,
-                    velocities: &mut dyn FnMut(&KineticMatrices<#n>) -> Option<(Vector3<f64>, SVector<f64, #n>)>,
+                    velocities: &mut ::rovib_runtime::assembly::Velocities<'_, #n>,
                     grad: &mut SVector<f64, #n>,
                 ) -> Option<(Vector3<f64>, SVector<f64, #n>, f64)>
             ),

@@ -16,7 +16,16 @@
 //! `rovib_codegen::kinetic::RUN_TIME_CENTRE_OF_MASS_FROM` coordinates; smaller ones keep the
 //! expanded form.
 
-use nalgebra::SMatrix;
+use nalgebra::{SMatrix, SVector, Vector3};
+
+use crate::molecule::KineticMatrices;
+
+/// The velocities callback of a large molecule's generated `kinetic_and_gradient_sparse`:
+/// `(ω, q̇)` from the finished kinetic matrices, or `None` (the generic
+/// `Molecule::kinetic_and_gradient` wrapper keeps the error). `dyn`, so that the large
+/// generated body is compiled once rather than once per caller.
+pub type Velocities<'a, const N: usize> =
+    dyn FnMut(&KineticMatrices<N>) -> Option<(Vector3<f64>, SVector<f64, N>)> + 'a;
 
 /// `a_jk −= total · dc_·j · dc_·k` for every entry: the centre-of-mass term of `a`, with `dc`
 /// column `k` = `∂c/∂q_k` and `total` the total mass: the arithmetic of the expanded expression
