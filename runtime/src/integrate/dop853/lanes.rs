@@ -29,6 +29,7 @@
 use core::ops::ControlFlow;
 
 use super::coefficients::{A, BHH, C, D, ER};
+use super::stages::{combine, weights};
 use super::{Dop853Options, FAC1, FAC2, FSAL, SAFETY, STAGES, UROUND};
 use crate::integrate::{InvalidInput, OutputGrid, Stats, check_dim, check_run};
 use crate::lanes::{Real, finite_mask};
@@ -577,25 +578,4 @@ fn lanes_of(mask: u32) -> impl Iterator<Item = usize> {
             lane
         })
     })
-}
-
-/// `out = Σ_j w_j k_j` over the sparse row `row`, as the scalar solver's `weights`.
-#[inline]
-fn weights<T: Real>(out: &mut [T], k: &[T], n: usize, row: &[(usize, f64)]) {
-    out.fill(T::splat(0.0));
-    for &(stage, w) in row {
-        let w = T::splat(w);
-        for (o, &v) in out.iter_mut().zip(&k[stage * n..(stage + 1) * n]) {
-            *o = *o + w * v;
-        }
-    }
-}
-
-/// `out = y + h·Σ_j a_j k_j`, with `h` per lane.
-#[inline]
-fn combine<T: Real>(out: &mut [T], y: &[T], k: &[T], n: usize, h: T, row: &[(usize, f64)]) {
-    weights(out, k, n, row);
-    for (o, &yi) in out.iter_mut().zip(y) {
-        *o = yi + h * *o;
-    }
 }
