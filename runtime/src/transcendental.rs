@@ -1,13 +1,17 @@
-//! `sin_cos` and `exp` written once over [`Real`], so that one `f64` and every lane of a SIMD
-//! vector compute the same bits, the vector types in vector instructions: the generated code's
-//! most frequent transcendental calls (water's right-hand side has one `sin_cos` and two `exp`).
+//! `sin_cos` and `exp` written once over [`Real`], what the SIMD lane types
+//! ([`crate::lanes`]) use: every lane of every vector width computes the same bits as the `f64`
+//! instance of these functions, in vector instructions. They are the generated code's most
+//! frequent transcendental calls (water's right-hand side has one `sin_cos` and two `exp`).
 //!
 //! Called lane by lane, the platform's libm cost about 14 % of a batched water ensemble's
-//! instructions (BENCHMARKS.md, "Many trajectories per core"), and `wide`'s vector versions,
-//! which use vector float-to-integer conversions, made the one-trajectory `f64` path 11 % slower
-//! on baseline x86-64 than libm (measured, same section). The functions here need only `+ − × ÷`,
-//! `copysign` and a power of two built from its exponent bits, so the `f64` instance compiles
-//! to straight-line scalar code and the vector instances to the same code on vectors.
+//! instructions, and a third of the eight-lane ensemble's gain on AVX-512 (BENCHMARKS.md, "Many
+//! trajectories per core", fourth round). The functions need only `+ − × ÷`, a sign flip and a
+//! power of two built from its exponent bits, with no fused multiply-add, so the bits do not
+//! depend on the build's target features either.
+//!
+//! The one-trajectory `f64` path (`Real for f64`) keeps calling libm: on one number glibc's
+//! table-driven `sincos` and `exp` are faster than these polynomials (13 against 20 ns, 9
+//! against 26 ns, same section). So a lane's trajectory is the `f64` one to round-off.
 //!
 //! # Method
 //! - `sin_cos`: `k = round(x · 2/π)` (by adding and subtracting 1.5·2⁵², exact below 2⁵¹),

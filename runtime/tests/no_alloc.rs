@@ -9,7 +9,11 @@
 
 use core::ops::ControlFlow;
 
-use rovib_runtime::integrate::{Dop853, Dop853Options, GaussLegendre, GaussLegendreOptions, Observer, Rk4, Rk4Options};
+use rovib_runtime::integrate::{
+    Dop853, Dop853Lanes, Dop853Options, GaussLegendre, GaussLegendreOptions, LaneFailure, LaneFeeder, LaneSystem,
+    Observer, Rk4, Rk4Options, Stats,
+};
+use rovib_runtime::lanes::{F64x4, Real};
 
 use rovib_runtime::integrate::problems::Kepler;
 
@@ -75,6 +79,68 @@ fn rk4_does_not_allocate_while_running() {
     });
     assert_eq!(outputs, 201);
     assert_eq!(count, 0, "RK4 allocated {count} times");
+}
+
+/// Kepler on lanes, each lane its own orbit.
+struct KeplerLanes;
+
+impl<T: Real> LaneSystem<T> for KeplerLanes {
+    fn dim(&self) -> usize {
+        4
+    }
+    fn rhs(&mut self, _t: T, y: &[T], dydt: &mut [T]) -> u32 {
+        let r = (y[0] * y[0] + y[1] * y[1]).sqrt();
+        let r3 = r * r * r;
+        dydt[0] = y[2];
+        dydt[1] = y[3];
+        dydt[2] = -y[0] / r3;
+        dydt[3] = -y[1] / r3;
+        T::ALL
+    }
+}
+
+/// Ten orbits of eccentricities 0.1 … 0.55, fed to the lanes without allocating.
+struct Orbits {
+    next: usize,
+    outputs: usize,
+    finished: usize,
+}
+
+impl LaneFeeder for Orbits {
+    fn next(&mut self, _lane: usize, y0: &mut [f64]) -> bool {
+        if self.next == 10 {
+            return false;
+        }
+        y0.copy_from_slice(&Kepler::initial(0.1 + 0.05 * self.next as f64));
+        self.next += 1;
+        true
+    }
+    fn observe(&mut self, _lane: usize, _t: f64, _y: &[f64]) -> ControlFlow<()> {
+        self.outputs += 1;
+        ControlFlow::Continue(())
+    }
+    fn finish(&mut self, _lane: usize, result: Result<Stats, LaneFailure>) {
+        assert!(result.is_ok());
+        self.finished += 1;
+    }
+}
+
+/// The batched DOP853 allocates nothing while it runs, including when a lane takes its next
+/// trajectory (the starting-step estimate of each new trajectory included).
+#[test]
+fn batched_dop853_does_not_allocate_while_running() {
+    let mut solver = Dop853Lanes::<F64x4>::new(4, Dop853Options::default()).unwrap();
+    let mut run = || {
+        let mut feeder = Orbits { next: 0, outputs: 0, finished: 0 };
+        solver.integrate(&mut KeplerLanes, 0.0, 20.0, 0.1, &mut feeder).unwrap();
+        feeder
+    };
+    run();
+    let mut feeder = None;
+    let info = allocation_counter::measure(|| feeder = Some(run()));
+    let feeder = feeder.unwrap();
+    assert_eq!((feeder.finished, feeder.outputs), (10, 10 * 201));
+    assert_eq!(info.count_total, 0, "the batched DOP853 allocated {} times", info.count_total);
 }
 
 /// The counter works: creating a solver does allocate.

@@ -14,8 +14,8 @@
 //! path, which reports its failure with the full error.
 //!
 //! The lane width is the build's: [`Lanes`] is [`runtime::lanes::F64x8`](crate::runtime::lanes::F64x8)
-//! when the build has AVX-512 (`RUSTFLAGS="-C target-cpu=native"` on such a CPU), else `F64x4`
-//! (one AVX2 register, or two SSE2 registers on the default baseline x86-64 build).
+//! when the build has AVX-512 (`RUSTFLAGS="-C target-cpu=native"` on such a CPU), `F64x4` with
+//! AVX2, else `F64x2` (one SSE2 register: the default, baseline x86-64 build).
 //!
 //! Used by [`super::runner::run_block`] when the plan asks for lanes and the run allows them:
 //! DOP853, no frozen coordinate, no kept trajectory files.
@@ -28,20 +28,26 @@ use crate::runtime::Molecule;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
 use crate::runtime::integrate::{Dop853Lanes, LaneFailure, LaneFeeder, Method, Stats};
-#[cfg(not(target_feature = "avx512f"))]
+#[cfg(not(target_feature = "avx2"))]
+use crate::runtime::lanes::F64x2;
+#[cfg(all(target_feature = "avx2", not(target_feature = "avx512f")))]
 use crate::runtime::lanes::F64x4;
 #[cfg(target_feature = "avx512f")]
 use crate::runtime::lanes::F64x8;
 use crate::runtime::lanes::Real;
 use crate::runtime::sample::Sampler;
 
-/// The lane type of ensembles without AVX-512: four `f64` lanes, two 128-bit registers on a
-/// baseline x86-64 build (SSE2; 1.49× the one-trajectory throughput against 1.45× with two
-/// lanes, BENCHMARKS.md, "Many trajectories per core"), one 256-bit register with AVX2.
-#[cfg(not(target_feature = "avx512f"))]
+/// The lane type of ensembles on a build without AVX2 (the default, baseline x86-64 with SSE2):
+/// two `f64` lanes, one 128-bit register (1.49× the one-trajectory throughput for water, against
+/// 1.43× with four lanes in two registers; BENCHMARKS.md, "Many trajectories per core").
+#[cfg(not(target_feature = "avx2"))]
+pub type Lanes = F64x2;
+/// The lane type of ensembles on an AVX2 build without AVX-512: four `f64` lanes, one 256-bit
+/// register.
+#[cfg(all(target_feature = "avx2", not(target_feature = "avx512f")))]
 pub type Lanes = F64x4;
 /// The lane type of ensembles on an AVX-512 build: eight `f64` lanes, one 512-bit register
-/// (3.0× the one-trajectory ensemble's throughput for water, against 2.25× with four lanes).
+/// (3.1× the one-trajectory throughput for water, against 2.2× with four lanes).
 #[cfg(target_feature = "avx512f")]
 pub type Lanes = F64x8;
 /// Trajectories per vector.

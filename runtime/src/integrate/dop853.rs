@@ -12,7 +12,9 @@ use super::{InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, che
 use crate::diagnostic::Compact;
 
 mod lanes;
+mod stages;
 pub use lanes::{Dop853Lanes, LaneFailure, LaneFeeder, LaneSystem};
+use stages::{combine, weights};
 
 /// Number of stages including the FSAL stage and the three extra dense-output stages.
 const STAGES: usize = 16;
@@ -862,24 +864,6 @@ fn eval_into<S: OdeSystem + ?Sized>(
 ) -> Result<(), (f64, S::Error)> {
     stats.rhs_evals += 1;
     system.rhs(t, arg, out).map_err(|source| (t, source))
-}
-
-/// `out = Σ_j w_j k_j` over the sparse row `row` (stage vectors of length `n` in `k`).
-fn weights(out: &mut [f64], k: &[f64], n: usize, row: &[(usize, f64)]) {
-    out.fill(0.0);
-    for &(stage, w) in row {
-        for (o, &v) in out.iter_mut().zip(&k[stage * n..(stage + 1) * n]) {
-            *o += w * v;
-        }
-    }
-}
-
-/// `out = y + h·Σ_j a_j k_j`: the argument of a stage.
-fn combine(out: &mut [f64], y: &[f64], k: &[f64], n: usize, h: f64, row: &[(usize, f64)]) {
-    weights(out, k, n, row);
-    for (o, &yi) in out.iter_mut().zip(y) {
-        *o = yi + h * *o;
-    }
 }
 
 #[cfg(test)]

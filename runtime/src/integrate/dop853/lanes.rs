@@ -29,6 +29,7 @@
 use core::ops::ControlFlow;
 
 use super::coefficients::{A, BHH, C, D, ER};
+use super::stages::{combine, weights};
 use super::{Dop853Options, FAC1, FAC2, FSAL, SAFETY, STAGES, UROUND};
 use crate::integrate::{InvalidInput, OutputGrid, Stats, check_dim, check_run};
 use crate::lanes::{Real, finite_mask};
@@ -161,8 +162,10 @@ impl<T: Real> Dop853Lanes<T> {
         S: LaneSystem<T> + ?Sized,
         F: LaneFeeder + ?Sized,
     {
-        let probe = vec![0.0; self.dim];
-        let grid = check_run(self.dim, system.dim(), t0, &probe, t_end, output_interval)?;
+        // The trajectories' states are checked as they start; the common arguments here, with a
+        // zero state from the workspace (no allocation).
+        self.lane_y.fill(0.0);
+        let grid = check_run(self.dim, system.dim(), t0, &self.lane_y, t_end, output_interval)?;
         let run = Run { t0, t_end, grid };
         for lane in 0..T::LANES {
             self.start(system, feeder, &run, lane);
@@ -248,18 +251,19 @@ impl<T: Real> Dop853Lanes<T> {
     ) -> Result<f64, f64> {
         let n = self.dim;
         let (rtol, atol) = (self.options.rtol, self.options.atol);
-        let f0: Vec<f64> = (0..n).map(|i| self.k[i].lane(lane)).collect();
-        let y0 = self.lane_y.clone();
+        // y0 is kept in y_out (free until the first output) while lane_y holds the Euler step;
+        // f(t0, y0) stays in the lane's stage 0. No allocation.
+        self.y_out.copy_from_slice(&self.lane_y);
         let (mut dnf, mut dny) = (0.0, 0.0);
         for i in 0..n {
-            let sk = atol + rtol * y0[i].abs();
-            dnf += (f0[i] / sk).powi(2);
-            dny += (y0[i] / sk).powi(2);
+            let sk = atol + rtol * self.y_out[i].abs();
+            dnf += (self.k[i].lane(lane) / sk).powi(2);
+            dny += (self.y_out[i] / sk).powi(2);
         }
         let mut h: f64 = if dnf <= 1e-10 || dny <= 1e-10 { 1e-6 } else { (dny / dnf).sqrt() * 0.01 };
         h = h.min(h_max);
         for i in 0..n {
-            self.lane_y[i] = y0[i] + h * f0[i];
+            self.lane_y[i] = self.y_out[i] + h * self.k[i].lane(lane);
         }
         stats.rhs_evals += 1;
         // Stage 1 of the lane is scratch here, as in the scalar solver.
@@ -268,8 +272,8 @@ impl<T: Real> Dop853Lanes<T> {
         }
         let mut der2: f64 = 0.0;
         for i in 0..n {
-            let sk = atol + rtol * y0[i].abs();
-            der2 += ((self.k[n + i].lane(lane) - f0[i]) / sk).powi(2);
+            let sk = atol + rtol * self.y_out[i].abs();
+            der2 += ((self.k[n + i].lane(lane) - self.k[i].lane(lane)) / sk).powi(2);
         }
         der2 = der2.sqrt() / h;
         let der12 = der2.abs().max(dnf.sqrt());
@@ -280,7 +284,7 @@ impl<T: Real> Dop853Lanes<T> {
         } else {
             (0.01 / der12).powf(1.0 / 8.0)
         };
-        self.lane_y.copy_from_slice(&y0);
+        self.lane_y.copy_from_slice(&self.y_out);
         Ok((100.0 * h).min(h1).min(h_max))
     }
 
@@ -577,25 +581,4 @@ fn lanes_of(mask: u32) -> impl Iterator<Item = usize> {
             lane
         })
     })
-}
-
-/// `out = Σ_j w_j k_j` over the sparse row `row`, as the scalar solver's `weights`.
-#[inline]
-fn weights<T: Real>(out: &mut [T], k: &[T], n: usize, row: &[(usize, f64)]) {
-    out.fill(T::splat(0.0));
-    for &(stage, w) in row {
-        let w = T::splat(w);
-        for (o, &v) in out.iter_mut().zip(&k[stage * n..(stage + 1) * n]) {
-            *o = *o + w * v;
-        }
-    }
-}
-
-/// `out = y + h·Σ_j a_j k_j`, with `h` per lane.
-#[inline]
-fn combine<T: Real>(out: &mut [T], y: &[T], k: &[T], n: usize, h: T, row: &[(usize, f64)]) {
-    weights(out, k, n, row);
-    for (o, &yi) in out.iter_mut().zip(y) {
-        *o = yi + h * *o;
-    }
 }
