@@ -16,7 +16,7 @@ use rovib::runtime::units::{BOHR_IN_ANGSTROM, DEBYE_IN_E_BOHR};
 const Q_H: f64 = 0.32922;
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rovib-dipole-{}-{name}", std::process::id()));
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-dipole-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -93,7 +93,7 @@ const STATISTICS: &str = "[statistics]\nmeans = [\"r1\", \"alpha\", \"T\", \"U\"
 const DOP853: &str = "method = \"dop853\"\nrtol = 1e-10\natol = 1e-10";
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rovib-ensemble-test-{}-{name}", std::process::id()));
+    let d = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-ensemble-test-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     d
 }

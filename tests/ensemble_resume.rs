@@ -21,7 +21,7 @@ const ALL_LINES: usize = 1 + (N / 64) as usize;
 const END: f64 = 500.0;
 
 fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rovib-ensemble-resume-{}-{name}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-ensemble-resume-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d

@@ -14,7 +14,7 @@ use rovib::runtime::sample::BOLTZMANN;
 use rovib::scene::{Scene, parse_scene};
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rovib-ensemble-samplers-{}-{name}", std::process::id()));
+    let d = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-ensemble-samplers-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     d
 }

@@ -20,7 +20,7 @@ fn error(ensemble: &str) -> FileError {
     if let Err(e) = parse_ensemble(&scene) {
         return e;
     }
-    let out = std::env::temp_dir().join(format!("rovib-ensemble-scene-{}", std::process::id()));
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-ensemble-scene");
     match run_ensemble(&scene, &EnsembleOptions::new(out)) {
         Err(CliError::File(e)) => e,
         other => panic!("expected a located error, got {other:?}"),
@@ -239,7 +239,7 @@ fn the_samplers_own_refusal_is_located_at_the_method() {
 
 #[test]
 fn a_bad_number_in_the_states_file_is_located_in_that_file() {
-    let dir = std::env::temp_dir().join(format!("rovib-ensemble-states-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-ensemble-states");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("states.csv"), "r1,r2,alpha\n1.8,1.8,1.82\n1.8,oops,1.82\n").unwrap();
     let text =

@@ -239,7 +239,8 @@ fn water_above_its_barrier_to_linearity_runs_through() {
 /// lab angular momentum conserved across them (every output, both charts).
 #[test]
 fn the_linear_hcn_scene_runs_through_its_crossings() {
-    let out = std::env::temp_dir().join(format!("rovib-linear-scene-{}", std::process::id()));
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-linear-scene");
+    let _ = std::fs::remove_dir_all(&out);
     let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hcn_linear.toml");
     rovib::cli::run::run(&scene, Some(&out), true).expect("the scene runs");
     let summary: serde_json::Value =
@@ -326,7 +327,7 @@ fn reference_member(i: u64) -> Vec<(SVector<f64, 3>, f64, Vector3<f64>)> {
 #[test]
 fn ensemble_members_bend_through_linear_in_agreement_with_the_cartesian_propagation() {
     use common::ensemble::{column, csv, options};
-    let dir = std::env::temp_dir().join(format!("rovib-linear-ensemble-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-linear-ensemble");
     let _ = std::fs::remove_dir_all(&dir);
     let scene = rovib::scene::parse_scene("ensemble.toml", &ensemble_scene(true)).unwrap();
     let report = run_with_sampler(&Hcn, &scene, &BendingStates, "bending states", &options(dir.clone(), 2)).unwrap();

@@ -128,11 +128,9 @@ fn check_scene_for<M: Molecule<3, 3> + Copy>(
     assert!(text.contains(&format!("molecule = \"{}\"", m.name())), "{scene}");
     // One directory per scene and length: two tests run the same scene over different lengths,
     // concurrently.
-    let dir = std::env::temp_dir().join(format!(
-        "rovib-linear-scenes-{}-{scene}-{}",
-        std::process::id(),
-        t_compare.to_bits()
-    ));
+    let dir =
+        Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-linear-scenes-{scene}-{}", t_compare.to_bits()));
+    let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let end_fs = t_compare * AU_TIME_IN_FS;
     let shortened: String = text

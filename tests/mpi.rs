@@ -19,7 +19,7 @@ use std::time::Duration;
 use common::ensemble::{assert_same_statistics, lines, summary, thermal_scene, wait_at_most, wait_for_lines};
 
 fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rovib-mpi-{}-{name}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-mpi-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d

@@ -70,7 +70,7 @@ fn the_run_time_gradient_is_the_derivative_of_the_run_time_potential() {
 
 #[test]
 fn a_scene_overrides_parameters_and_names_an_unknown_one() {
-    let dir = std::env::temp_dir().join(format!("rovib-parameters-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-parameters");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let text = "molecule = \"h2o\"\n[initial]\nq = { r1 = 1.2, r2 = 0.9, alpha = 1.7 }\n\

@@ -36,7 +36,7 @@ const WATER_CHARGES: [f64; 3] = [-2.0 * 0.32922, 0.32922, 0.32922];
 const AMMONIA_CHARGES: [f64; 4] = [-3.0 * 0.268515, 0.268515, 0.268515, 0.268515];
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rovib-spectrum-{}-{name}", std::process::id()));
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-spectrum-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     dir
 }

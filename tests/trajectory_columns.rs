@@ -12,7 +12,7 @@ use rovib::runtime::nalgebra::SMatrix;
 use rovib::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit};
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rovib-columns-{}-{name}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-columns-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -352,7 +352,9 @@ mod tests {
     }
 
     fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("rovib-checkpoint-{name}-{}", std::process::id()));
+        // The same directory on every run (removed first), so that runs do not pile up in /tmp.
+        let d = std::env::temp_dir().join(format!("rovib-checkpoint-{name}"));
+        let _ = std::fs::remove_dir_all(&d);
         std::fs::create_dir_all(&d).unwrap();
         d.join("checkpoint.jsonl")
     }

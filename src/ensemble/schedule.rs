@@ -416,7 +416,9 @@ mod tests {
         for b in 0..n_blocks {
             in_order.merge(&outcome(b));
         }
-        let dir = std::env::temp_dir().join(format!("rovib-schedule-compaction-{}", std::process::id()));
+        // The same directory on every run (removed first), so that runs do not pile up in /tmp.
+        let dir = std::env::temp_dir().join("rovib-schedule-compaction");
+        let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("checkpoint.jsonl");
         let header = Header::new(b"scene", 1, n, BLOCK);

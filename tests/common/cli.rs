@@ -7,7 +7,7 @@ use std::process::{Command, Output};
 /// A fresh, empty temporary directory for test `name` of the test file `file` (removed first
 /// if an earlier run left it).
 pub fn temp_dir(file: &str, name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rovib-{file}-{}-{name}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-{file}-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
