@@ -38,8 +38,8 @@ use crate::runtime::lanes::Real;
 use crate::runtime::sample::Sampler;
 
 /// The lane type of ensembles on a build without AVX2 (the default, baseline x86-64 with SSE2):
-/// two `f64` lanes, one 128-bit register (1.49× the one-trajectory throughput for water, against
-/// 1.43× with four lanes in two registers; BENCHMARKS.md, "Many trajectories per core").
+/// two `f64` lanes, one 128-bit register (1.48× the one-trajectory throughput for water, against
+/// 1.37× with four lanes in two registers; BENCHMARKS.md, "Many trajectories per core").
 #[cfg(not(target_feature = "avx2"))]
 pub type Lanes = F64x2;
 /// The lane type of ensembles on an AVX2 build without AVX-512: four `f64` lanes, one 256-bit
