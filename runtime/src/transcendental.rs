@@ -15,8 +15,9 @@
 //!
 //! # Method
 //! - `sin_cos`: `k = round(x · 2/π)` (by adding and subtracting 1.5·2⁵², exact below 2⁵¹),
-//!   `r = |x| − k·π/2` with π/2 split into three parts (Cody & Waite; the first two have few
-//!   enough bits that `k` times them is exact for `k < 2²⁴`), then the minimax polynomials of
+//!   `r = |x| − k·π/2` with π/2 split into three parts (Cody & Waite; the first two have 25 and
+//!   24 significant bits, so `k` times them is exact for `k < 2²⁸`, and `|x| ≤ 10⁵` means
+//!   `k < 2¹⁶`), then the minimax polynomials of
 //!   Cephes (S. L. Moshier, *Methods and Programs for Mathematical Functions*, 1989) on
 //!   `[−π/4, π/4]`: `sin r = r + r³·P(r²)`, `cos r = 1 − r²/2 + r⁴·Q(r²)`, and the quadrant
 //!   `k mod 4` swaps them and sets their signs; the sine takes the sign of `x`.
@@ -34,8 +35,8 @@
 //! - `sin_cos`: `|x| ≤` [`SIN_COS_RANGE`] (the three-part reduction loses accuracy far beyond);
 //! - `exp`: `|x| ≤` [`EXP_RANGE`] (beyond it the result overflows, or is subnormal or zero).
 //!
-//! The fallback is decided per lane by the same test in every instance, so the bit-for-bit
-//! equality of a lane with the `f64` path holds for every argument.
+//! The fallback is decided per lane by the same test in every instance, so a lane equals this
+//! module's `f64` instance bit for bit for every argument.
 
 use crate::lanes::Real;
 
