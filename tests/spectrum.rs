@@ -47,6 +47,12 @@ fn run_spectrum(text: &str, dir: &Path) -> (Spectrum, Vec<String>, Vec<Vec<f64>>
     let scene = parse_scene("ir.toml", text).unwrap();
     let report = run_ensemble(&scene, &options(dir.to_owned(), 2)).unwrap();
     assert_eq!(report.outcome.completed, report.requested, "every trajectory completes");
+    read_spectrum(dir)
+}
+
+/// `dir/spectrum.csv`: the line shape with the trajectory length from the file's comment line,
+/// and the header and rows of the file.
+fn read_spectrum(dir: &Path) -> (Spectrum, Vec<String>, Vec<Vec<f64>>) {
     let csv = std::fs::read_to_string(dir.join("spectrum.csv")).unwrap();
     let mut lines = csv.lines();
     let comment = lines.next().unwrap();
@@ -572,17 +578,7 @@ fn the_p_r_maxima_of_a_linear_molecule_are_classically_separated() {
         let sampler = Thermal::new(&ChargedHcn, PR_KELVIN, &region, 200 + batch).unwrap();
         let report = run_with_sampler(&ChargedHcn, &scene, &sampler, "thermal", &options(dir.clone(), 2)).unwrap();
         assert_eq!(report.outcome.completed, report.requested, "{:?}", report.outcome.first_failures);
-        let csv = std::fs::read_to_string(dir.join("spectrum.csv")).unwrap();
-        let mut lines = csv.lines();
-        let length: f64 = lines.next().unwrap().split_whitespace().nth(10).unwrap().parse().unwrap();
-        let header: Vec<String> = lines.next().unwrap().split(',').map(str::to_owned).collect();
-        let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
-        let (nu, shape) = (column(&header, "wavenumber_cm-1"), column(&header, "lineshape_e2bohr2_per_hartree"));
-        let s = Spectrum {
-            wavenumber: rows.iter().map(|r| r[nu]).collect(),
-            lineshape: rows.iter().map(|r| r[shape]).collect(),
-            length,
-        };
+        let (s, _, _) = read_spectrum(&dir);
         let band = pr_band(&s, PR_BAND_GUESS, 100.0);
         println!(
             "batch {batch}: band centre {:.2} cm-1, fitted contour maxima {:.2} apart, direct maxima {:.2} and {:.2} \
