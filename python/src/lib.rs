@@ -458,9 +458,20 @@ fn to_lab_frame<'py>(
     PyTuple::new(py, [matrix(py, &x)?.into_any(), matrix(py, &v)?.into_any()])
 }
 
+/// How deeply a scene given as a dict may nest tables and lists. A scene file nests at most four
+/// levels (`[ensemble]` → `region` → `limits` → `[lo, hi]`); the bound keeps a deeply nested or
+/// self-referencing dict from exhausting the stack.
+const MAX_SCENE_DEPTH: usize = 32;
+
 /// A Python value of a scene (dict, list, str, int, float, bool) as TOML; `at` names it in
-/// messages.
-fn toml_value(v: &Bound<'_, PyAny>, at: &str) -> PyResult<toml::Value> {
+/// messages, `depth` is how many tables and lists enclose it.
+fn toml_value(v: &Bound<'_, PyAny>, at: &str, depth: usize) -> PyResult<toml::Value> {
+    if depth > MAX_SCENE_DEPTH {
+        return Err(message(format!(
+            "scene: `{at}` is nested more than {MAX_SCENE_DEPTH} tables or lists deep (a scene nests at most \
+             four; does a dict or list contain itself?)"
+        )));
+    }
     // bool before int: Python's bool is an int.
     if v.is_instance_of::<PyBool>() {
         Ok(toml::Value::Boolean(v.extract()?))
@@ -475,14 +486,14 @@ fn toml_value(v: &Bound<'_, PyAny>, at: &str) -> PyResult<toml::Value> {
         for (k, item) in d.iter() {
             let key: String = k.extract().map_err(|_| message(format!("scene: the keys of `{at}` must be strings")))?;
             let path = if at.is_empty() { key.clone() } else { format!("{at}.{key}") };
-            table.insert(key, toml_value(&item, &path)?);
+            table.insert(key, toml_value(&item, &path, depth + 1)?);
         }
         Ok(toml::Value::Table(table))
     } else if v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>() || v.hasattr("tolist")? {
         let items: Vec<Bound<'_, PyAny>> =
             if v.hasattr("tolist")? { v.call_method0("tolist")?.extract()? } else { v.extract()? };
         let values: PyResult<Vec<toml::Value>> =
-            items.iter().enumerate().map(|(i, x)| toml_value(x, &format!("{at}[{i}]"))).collect();
+            items.iter().enumerate().map(|(i, x)| toml_value(x, &format!("{at}[{i}]"), depth + 1)).collect();
         Ok(toml::Value::Array(values?))
     } else {
         Err(message(format!(
@@ -495,7 +506,7 @@ fn toml_value(v: &Bound<'_, PyAny>, at: &str) -> PyResult<toml::Value> {
 /// The TOML text of a scene given as a dict (the same keys as a scene file).
 #[pyfunction]
 fn scene_toml(scene: &Bound<'_, PyDict>) -> PyResult<String> {
-    let value = toml_value(scene.as_any(), "")?;
+    let value = toml_value(scene.as_any(), "", 0)?;
     toml::to_string(&value).map_err(|e| message(format!("scene: cannot write it as toml: {e}")))
 }
 

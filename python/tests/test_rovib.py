@@ -173,6 +173,26 @@ def test_a_dict_scene_with_an_unknown_value_type_is_rejected(tmp_path):
         rovib.run({"molecule": "h2o", "initial": {"q": object()}}, tmp_path)
 
 
+def test_a_dict_scene_nested_deeply_or_containing_itself_is_rejected_not_a_crash(tmp_path):
+    # Without a depth bound the conversion recursed once per level and overflowed the stack
+    # (SIGSEGV) at 10 000 levels; a dict containing itself recursed without end.
+    deep = {}
+    inner = deep
+    for _ in range(10_000):
+        inner["a"] = {}
+        inner = inner["a"]
+    with pytest.raises(rovib.RovibError, match="nested more than 32"):
+        rovib.run({"molecule": "h2o", "initial": deep}, tmp_path / "deep")
+    looped = {"molecule": "h2o"}
+    looped["initial"] = looped
+    with pytest.raises(rovib.RovibError, match="contain itself"):
+        rovib.run(looped, tmp_path / "looped")
+    listed = []
+    listed.append(listed)
+    with pytest.raises(rovib.RovibError, match="nested more than 32"):
+        rovib.run({"molecule": "h2o", "initial": {"q": listed}}, tmp_path / "listed")
+
+
 def _moving_state():
     state = dict(STATE)
     state["com"] = {"position": np.array([0.5, -1.0, 2.0]), "velocity": np.array([1e-4, 2e-4, -3e-4])}
