@@ -56,7 +56,7 @@ use toml::Spanned;
 use crate::diagnostic::{FileError, Source};
 use crate::elements;
 use crate::expr::{ExprId, Func, Graph, Node};
-use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
+use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Library, Scope};
 use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, DipoleUnit, EnergyUnit, LengthUnit};
 
 /// A problem in a definition file, with its place and a suggested fix (file, line, column,
@@ -124,6 +124,9 @@ pub struct Definition {
     pub potential_scope: HashMap<String, ExprId>,
     /// See `potential_scope`.
     pub potential_text: String,
+    /// The functions and named expressions, inlined where used (also when the potential is
+    /// built again).
+    pub library: Library,
     /// The dipole moment surface, if the file has a `[dipole]` table.
     pub dipole: Option<DipoleDef>,
 }
@@ -147,6 +150,10 @@ struct RawDefinition {
     length_unit: Option<Spanned<String>>,
     #[serde(default)]
     constants: BTreeMap<Spanned<String>, Spanned<RawValue>>,
+    #[serde(default)]
+    functions: BTreeMap<Spanned<String>, Spanned<String>>,
+    #[serde(default)]
+    expressions: BTreeMap<Spanned<String>, Spanned<String>>,
     #[serde(default)]
     coordinates: Vec<RawCoordinate>,
     atoms: Vec<RawAtom>,
@@ -227,7 +234,7 @@ pub fn default_range(unit: CoordinateUnit) -> (f64, f64) {
 }
 
 /// Places inside expression strings.
-trait ExpressionPlace {
+pub(crate) trait ExpressionPlace {
     /// Turns an error inside the string value at `span` into an error at its place in the file.
     fn expression_error(&self, span: Range<usize>, value: &str, e: ExprError) -> DefinitionError;
 }
@@ -292,8 +299,15 @@ pub fn parse_definition(path: &str, text: &str) -> Result<Definition, Vec<Defini
         }
     });
     let raw = raw.map_err(|e| vec![e])?;
-    Validator { src: &src, graph: Graph::new(), names: HashMap::new(), declared: HashMap::new(), errors: Vec::new() }
-        .run(raw)
+    Validator {
+        src: &src,
+        graph: Graph::new(),
+        names: HashMap::new(),
+        declared: HashMap::new(),
+        errors: Vec::new(),
+        library: Library::default(),
+    }
+    .run(raw)
 }
 
 /// State of one validation: the graph being built and the names declared so far.
@@ -306,6 +320,8 @@ struct Validator<'s> {
     declared: HashMap<String, (&'static str, Range<usize>)>,
     /// Every problem found so far.
     errors: Vec<DefinitionError>,
+    /// The functions and named expressions (empty until the constants are known).
+    library: Library,
 }
 
 /// The molecule's name becomes a module and a type, and `--molecule NAME` finds it by file
@@ -417,7 +433,7 @@ impl Validator<'_> {
     }
 
     fn expression(&mut self, value: &Spanned<String>, context: &str) -> Result<ExprId, DefinitionError> {
-        let scope = Scope { names: &self.names, context };
+        let scope = Scope { names: &self.names, context, library: &self.library, named: true };
         parse::parse_expression(&mut self.graph, value.get_ref(), &scope)
             .map_err(|e| self.src.expression_error(value.span(), value.get_ref(), e))
     }
@@ -548,8 +564,33 @@ impl Validator<'_> {
         }
         let coordinate_names: HashMap<String, ExprId> = std::mem::take(&mut self.names);
         self.resolve_constants(&constants);
+        let constant_values: HashMap<String, f64> = constants
+            .iter()
+            .filter_map(|(k, _)| {
+                let id = self.names.get(k.get_ref())?;
+                Some((k.get_ref().clone(), self.graph.as_const(*id)?))
+            })
+            .collect();
         self.names.extend(coordinate_names);
-        let constants_ok = self.errors.len() == before_constants;
+
+        // Functions and named expressions, checked once here and inlined where they are used.
+        let mut names: Vec<String> = self.names.keys().cloned().collect();
+        names.extend(raw.potential.get_ref().parameters.keys().map(|k| k.get_ref().clone()));
+        names.extend(raw.dipole.iter().flat_map(|d| d.get_ref().parameters.keys().map(|k| k.get_ref().clone())));
+        let input = crate::library::Input {
+            functions: &raw.functions,
+            expressions: &raw.expressions,
+            constants: constant_values,
+            names,
+        };
+        let (library, library_errors) = {
+            let mut declare = |k: &Spanned<String>, what: &'static str| self.declare(k, what);
+            crate::library::validate(src, input, &mut declare)
+        };
+        let library_ok = library_errors.is_empty();
+        self.errors.extend(library_errors);
+        self.library = library;
+        let constants_ok = self.errors.len() == before_constants && library_ok;
 
         // Atoms and their positions (`None` where a position has a problem).
         if raw.atoms.len() < 2 {
@@ -831,6 +872,7 @@ impl Validator<'_> {
             parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
             potential_scope,
             potential_text: pot.expression.get_ref().clone(),
+            library: self.library,
             dipole,
         })
     }
@@ -959,7 +1001,8 @@ impl Validator<'_> {
                 RawValue::Expr(text) => {
                     let mut g = Graph::new();
                     let names = HashMap::new();
-                    let scope = Scope { names: &names, context: "a range" };
+                    let library = Library::default();
+                    let scope = Scope { names: &names, context: "a range", library: &library, named: true };
                     let e = parse::parse_expression(&mut g, text, &scope)
                         .map_err(|e| src.expression_error(v.span(), text, e))?;
                     g.as_const(e).unwrap_or(f64::NAN)

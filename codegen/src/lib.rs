@@ -30,6 +30,7 @@ pub mod emit;
 pub mod emit_lanes;
 pub mod expr;
 pub mod kinetic;
+pub mod library;
 pub mod names;
 pub mod parametric;
 pub mod parse;

@@ -36,12 +36,71 @@ impl ExprError {
 }
 
 /// The names an expression may use: each maps to an expression already in the graph (a
-/// coordinate in its declared unit, a constant, a parameter).
+/// coordinate in its declared unit, a constant, a parameter), plus the definition's named
+/// expressions and functions.
 pub struct Scope<'a> {
     /// Name → expression.
     pub names: &'a HashMap<String, ExprId>,
     /// Where the expression appears, for messages ("the position of atom H1").
     pub context: &'a str,
+    /// The functions (always callable) and named expressions (usable where `named` is true).
+    pub library: &'a Library,
+    /// Whether the library's named expressions are visible (not inside function bodies).
+    pub named: bool,
+}
+
+/// The named expressions and functions of a definition, inlined where they are used: a named
+/// expression is built with the names of the place that uses it (so a named expression that uses
+/// a potential parameter can be used in the potential but not in a position), a function with
+/// its parameters bound to the arguments' expressions and the constants. Hash-consing shares what
+/// repeated uses have in common, and derivatives of the inlined graph are exact.
+#[derive(Clone, Debug, Default)]
+pub struct Library {
+    /// The constants' values: the names a function body sees besides its parameters.
+    pub constants: HashMap<String, f64>,
+    /// Function name → definition.
+    pub functions: HashMap<String, Function>,
+    /// Named expression name → definition.
+    pub expressions: HashMap<String, Named>,
+}
+
+/// A function defined once in the definition (`"lj(r, eps, sigma)" = "..."`).
+#[derive(Clone, Debug)]
+pub struct Function {
+    /// The parameter names, in order.
+    pub params: Vec<String>,
+    /// The body's text.
+    pub body: String,
+    /// Whether the body has a problem (already reported): a call then builds a placeholder.
+    pub broken: bool,
+}
+
+/// A named sub-expression (`r_OAr = "sqrt(...)"`).
+#[derive(Clone, Debug)]
+pub struct Named {
+    /// The expression's text.
+    pub body: String,
+    /// Whether the body has a problem (already reported): a use then builds a placeholder.
+    pub broken: bool,
+}
+
+/// What a named expression or function with a problem stands for, so that the rest of the
+/// definition can still be checked (never emitted: a definition with a problem generates nothing).
+const BROKEN_PLACEHOLDER: f64 = 1.0;
+
+/// How deeply named expressions and function calls may nest inside each other's bodies (each
+/// level is a nested parse, so this bounds the build script's stack).
+pub const MAX_INLINE_DEPTH: usize = 64;
+
+/// What one top-level parse has inlined so far: a named expression or a call with the same
+/// arguments builds the same expression, so it is built once (which keeps a chain of functions
+/// that each call the previous one twice linear, not exponential).
+#[derive(Default)]
+struct Inlined {
+    /// (name, argument expressions) → result; named expressions have no arguments.
+    cache: HashMap<(String, Vec<ExprId>), ExprId>,
+    /// Current nesting of bodies being built.
+    depth: usize,
 }
 
 /// Names of the two-argument functions.
@@ -49,6 +108,15 @@ pub const BINARY_FUNCTIONS: [&str; 2] = ["atan2", "pow"];
 
 /// Parses `text` and builds it into `graph`.
 pub fn parse_expression(graph: &mut Graph, text: &str, scope: &Scope<'_>) -> Result<ExprId, ExprError> {
+    parse_inlining(graph, text, scope, &mut Inlined::default())
+}
+
+fn parse_inlining(
+    graph: &mut Graph,
+    text: &str,
+    scope: &Scope<'_>,
+    inlined: &mut Inlined,
+) -> Result<ExprId, ExprError> {
     if text.trim().is_empty() {
         return Err(ExprError {
             line: 1,
@@ -66,7 +134,7 @@ pub fn parse_expression(graph: &mut Graph, text: &str, scope: &Scope<'_>) -> Res
         };
         ExprError::at(e.span(), format!("syntax error in {}: {e}", scope.context), help)
     })?;
-    let mut builder = Builder { graph, scope, tasks: vec![Task::Visit(expr)], values: Vec::new() };
+    let mut builder = Builder { graph, scope, inlined, tasks: vec![Task::Visit(expr)], values: Vec::new() };
     let result = builder.run();
     // Whatever an error left unvisited is taken apart without recursion.
     dismantle(builder.tasks.drain(..).filter_map(|t| match t {
@@ -217,6 +285,8 @@ enum Task {
     Binary(fn(&mut Graph, ExprId, ExprId) -> ExprId),
     /// Pop one value, push the function of it.
     Call(Func),
+    /// Pop the arguments of the library function (the last on top), push its inlined body.
+    Inline(String, Span),
 }
 
 /// Builds a syn expression into the graph, iteratively: a post-order walk with an explicit
@@ -225,6 +295,7 @@ enum Task {
 struct Builder<'g, 's> {
     graph: &'g mut Graph,
     scope: &'s Scope<'s>,
+    inlined: &'g mut Inlined,
     tasks: Vec<Task>,
     values: Vec<ExprId>,
 }
@@ -248,6 +319,10 @@ impl Builder<'_, '_> {
                 Task::Call(f) => {
                     let a = self.pop();
                     let v = self.graph.call(f, a);
+                    self.values.push(v);
+                }
+                Task::Inline(name, span) => {
+                    let v = self.inline_function(&name, span)?;
                     self.values.push(v);
                 }
             }
@@ -370,6 +445,26 @@ impl Builder<'_, '_> {
         };
         let span = call.func.span();
         let args: Vec<Expr> = call.args.into_iter().collect();
+        if let Some(f) = self.scope.library.functions.get(&name) {
+            if args.len() != f.params.len() {
+                let (expected, given) = (f.params.len(), args.len());
+                dismantle(args);
+                return Err(ExprError::at(
+                    span,
+                    format!(
+                        "`{name}` takes {expected} argument{} but {given} {} given in {}",
+                        if expected == 1 { "" } else { "s" },
+                        if given == 1 { "was" } else { "were" },
+                        self.scope.context
+                    ),
+                    format!("write `{name}({})`", f.params.join(", ")),
+                ));
+            }
+            self.tasks.push(Task::Inline(name, span));
+            // The first argument is built first.
+            self.tasks.extend(args.into_iter().rev().map(Task::Visit));
+            return Ok(());
+        }
         let expected = if BINARY_FUNCTIONS.contains(&name.as_str()) {
             2
         } else if Func::from_name(&name).is_some() {
@@ -440,6 +535,48 @@ impl Builder<'_, '_> {
         }
     }
 
+    /// Builds the body of library function `name` with its parameters bound to the arguments on
+    /// the value stack.
+    fn inline_function(&mut self, name: &str, span: Span) -> Result<ExprId, ExprError> {
+        let library: &Library = self.scope.library;
+        let f = &library.functions[name];
+        let args = self.values.split_off(self.values.len() - f.params.len());
+        if f.broken {
+            return Ok(self.graph.constant(BROKEN_PLACEHOLDER));
+        }
+        let key = (name.to_owned(), args);
+        if let Some(&v) = self.inlined.cache.get(&key) {
+            return Ok(v);
+        }
+        let mut names: HashMap<String, ExprId> =
+            self.scope.library.constants.iter().map(|(k, &v)| (k.clone(), self.graph.constant(v))).collect();
+        names.extend(f.params.iter().cloned().zip(key.1.iter().copied()));
+        let context = format!("the function `{name}`");
+        let scope = Scope { names: &names, context: &context, library, named: false };
+        let v = self.inline(&f.body, &scope, name, span)?;
+        self.inlined.cache.insert(key, v);
+        Ok(v)
+    }
+
+    /// Builds the body of a named expression or function in `scope`, one level deeper; a
+    /// problem inside it (a name the place of use does not have) is reported at the use.
+    fn inline(&mut self, body: &str, scope: &Scope<'_>, name: &str, span: Span) -> Result<ExprId, ExprError> {
+        if self.inlined.depth >= MAX_INLINE_DEPTH {
+            return Err(ExprError::at(
+                span,
+                format!(
+                    "named expressions and functions nested more than {MAX_INLINE_DEPTH} deep in {}",
+                    self.scope.context
+                ),
+                "write some of the nested parts out, or combine them",
+            ));
+        }
+        self.inlined.depth += 1;
+        let v = parse_inlining(self.graph, body, scope, self.inlined);
+        self.inlined.depth -= 1;
+        v.map_err(|e| ExprError::at(span, format!("{} (inside `{name}`)", e.message), e.help))
+    }
+
     fn name(&mut self, name: &str, span: Span) -> Result<ExprId, ExprError> {
         if let Some(&id) = self.scope.names.get(name) {
             return Ok(id);
@@ -447,11 +584,35 @@ impl Builder<'_, '_> {
         if name == "pi" {
             return Ok(self.graph.constant(std::f64::consts::PI));
         }
+        if let Some(named) = self.scope.library.expressions.get(name).filter(|_| self.scope.named) {
+            if named.broken {
+                return Ok(self.graph.constant(BROKEN_PLACEHOLDER));
+            }
+            let key = (name.to_owned(), Vec::new());
+            if let Some(&v) = self.inlined.cache.get(&key) {
+                return Ok(v);
+            }
+            let scope = Scope {
+                names: self.scope.names,
+                context: self.scope.context,
+                library: self.scope.library,
+                named: true,
+            };
+            let v = self.inline(&named.body, &scope, name, span)?;
+            self.inlined.cache.insert(key, v);
+            return Ok(v);
+        }
         let mut known: Vec<&str> = self.scope.names.keys().map(String::as_str).collect();
+        if self.scope.named {
+            known.extend(self.scope.library.expressions.keys().map(String::as_str));
+        }
         known.push("pi");
         known.sort_unstable();
         let suggestion = closest(name, &known).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
-        let help = if Func::from_name(name).is_some() || BINARY_FUNCTIONS.contains(&name) {
+        let help = if Func::from_name(name).is_some()
+            || BINARY_FUNCTIONS.contains(&name)
+            || self.scope.library.functions.contains_key(name)
+        {
             format!("`{name}` is a function: call it, e.g. `{name}(x)`")
         } else {
             format!("{suggestion}the names available here are: {}", known.join(", "))
@@ -485,7 +646,8 @@ mod tests {
         let mut g = Graph::new();
         let x = g.var("x");
         let names = HashMap::from([("x".to_owned(), x)]);
-        let scope = Scope { names: &names, context: "the test" };
+        let library = Library::default();
+        let scope = Scope { names: &names, context: "the test", library: &library, named: true };
         let id = parse_expression(&mut g, text, &scope)?;
         Ok((g, id))
     }
