@@ -72,3 +72,23 @@ fn co2_ar_with_named_parts_equals_the_written_out_model() {
     let differing = a.lines().zip(b.lines()).filter(|(x, y)| x != y).count();
     assert!(differing <= 4, "{differing} lines differ (expected only the header and description)");
 }
+
+/// A chain of functions each calling the previous twice with the same argument, 2^40 calls if
+/// inlined naively, builds in linear time: a call with the same argument expressions is built
+/// once per expression.
+#[test]
+fn repeated_calls_are_built_once() {
+    let mut functions = String::from("[functions]\n\"f0(x)\" = \"1 + x / 8\"\n");
+    for i in 1..=40 {
+        functions.push_str(&format!("\"f{i}(x)\" = \"f{p}(x) * f{p}(x) / f{p}(x)\"\n", p = i - 1));
+    }
+    let text = FLAT.replace("length_unit = \"angstrom\"\n", &format!("length_unit = \"angstrom\"\n{functions}"));
+    let text = text.replace("expression = \"\"\"\n", "expression = \"\"\"\nf40(r1) - (1 + r1 / 8) +\n");
+    let start = std::time::Instant::now();
+    let m = generate_molecule("tests/fixtures/co2ar/co2ar_flat.toml", &text).expect("valid");
+    assert!(start.elapsed().as_secs_f64() < 20.0, "took {:?}", start.elapsed());
+    let flat = generate_molecule("tests/fixtures/co2ar/co2ar_flat.toml", FLAT).expect("valid");
+    let q = [2.2, 2.2, 6.6, 1.4];
+    let u = |s: &str| common::interpret(&method(s, "potential"), &q, 0).1.expect("returns U");
+    assert!(close(u(&m.source), u(&flat.source)), "{} vs {}", u(&m.source), u(&flat.source));
+}
