@@ -411,7 +411,11 @@ impl Validator<'_> {
                 "names start with a letter and contain only letters, digits and `_` (and are not Rust keywords)",
             ));
         }
-        if n == "pi" || Func::from_name(n).is_some() || BINARY_FUNCTIONS.contains(&n.as_str()) {
+        if n == "pi"
+            || Func::from_name(n).is_some()
+            || BINARY_FUNCTIONS.contains(&n.as_str())
+            || parse::SPECIAL_FUNCTIONS.iter().any(|(f, _)| f == n)
+        {
             return Err(self.src.error(
                 name.span(),
                 format!("the {what} name `{n}` is reserved"),

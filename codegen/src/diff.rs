@@ -139,6 +139,10 @@ pub fn chain_rule(g: &mut Graph, e: ExprId, d: impl Fn(ExprId) -> ExprId, dvar: 
                 };
                 g.mul(outer, da)
             }
+            Node::Select(cmp, x, y, a, b) => {
+                // By branch: the derivative of the branch chosen.
+                g.select(cmp, x, y, d(a), d(b))
+            }
             Node::Atan2(y, x) => {
                 // atan2(y, x)' = (x·y' − y·x') / (x² + y²)
                 let xdy = g.mul(x, d(y));

@@ -35,6 +35,7 @@ pub mod names;
 pub mod parametric;
 pub mod parse;
 pub mod scopes;
+pub mod special;
 pub mod template;
 pub mod zmatrix;
 

@@ -170,6 +170,7 @@ fn signature(
         let reserved = p == "pi"
             || crate::expr::Func::from_name(p).is_some()
             || parse::BINARY_FUNCTIONS.contains(&p)
+            || parse::SPECIAL_FUNCTIONS.iter().any(|(f, _)| *f == p)
             || syn::parse_str::<syn::Ident>(p).is_err()
             || !p.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
             || !p.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');

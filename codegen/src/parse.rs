@@ -13,7 +13,8 @@ use proc_macro2::Span;
 use syn::spanned::Spanned;
 use syn::{BinOp, Expr, Lit, UnOp};
 
-use crate::expr::{ExprId, Func, Graph};
+use crate::expr::{Cmp, ExprId, Func, Graph};
+use crate::special::{MAX_LEGENDRE_DEGREE, legendre};
 
 /// A problem in one expression, located within the expression's text.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -126,6 +127,7 @@ fn parse_inlining(
         });
     }
     check_shape(text, scope)?;
+    let text = &spell_if(text);
     let expr: Expr = syn::parse_str(text).map_err(|e| {
         let help = if text.contains("**") {
             "write powers as `pow(x, 2)`; `**` is not an operator here".to_owned()
@@ -190,7 +192,14 @@ fn check_shape(text: &str, scope: &Scope<'_>) -> Result<(), ExprError> {
                         column += 1;
                     }
                 }
-                if syn::parse_str::<syn::Ident>(&word).is_err() && !word.starts_with(|d: char| d.is_ascii_digit()) {
+                let is_if_call = word == "if"
+                    && text[text.len() - chars.clone().map(char::len_utf8).sum::<usize>()..]
+                        .trim_start()
+                        .starts_with('(');
+                if !is_if_call
+                    && syn::parse_str::<syn::Ident>(&word).is_err()
+                    && !word.starts_with(|d: char| d.is_ascii_digit())
+                {
                     return Err(err(
                         l,
                         col,
@@ -214,6 +223,17 @@ fn check_shape(text: &str, scope: &Scope<'_>) -> Result<(), ExprError> {
             '-' | '*' if !after_operand => {
                 *levels.last_mut().expect("the outermost level is never popped") += 1;
                 depth += 1;
+            }
+            '<' | '>' => {
+                // `<=` and `>=` are one operator.
+                if chars.peek() == Some(&'=') {
+                    chars.next();
+                    column += 1;
+                }
+                let pending = levels.last_mut().expect("the outermost level is never popped");
+                depth -= *pending;
+                *pending = 0;
+                after_operand = false;
             }
             '+' | '-' | '*' | '/' | '^' | ',' => {
                 // A binary operator or a comma ends the operand of every pending prefix operator.
@@ -242,6 +262,28 @@ fn check_shape(text: &str, scope: &Scope<'_>) -> Result<(), ExprError> {
         }
     }
     Ok(())
+}
+
+/// The spelling of `if` handed to syn: `if` is a Rust keyword, so `if(c, a, b)` would not parse
+/// as a call. `ıf` (dotless i) has as many characters, so places in messages do not move, and
+/// cannot be a name in a definition (names are ASCII).
+const IF_SPELLING: &str = "\u{131}f";
+
+/// `text` with every word `if` spelt [`IF_SPELLING`].
+fn spell_if(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut word = String::new();
+    for c in text.chars().chain(std::iter::once(' ')) {
+        if c.is_ascii_alphanumeric() || c == '_' || (c == '.' && word.starts_with(|d: char| d.is_ascii_digit())) {
+            word.push(c);
+            continue;
+        }
+        out.push_str(if word == "if" { IF_SPELLING } else { &word });
+        word.clear();
+        out.push(c);
+    }
+    out.pop();
+    out
 }
 
 /// Takes syn expressions apart with an explicit stack. Dropping a deep syn tree recurses once per
@@ -287,6 +329,14 @@ enum Task {
     Call(Func),
     /// Pop the arguments of the library function (the last on top), push its inlined body.
     Inline(String, Span),
+    /// Pop x, y, a, b (b on top), push `if x cmp y { a } else { b }`.
+    Select(Cmp),
+    /// Pop x, push |x|.
+    Abs,
+    /// Pop a, b, push min(a, b) (`false`) or max(a, b) (`true`).
+    MinMax(bool),
+    /// Pop l (and m if `true`), then x; push the Legendre (associated Legendre) polynomial.
+    Legendre(bool, Span),
 }
 
 /// Builds a syn expression into the graph, iteratively: a post-order walk with an explicit
@@ -323,6 +373,35 @@ impl Builder<'_, '_> {
                 }
                 Task::Inline(name, span) => {
                     let v = self.inline_function(&name, span)?;
+                    self.values.push(v);
+                }
+                Task::Select(cmp) => {
+                    let b = self.pop();
+                    let a = self.pop();
+                    let y = self.pop();
+                    let x = self.pop();
+                    let v = self.graph.select(cmp, x, y, a, b);
+                    self.values.push(v);
+                }
+                Task::Abs => {
+                    let x = self.pop();
+                    let (zero, minus_x) = (self.graph.zero(), self.graph.neg(x));
+                    let v = self.graph.select(Cmp::Lt, x, zero, minus_x, x);
+                    self.values.push(v);
+                }
+                Task::MinMax(max) => {
+                    let b = self.pop();
+                    let a = self.pop();
+                    // min: a where a <= b; max: a where b <= a; else b (also for NaN).
+                    let v = if max {
+                        self.graph.select(Cmp::Le, b, a, a, b)
+                    } else {
+                        self.graph.select(Cmp::Le, a, b, a, b)
+                    };
+                    self.values.push(v);
+                }
+                Task::Legendre(associated, span) => {
+                    let v = self.legendre(associated, span)?;
                     self.values.push(v);
                 }
             }
@@ -385,6 +464,12 @@ impl Builder<'_, '_> {
                                 op.span(),
                                 format!("`^` is not a power in {}", self.scope.context),
                                 "write powers as `pow(base, exponent)`, e.g. `pow(r1 - re, 2)`",
+                            )
+                        } else if let BinOp::Lt(_) | BinOp::Le(_) | BinOp::Gt(_) | BinOp::Ge(_) = op {
+                            ExprError::at(
+                                op.span(),
+                                format!("a comparison `{}` outside `if` in {}", quote::quote!(#op), self.scope.context),
+                                "comparisons are the first argument of `if(x < y, a, b)` (or `select`)",
                             )
                         } else {
                             ExprError::at(
@@ -465,6 +550,9 @@ impl Builder<'_, '_> {
             self.tasks.extend(args.into_iter().rev().map(Task::Visit));
             return Ok(());
         }
+        if let Some(&(_, arity)) = SPECIAL_FUNCTIONS.iter().find(|(n, _)| *n == name.replace(IF_SPELLING, "if")) {
+            return self.special(name.replace(IF_SPELLING, "if"), arity, span, args);
+        }
         let expected = if BINARY_FUNCTIONS.contains(&name.as_str()) {
             2
         } else if Func::from_name(&name).is_some() {
@@ -533,6 +621,112 @@ impl Builder<'_, '_> {
                 "write a finite number",
             )),
         }
+    }
+
+    /// Schedules a call of one of [`SPECIAL_FUNCTIONS`].
+    fn special(&mut self, name: String, arity: usize, span: Span, args: Vec<Expr>) -> Result<(), ExprError> {
+        if args.len() != arity {
+            let given = args.len();
+            dismantle(args);
+            return Err(ExprError::at(
+                span,
+                format!(
+                    "`{name}` takes {arity} argument{} but {given} {} given in {}",
+                    if arity == 1 { "" } else { "s" },
+                    if given == 1 { "was" } else { "were" },
+                    self.scope.context
+                ),
+                format!("write `{}`", SPECIAL_USAGE.iter().find(|(n, _)| *n == name).map_or("", |(_, u)| u)),
+            ));
+        }
+        let mut args = args;
+        let task = match name.as_str() {
+            "if" | "select" => {
+                let condition = args.remove(0);
+                let mut c = condition;
+                while let Expr::Paren(p) = c {
+                    c = *p.expr;
+                }
+                let Expr::Binary(b) = c else {
+                    let s = c.span();
+                    dismantle([c]);
+                    dismantle(args);
+                    return Err(ExprError::at(
+                        s,
+                        format!("the first argument of `{name}` is not a comparison in {}", self.scope.context),
+                        format!("write `{name}(x < y, a, b)`, with one of < <= > >="),
+                    ));
+                };
+                let (cmp, swap) = match b.op {
+                    BinOp::Lt(_) => (Cmp::Lt, false),
+                    BinOp::Le(_) => (Cmp::Le, false),
+                    BinOp::Gt(_) => (Cmp::Lt, true),
+                    BinOp::Ge(_) => (Cmp::Le, true),
+                    op => {
+                        dismantle([*b.left, *b.right]);
+                        dismantle(args);
+                        return Err(ExprError::at(
+                            op.span(),
+                            format!("the first argument of `{name}` is not a comparison in {}", self.scope.context),
+                            format!("write `{name}(x < y, a, b)`, with one of < <= > >="),
+                        ));
+                    }
+                };
+                let (x, y) = if swap { (*b.right, *b.left) } else { (*b.left, *b.right) };
+                args.splice(0..0, [x, y]);
+                Task::Select(cmp)
+            }
+            "abs" => Task::Abs,
+            "min" => Task::MinMax(false),
+            "max" => Task::MinMax(true),
+            "legendre" => Task::Legendre(false, span),
+            _ => Task::Legendre(true, span),
+        };
+        self.tasks.push(task);
+        // The first argument is built first.
+        self.tasks.extend(args.into_iter().rev().map(Task::Visit));
+        Ok(())
+    }
+
+    /// The Legendre polynomial P_l(x), or the associated P_l^m(x), from the values on the stack
+    /// (x, l and m last), expanded by the three-term recurrences into the graph.
+    fn legendre(&mut self, associated: bool, span: Span) -> Result<ExprId, ExprError> {
+        let name = if associated { "assoc_legendre" } else { "legendre" };
+        // The stack holds l, (m,) x, with x on top.
+        let x = self.pop();
+        let mut integers = self.values.split_off(self.values.len() - if associated { 2 } else { 1 }).into_iter();
+        let graph = &*self.graph;
+        let context = self.scope.context;
+        let mut integer = |what: &str| -> Result<u32, ExprError> {
+            let v = integers.next().expect("popped above");
+            match graph.as_const(v) {
+                Some(k) if k.fract() == 0.0 && (0.0..=f64::from(MAX_LEGENDRE_DEGREE)).contains(&k) => Ok(k as u32),
+                _ => Err(ExprError::at(
+                    span,
+                    format!("the {what} of `{name}` is not an integer from 0 to {MAX_LEGENDRE_DEGREE} in {context}"),
+                    if associated {
+                        "write `assoc_legendre(l, m, x)` with integers 0 <= m <= l (numbers or constants)"
+                    } else {
+                        "write `legendre(l, x)` with an integer degree l >= 0 (a number or constant)"
+                    },
+                )),
+            }
+        };
+        let (l, m) = if associated {
+            let l = integer("degree l")?;
+            let m = integer("order m")?;
+            if m > l {
+                return Err(ExprError::at(
+                    span,
+                    format!("`assoc_legendre` with order m = {m} above the degree l = {l} in {}", self.scope.context),
+                    "P_l^m is zero for m > l; write `assoc_legendre(l, m, x)` with 0 <= m <= l",
+                ));
+            }
+            (l, m)
+        } else {
+            (integer("degree l")?, 0)
+        };
+        Ok(legendre(self.graph, l, m, x))
     }
 
     /// Builds the body of library function `name` with its parameters bound to the arguments on
@@ -621,9 +815,25 @@ impl Builder<'_, '_> {
     }
 }
 
+/// The functions built into the graph from other operations, with their argument counts.
+pub const SPECIAL_FUNCTIONS: [(&str, usize); 7] =
+    [("if", 3), ("select", 3), ("abs", 1), ("min", 2), ("max", 2), ("legendre", 2), ("assoc_legendre", 3)];
+
+/// How each of [`SPECIAL_FUNCTIONS`] is called.
+const SPECIAL_USAGE: [(&str, &str); 7] = [
+    ("if", "if(x < y, a, b)"),
+    ("select", "select(x < y, a, b)"),
+    ("abs", "abs(x)"),
+    ("min", "min(a, b)"),
+    ("max", "max(a, b)"),
+    ("legendre", "legendre(l, x)"),
+    ("assoc_legendre", "assoc_legendre(l, m, x)"),
+];
+
 fn function_help() -> String {
     let mut names: Vec<&str> = Func::ALL.iter().map(|(_, n)| *n).collect();
     names.extend(BINARY_FUNCTIONS);
+    names.extend(SPECIAL_FUNCTIONS.iter().map(|(n, _)| *n));
     format!("the functions are {}", names.join(", "))
 }
 
@@ -666,6 +876,69 @@ mod tests {
         assert_eq!(value("2 * pow(x, 2)", 3.0), 18.0);
         assert!((value("atan2(1, x)", 1.0) - std::f64::consts::FRAC_PI_4).abs() < 1e-15);
         assert!((value("cos(pi * x)", 1.0) + 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn piecewise_functions() {
+        assert_eq!(value("if(x < 1, 10, 20)", 0.5), 10.0);
+        assert_eq!(value("if(x < 1, 10, 20)", 1.0), 20.0);
+        assert_eq!(value("if(x <= 1, 10, 20)", 1.0), 10.0);
+        assert_eq!(value("if(x > 1, 10, 20)", 1.0), 20.0);
+        assert_eq!(value("select((x >= 1), 10, 20)", 1.0), 10.0);
+        assert_eq!(value("if(2 * x > 1, x, -x) + 1", 0.25), 0.75);
+        assert_eq!(value("abs(x - 3)", 1.0), 2.0);
+        assert_eq!(value("abs(x)", -0.0), 0.0);
+        assert_eq!(value("min(x, 2) + max(x, 2)", 5.0), 7.0);
+        assert_eq!(value("min(x, 2) - max(x, 2)", -1.0), -3.0);
+        // A NaN comparison chooses the second branch.
+        assert_eq!(value("if(x < 1, 10, 20)", f64::NAN), 20.0);
+        assert_eq!(value("legendre(2, x)", 0.5), -0.125);
+        assert_eq!(value("assoc_legendre(2, 2, x)", 0.5), 2.25);
+        // A constant condition chooses at build time.
+        let (g, id) = parse("if(1 < 2, x, 2 * x)").unwrap();
+        assert_eq!(g.node(id), crate::expr::Node::Var(0));
+    }
+
+    #[test]
+    fn piecewise_mistakes_are_located() {
+        let e = parse("x < 1").unwrap_err();
+        assert_eq!(e.message, "a comparison `<` outside `if` in the test");
+        assert_eq!((e.line, e.column), (1, 2));
+        let e = parse("1 + if(x, 1, 2)").unwrap_err();
+        assert_eq!(e.message, "the first argument of `if` is not a comparison in the test");
+        assert_eq!((e.line, e.column), (1, 7));
+        let e = parse("2 * if(x < 1, 2)").unwrap_err();
+        assert_eq!(e.message, "`if` takes 3 arguments but 2 were given in the test");
+        assert!(e.help.contains("if(x < y, a, b)"));
+        assert_eq!((e.line, e.column), (1, 4));
+        let e = parse("if(x == 1, 1, 2)").unwrap_err();
+        assert_eq!(e.message, "unexpected character `=` in the test");
+        let e = parse("legendre(x, x)").unwrap_err();
+        assert!(e.message.starts_with("the degree l of `legendre` is not an integer"), "{e:?}");
+        let e = parse("legendre(1.5, x)").unwrap_err();
+        assert!(e.message.starts_with("the degree l of `legendre` is not an integer"), "{e:?}");
+        let e = parse("assoc_legendre(1, 2, x)").unwrap_err();
+        assert!(e.message.starts_with("`assoc_legendre` with order m = 2 above the degree l = 1"), "{e:?}");
+        let e = parse("abs(x, 1)").unwrap_err();
+        assert_eq!(e.message, "`abs` takes 1 argument but 2 were given in the test");
+    }
+
+    #[test]
+    fn derivatives_of_piecewise_functions_are_by_branch() {
+        use crate::diff::Differentiator;
+        for (text, x, want) in [
+            ("abs(x)", -2.0, -1.0),
+            ("abs(x)", 2.0, 1.0),
+            ("min(x * x, 1)", 0.5, 1.0),
+            ("min(x * x, 1)", 2.0, 0.0),
+            ("max(x * x, 1)", 2.0, 4.0),
+            ("if(x < 1, x * x * x, 3 * x)", 0.5, 0.75),
+            ("if(x < 1, x * x * x, 3 * x)", 1.5, 3.0),
+        ] {
+            let (mut g, id) = parse(text).unwrap();
+            let d = Differentiator::new().derivative(&mut g, id, 0);
+            assert_eq!(g.eval(&[d], &[x])[0], want, "d/dx {text} at {x}");
+        }
     }
 
     #[test]
