@@ -127,6 +127,8 @@ pub struct Definition {
     /// The functions and named expressions, inlined where used (also when the potential is
     /// built again).
     pub library: Library,
+    /// The data files the definition read (CSV files of `[arrays]`).
+    pub data_files: Vec<std::path::PathBuf>,
     /// The dipole moment surface, if the file has a `[dipole]` table.
     pub dipole: Option<DipoleDef>,
 }
@@ -154,6 +156,8 @@ struct RawDefinition {
     functions: BTreeMap<Spanned<String>, Spanned<String>>,
     #[serde(default)]
     expressions: BTreeMap<Spanned<String>, Spanned<String>>,
+    #[serde(default)]
+    arrays: BTreeMap<Spanned<String>, Spanned<crate::arrays::RawArray>>,
     #[serde(default)]
     coordinates: Vec<RawCoordinate>,
     atoms: Vec<RawAtom>,
@@ -280,6 +284,16 @@ fn unit_help<T>(spellings: &[(&str, T)]) -> String {
 /// error or an unknown or missing key stops the reading at that place (the rest of the file
 /// cannot be read reliably); after that, every independent mistake gets its own error.
 pub fn parse_definition(path: &str, text: &str) -> Result<Definition, Vec<DefinitionError>> {
+    parse_definition_in(path, text, std::path::Path::new(path).parent())
+}
+
+/// [`parse_definition`] with the directory that paths in the definition (CSV files of
+/// `[arrays]`) are relative to; `None` if there is none.
+pub fn parse_definition_in(
+    path: &str,
+    text: &str,
+    base: Option<&std::path::Path>,
+) -> Result<Definition, Vec<DefinitionError>> {
     let src = Source { path, text };
     let raw = toml::from_str::<RawDefinition>(text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
@@ -287,12 +301,16 @@ pub fn parse_definition(path: &str, text: &str) -> Result<Definition, Vec<Defini
             "check the spelling; the README lists every key of a molecule definition".to_owned()
         } else if message.starts_with("missing field") {
             "add it; the README lists every key of a molecule definition".to_owned()
+        } else if message.contains("did not match any variant of untagged enum RawArray") {
+            "an array is a list of numbers, c = [1.0, 0.5], or a CSV file, c = { file = \"c.csv\", column = 2 }"
+                .to_owned()
         } else if message.contains("did not match any variant of untagged enum RawValue") {
             "a position component or constant is a number or a string holding an expression".to_owned()
         } else {
             "see the TOML syntax at https://toml.io and the README's example definition".to_owned()
         };
         let message = message.replace("data did not match any variant of untagged enum RawValue", "invalid value");
+        let message = message.replace("data did not match any variant of untagged enum RawArray", "invalid array");
         match e.span() {
             Some(span) => src.error(span, message, help),
             None => src.whole_file(message, help),
@@ -306,6 +324,8 @@ pub fn parse_definition(path: &str, text: &str) -> Result<Definition, Vec<Defini
         declared: HashMap::new(),
         errors: Vec::new(),
         library: Library::default(),
+        base,
+        data_files: Vec::new(),
     }
     .run(raw)
 }
@@ -322,6 +342,10 @@ struct Validator<'s> {
     errors: Vec<DefinitionError>,
     /// The functions and named expressions (empty until the constants are known).
     library: Library,
+    /// The definition's directory, for data files.
+    base: Option<&'s std::path::Path>,
+    /// The data files read.
+    data_files: Vec<std::path::PathBuf>,
 }
 
 /// The molecule's name becomes a module and a type, and `--molecule NAME` finds it by file
@@ -581,17 +605,26 @@ impl Validator<'_> {
         let mut names: Vec<String> = self.names.keys().cloned().collect();
         names.extend(raw.potential.get_ref().parameters.keys().map(|k| k.get_ref().clone()));
         names.extend(raw.dipole.iter().flat_map(|d| d.get_ref().parameters.keys().map(|k| k.get_ref().clone())));
+        let (arrays, data_files, array_errors) = crate::arrays::read(src, &raw.arrays, self.base);
+        let arrays_ok = array_errors.is_empty();
+        self.errors.extend(array_errors);
+        self.data_files = data_files;
+        for (k, _) in &arrays {
+            let declared = self.declare(k, "array");
+            self.check(declared);
+        }
         let input = crate::library::Input {
             functions: &raw.functions,
             expressions: &raw.expressions,
             constants: constant_values,
+            arrays: arrays.into_iter().map(|(k, v)| (k.into_inner(), v)).collect(),
             names,
         };
         let (library, library_errors) = {
             let mut declare = |k: &Spanned<String>, what: &'static str| self.declare(k, what);
             crate::library::validate(src, input, &mut declare)
         };
-        let library_ok = library_errors.is_empty();
+        let library_ok = library_errors.is_empty() && arrays_ok;
         self.errors.extend(library_errors);
         self.library = library;
         let constants_ok = self.errors.len() == before_constants && library_ok;
@@ -877,6 +910,7 @@ impl Validator<'_> {
             potential_scope,
             potential_text: pot.expression.get_ref().clone(),
             library: self.library,
+            data_files: self.data_files,
             dipole,
         })
     }

@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 pub mod adjoint;
+pub mod arrays;
 pub mod cartesian;
 pub mod definition;
 pub mod diff;
@@ -76,6 +77,8 @@ pub struct GeneratedMolecule {
     /// (atom, coordinate) pairs whose raw position depends on the coordinate: the sparsity the
     /// generated code exploits (out of `atoms · coordinates`).
     pub nonzero_derivatives: usize,
+    /// The data files the definition read (CSV files of `[arrays]`).
+    pub data_files: Vec<PathBuf>,
 }
 
 impl GeneratedMolecule {
@@ -146,8 +149,19 @@ pub fn generate_molecule_with(
     text: &str,
     options: &Options,
 ) -> Result<GeneratedMolecule, Vec<DefinitionError>> {
+    generate_molecule_in(path, text, options, Path::new(path).parent())
+}
+
+/// [`generate_molecule_with`] with the directory that data files named in the definition (CSV
+/// files of `[arrays]`) are relative to (`path` is then used in messages only).
+pub fn generate_molecule_in(
+    path: &str,
+    text: &str,
+    options: &Options,
+    base: Option<&Path>,
+) -> Result<GeneratedMolecule, Vec<DefinitionError>> {
     let start = Instant::now();
-    let mut def = parse_definition(path, text)?;
+    let mut def = definition::parse_definition_in(path, text, base)?;
     let exprs = kinetic::build(&mut def, options);
     let nonzero_derivatives = exprs.nonzero_derivatives;
     let notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
@@ -186,6 +200,7 @@ pub fn generate_molecule_with(
         codegen_time: start.elapsed(),
         notes,
         nonzero_derivatives,
+        data_files: def.data_files.clone(),
     })
 }
 
@@ -237,7 +252,7 @@ pub fn singular_reference_note(def: &Definition, exprs: &kinetic::KineticExprs) 
 pub struct Report {
     /// The molecules, in name order.
     pub molecules: Vec<GeneratedMolecule>,
-    /// Every definition file read (for `rerun-if-changed`).
+    /// Every definition and data file read (for `rerun-if-changed`).
     pub inputs: Vec<PathBuf>,
 }
 
@@ -293,7 +308,7 @@ pub fn generate_with(
                 continue;
             }
         };
-        match generate_molecule_with(&display, &text, options) {
+        match generate_molecule_in(&display, &text, options, input.parent()) {
             Ok(m) => molecules.push(m),
             Err(e) => errors.extend(e),
         }
@@ -341,6 +356,9 @@ pub fn generate_with(
         write(&template::file_name(&m.name), &m.source).map_err(|e| vec![e])?;
     }
     write("molecules.rs", &template::registry(&molecules, display_dir)).map_err(|e| vec![e])?;
+    // Data files too, so that a changed CSV file regenerates its molecule.
+    let mut inputs = inputs;
+    inputs.extend(molecules.iter().flat_map(|m| m.data_files.iter().cloned()));
     Ok(Report { molecules, inputs })
 }
 
@@ -365,6 +383,7 @@ mod tests {
                 temporaries: 0,
             }],
             graph_nodes: 0,
+            data_files: Vec::new(),
             codegen_time: Duration::from_millis(1500),
             notes: Vec::new(),
             nonzero_derivatives: 0,

@@ -34,6 +34,8 @@ pub struct Input<'a> {
     pub expressions: &'a BTreeMap<Spanned<String>, Spanned<String>>,
     /// The constants' values.
     pub constants: HashMap<String, f64>,
+    /// The arrays' values.
+    pub arrays: HashMap<String, Vec<f64>>,
     /// Every other name a named expression may use: coordinates, constants, parameters.
     pub names: Vec<String>,
 }
@@ -53,7 +55,7 @@ pub fn validate(
     input: Input<'_>,
     declare: &mut dyn FnMut(&Spanned<String>, &'static str) -> Result<(), DefinitionError>,
 ) -> (Library, Vec<DefinitionError>) {
-    let mut library = Library { constants: input.constants, ..Library::default() };
+    let mut library = Library { constants: input.constants, arrays: input.arrays, ..Library::default() };
     let mut errors = Vec::new();
 
     let functions = in_file_order(input.functions);

@@ -63,6 +63,8 @@ pub struct Library {
     pub functions: HashMap<String, Function>,
     /// Named expression name → definition.
     pub expressions: HashMap<String, Named>,
+    /// Coefficient array name → values (`c[k]` in expressions).
+    pub arrays: HashMap<String, Vec<f64>>,
 }
 
 /// A function defined once in the definition (`"lj(r, eps, sigma)" = "..."`).
@@ -209,12 +211,12 @@ fn check_shape(text: &str, scope: &Scope<'_>) -> Result<(), ExprError> {
                 }
                 after_operand = true;
             }
-            '(' => {
+            '(' | '[' => {
                 levels.push(0);
                 depth += 1;
                 after_operand = false;
             }
-            ')' => {
+            ')' | ']' => {
                 if levels.len() > 1 {
                     depth -= 1 + levels.pop().unwrap_or(0);
                 }
@@ -337,6 +339,10 @@ enum Task {
     MinMax(bool),
     /// Pop l (and m if `true`), then x; push the Legendre (associated Legendre) polynomial.
     Legendre(bool, Span),
+    /// Pop the index, push the array's value there.
+    Index(String, Span),
+    /// Pop the bounds (last on top), push the sum of the body over the index range.
+    Sum(String, Box<Expr>, Span),
 }
 
 /// Builds a syn expression into the graph, iteratively: a post-order walk with an explicit
@@ -402,6 +408,37 @@ impl Builder<'_, '_> {
                 }
                 Task::Legendre(associated, span) => {
                     let v = self.legendre(associated, span)?;
+                    self.values.push(v);
+                }
+                Task::Index(name, span) => {
+                    let i = self.pop();
+                    let values = &self.scope.library.arrays[&name];
+                    let v = match self.graph.as_const(i) {
+                        Some(k) if k.fract() == 0.0 && k >= 0.0 && (k as usize) < values.len() => values[k as usize],
+                        Some(k) if k.fract() == 0.0 => {
+                            return Err(ExprError::at(
+                                span,
+                                format!(
+                                    "index {k} is outside `{name}` ({} values) in {}",
+                                    values.len(),
+                                    self.scope.context
+                                ),
+                                format!("`{name}` has indices 0 to {}", values.len().saturating_sub(1)),
+                            ));
+                        }
+                        _ => {
+                            return Err(ExprError::at(
+                                span,
+                                format!("the index of `{name}` is not an integer constant in {}", self.scope.context),
+                                "index arrays with integers: numbers, constants or a `sum` index, e.g. `c[k]`",
+                            ));
+                        }
+                    };
+                    let v = self.graph.constant(v);
+                    self.values.push(v);
+                }
+                Task::Sum(index, body, span) => {
+                    let v = self.sum(&index, *body, span)?;
                     self.values.push(v);
                 }
             }
@@ -483,6 +520,28 @@ impl Builder<'_, '_> {
                 self.schedule(Task::Binary(op), *b.left, Some(*b.right));
             }
             Expr::Call(call) => self.call(call)?,
+            Expr::Index(i) if matches!(&*i.expr, Expr::Path(p) if p.path.get_ident().is_some()) => {
+                let Expr::Path(p) = &*i.expr else { unreachable!("matched above") };
+                let ident = p.path.get_ident().expect("matched above");
+                let (name, span) = (ident.to_string(), ident.span());
+                if !self.scope.library.arrays.contains_key(&name) {
+                    dismantle([Expr::Index(i)]);
+                    let mut arrays: Vec<&str> = self.scope.library.arrays.keys().map(String::as_str).collect();
+                    arrays.sort_unstable();
+                    return Err(ExprError::at(
+                        span,
+                        format!("`{name}` is not an array in {}", self.scope.context),
+                        if arrays.is_empty() {
+                            "declare arrays in an [arrays] table, e.g. c = [1.0, 0.5] or c = { file = \"c.csv\" }"
+                                .to_owned()
+                        } else {
+                            format!("the arrays are: {}", arrays.join(", "))
+                        },
+                    ));
+                }
+                self.tasks.push(Task::Index(name, span));
+                self.tasks.push(Task::Visit(*i.index));
+            }
             Expr::MethodCall(m) => {
                 let (method, span) = (m.method.to_string(), m.method.span());
                 dismantle([Expr::MethodCall(m)]);
@@ -640,6 +699,28 @@ impl Builder<'_, '_> {
             ));
         }
         let mut args = args;
+        if name == "sum" {
+            let index = match &args[0] {
+                Expr::Path(p) => p.path.get_ident().map(|i| (i.to_string(), i.span())),
+                _ => None,
+            };
+            let Some((index, index_span)) = index.filter(|(i, _)| !self.scope.names.contains_key(i) && i != "pi")
+            else {
+                let s = args[0].span();
+                dismantle(args);
+                return Err(ExprError::at(
+                    s,
+                    format!("the first argument of `sum` is not a new index name in {}", self.scope.context),
+                    "write `sum(k, first, last, term)` with an index name not otherwise in use, e.g. `sum(k, 0, 9, c[k] * legendre(k, x))`",
+                ));
+            };
+            let _ = index_span;
+            let body = args.pop().expect("four arguments");
+            args.remove(0);
+            self.tasks.push(Task::Sum(index, Box::new(body), span));
+            self.tasks.extend(args.into_iter().rev().map(Task::Visit));
+            return Ok(());
+        }
         let task = match name.as_str() {
             "if" | "select" => {
                 let condition = args.remove(0);
@@ -686,6 +767,78 @@ impl Builder<'_, '_> {
         // The first argument is built first.
         self.tasks.extend(args.into_iter().rev().map(Task::Visit));
         Ok(())
+    }
+
+    /// `sum(index, first, last, body)` with the bounds on the stack: the body built once per
+    /// index value (a constant), the terms added in index order.
+    fn sum(&mut self, index: &str, body: Expr, span: Span) -> Result<ExprId, ExprError> {
+        let last = self.pop();
+        let first = self.pop();
+        let bound = |v: ExprId| self.graph.as_const(v).filter(|b| b.fract() == 0.0 && b.abs() <= 1e9);
+        let (Some(first), Some(last)) = (bound(first), bound(last)) else {
+            dismantle([body]);
+            return Err(ExprError::at(
+                span,
+                format!("the bounds of `sum` are not integer constants in {}", self.scope.context),
+                "write `sum(k, first, last, term)` with integers (numbers or constants) first <= last",
+            ));
+        };
+        let terms = last - first + 1.0;
+        if !(1.0..=MAX_SUM_TERMS as f64).contains(&terms) {
+            dismantle([body]);
+            return Err(ExprError::at(
+                span,
+                format!("`sum` from {first} to {last} has {terms} terms in {}", self.scope.context),
+                format!("a sum has 1 to {MAX_SUM_TERMS} terms: first <= last"),
+            ));
+        }
+        if self.inlined.depth >= MAX_INLINE_DEPTH {
+            dismantle([body]);
+            return Err(ExprError::at(
+                span,
+                format!(
+                    "sums, named expressions and functions nested more than {MAX_INLINE_DEPTH} deep in {}",
+                    self.scope.context
+                ),
+                "write some of the nested parts out, or combine them",
+            ));
+        }
+        let mut names = self.scope.names.clone();
+        let mut total = self.graph.zero();
+        self.inlined.depth += 1;
+        let mut result = Ok(());
+        for k in (first as i64)..=(last as i64) {
+            let k_id = self.graph.constant(k as f64);
+            names.insert(index.to_owned(), k_id);
+            let scope = Scope {
+                names: &names,
+                context: self.scope.context,
+                library: self.scope.library,
+                named: self.scope.named,
+            };
+            let mut builder = Builder {
+                graph: self.graph,
+                scope: &scope,
+                inlined: self.inlined,
+                tasks: vec![Task::Visit(body.clone())],
+                values: Vec::new(),
+            };
+            let term = builder.run();
+            dismantle(builder.tasks.drain(..).filter_map(|t| match t {
+                Task::Visit(e) => Some(e),
+                _ => None,
+            }));
+            match term {
+                Ok(t) => total = self.graph.add(total, t),
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
+            }
+        }
+        self.inlined.depth -= 1;
+        dismantle([body]);
+        result.map(|()| total)
     }
 
     /// The Legendre polynomial P_l(x), or the associated P_l^m(x), from the values on the stack
@@ -816,11 +969,15 @@ impl Builder<'_, '_> {
 }
 
 /// The functions built into the graph from other operations, with their argument counts.
-pub const SPECIAL_FUNCTIONS: [(&str, usize); 7] =
-    [("if", 3), ("select", 3), ("abs", 1), ("min", 2), ("max", 2), ("legendre", 2), ("assoc_legendre", 3)];
+pub const SPECIAL_FUNCTIONS: [(&str, usize); 8] =
+    [("if", 3), ("select", 3), ("abs", 1), ("min", 2), ("max", 2), ("legendre", 2), ("assoc_legendre", 3), ("sum", 4)];
+
+/// The most terms one `sum` may have.
+pub const MAX_SUM_TERMS: usize = 1_000_000;
 
 /// How each of [`SPECIAL_FUNCTIONS`] is called.
-const SPECIAL_USAGE: [(&str, &str); 7] = [
+const SPECIAL_USAGE: [(&str, &str); 8] = [
+    ("sum", "sum(k, first, last, term)"),
     ("if", "if(x < y, a, b)"),
     ("select", "select(x < y, a, b)"),
     ("abs", "abs(x)"),
