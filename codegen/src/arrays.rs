@@ -40,6 +40,9 @@ pub(crate) enum RawArray {
 /// The largest CSV file read for an array.
 const MAX_CSV_BYTES: u64 = 64 << 20;
 
+/// The arrays read (name, values), the data files read, and the problems found.
+pub(crate) type Arrays = (Vec<(Spanned<String>, Vec<f64>)>, Vec<PathBuf>, Vec<DefinitionError>);
+
 /// Reads every array: name → values, plus the data files read (for rebuilds when they change).
 /// `base` is the directory of the definition file, or `None` when the definition did not come
 /// from a file (then a `file` entry is an error).
@@ -47,7 +50,7 @@ pub(crate) fn read(
     src: &Source<'_>,
     table: &BTreeMap<Spanned<String>, Spanned<RawArray>>,
     base: Option<&Path>,
-) -> (Vec<(Spanned<String>, Vec<f64>)>, Vec<PathBuf>, Vec<DefinitionError>) {
+) -> Arrays {
     let (mut arrays, mut files, mut errors) = (Vec::new(), Vec::new(), Vec::new());
     for (name, raw) in table {
         let values = match raw.get_ref() {

@@ -305,6 +305,11 @@ impl Emitter<'_> {
                 let (ra, tb) = (a.at_least(4), &b.tokens);
                 Printed { tokens: quote!(#ra.powf(#tb)), prec: 4, weight: a.weight + b.weight + 1 }
             }
+            Node::Call(Func::Erf, a) if self.flavor == Flavor::F64 => {
+                let a = self.get(a);
+                let t = &a.tokens;
+                Printed { tokens: quote!(::rovib_runtime::special::erf(#t)), prec: 4, weight: a.weight + 1 }
+            }
             Node::Call(f, a) => {
                 let a = receiver(self.lg, a, &self.printed, self.flavor);
                 let ra = a.at_least(4);

@@ -86,11 +86,13 @@ pub enum Func {
     Cosh,
     /// Hyperbolic tangent.
     Tanh,
+    /// The error function (`rovib_runtime::special::erf`, libm's; `f64` has no method).
+    Erf,
 }
 
 impl Func {
     /// Every function, with the name definitions use for it (also the `f64` method name).
-    pub const ALL: [(Func, &'static str); 12] = [
+    pub const ALL: [(Func, &'static str); 13] = [
         (Func::Sin, "sin"),
         (Func::Cos, "cos"),
         (Func::Tan, "tan"),
@@ -103,6 +105,7 @@ impl Func {
         (Func::Sinh, "sinh"),
         (Func::Cosh, "cosh"),
         (Func::Tanh, "tanh"),
+        (Func::Erf, "erf"),
     ];
 
     /// The function's name, which is also the name of the `f64` method that computes it.
@@ -130,6 +133,7 @@ impl Func {
             Func::Sinh => x.sinh(),
             Func::Cosh => x.cosh(),
             Func::Tanh => x.tanh(),
+            Func::Erf => libm::erf(x),
         }
     }
 }
@@ -702,7 +706,7 @@ impl Graph {
         if let Node::Neg(x) = self.node(a) {
             match f {
                 // Odd functions.
-                Func::Sin | Func::Tan | Func::Asin | Func::Atan | Func::Sinh | Func::Tanh => {
+                Func::Sin | Func::Tan | Func::Asin | Func::Atan | Func::Sinh | Func::Tanh | Func::Erf => {
                     let y = self.call(f, x);
                     return self.neg(y);
                 }

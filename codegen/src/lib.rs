@@ -35,6 +35,7 @@ pub mod library;
 pub mod names;
 pub mod parametric;
 pub mod parse;
+pub mod piecewise;
 pub mod scopes;
 pub mod special;
 pub mod template;
@@ -164,7 +165,10 @@ pub fn generate_molecule_in(
     let mut def = definition::parse_definition_in(path, text, base)?;
     let exprs = kinetic::build(&mut def, options);
     let nonzero_derivatives = exprs.nonzero_derivatives;
-    let notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
+    let mut notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
+    if piecewise::has_branches(&def.graph) {
+        notes.extend(piecewise::jump_notes(&def, exprs.potential, &exprs.potential_gradient));
+    }
     // Variables: coordinates, ω, velocities (kinetic), then positions (cartesian), then the
     // parameters (parametric, last); the dipole adds none.
     let mut cartesian = cartesian::build(&mut def);
@@ -357,7 +361,6 @@ pub fn generate_with(
     }
     write("molecules.rs", &template::registry(&molecules, display_dir)).map_err(|e| vec![e])?;
     // Data files too, so that a changed CSV file regenerates its molecule.
-    let mut inputs = inputs;
     inputs.extend(molecules.iter().flat_map(|m| m.data_files.iter().cloned()));
     Ok(Report { molecules, inputs })
 }

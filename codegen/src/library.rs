@@ -26,6 +26,9 @@ use crate::diagnostic::Source;
 use crate::expr::{ExprId, Graph};
 use crate::parse::{self, ExprError, Function, Library, Named, Scope};
 
+/// Checks a new name (valid, not reserved, not taken) and records it, as `what` (e.g. "function").
+pub type Declare<'a> = dyn FnMut(&Spanned<String>, &'static str) -> Result<(), DefinitionError> + 'a;
+
 /// One validation of the library: what [`validate`] needs from the definition's validator.
 pub struct Input<'a> {
     /// The `[functions]` table as read.
@@ -50,11 +53,7 @@ fn in_file_order(table: &BTreeMap<Spanned<String>, Spanned<String>>) -> Vec<(&Sp
 /// Validates the functions, then the named expressions, each in file order. `declare` checks a
 /// new name (valid, not reserved, not taken) and records it. Every problem is returned; an entry
 /// with a problem is in the library marked broken, so uses of it raise no further errors.
-pub fn validate(
-    src: &Source<'_>,
-    input: Input<'_>,
-    declare: &mut dyn FnMut(&Spanned<String>, &'static str) -> Result<(), DefinitionError>,
-) -> (Library, Vec<DefinitionError>) {
+pub fn validate(src: &Source<'_>, input: Input<'_>, declare: &mut Declare<'_>) -> (Library, Vec<DefinitionError>) {
     let mut library = Library { constants: input.constants, arrays: input.arrays, ..Library::default() };
     let mut errors = Vec::new();
 
@@ -150,7 +149,7 @@ fn explain_order(
 fn signature(
     src: &Source<'_>,
     key: &Spanned<String>,
-    declare: &mut dyn FnMut(&Spanned<String>, &'static str) -> Result<(), DefinitionError>,
+    declare: &mut Declare<'_>,
 ) -> Result<(String, Vec<String>), DefinitionError> {
     let text = key.get_ref().trim();
     let form = "write the key as the signature, quoted: \"lj(r, eps, sigma)\" = \"4 * eps * ...\"";

@@ -2,7 +2,7 @@
 //!
 //! The syntax is a small subset of Rust's expression syntax, so syn parses it and Rust's
 //! precedence rules apply: numbers, names, `+ - * /`, unary minus, parentheses, and calls of
-//! `sin cos tan asin acos atan exp ln sqrt sinh cosh tanh` (one argument), `atan2(y, x)` and
+//! `sin cos tan asin acos atan exp ln sqrt sinh cosh tanh erf` (one argument), `atan2(y, x)` and
 //! `pow(base, exponent)` (two arguments), and the constant `pi`. Powers are written
 //! `pow(x, 2)`: `^` is exclusive-or in Rust and binds more loosely than `+`, so `x^2 + 1` would
 //! mean `x^(2 + 1)`; it is rejected with a message that says what to write instead.

@@ -18,7 +18,7 @@ pub fn legendre(g: &mut Graph, l: u32, m: u32, x: ExprId) -> ExprId {
         let one = g.one();
         let x2 = g.powi(x, 2);
         let s2 = g.sub(one, x2);
-        let root = if m % 2 == 0 {
+        let root = if m.is_multiple_of(2) {
             g.powi(s2, (m / 2) as i32)
         } else {
             let s = g.call(Func::Sqrt, s2);

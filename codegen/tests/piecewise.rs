@@ -46,7 +46,7 @@ position = ["R * sin(theta)", 0, "R * cos(theta)"]
 energy_unit = "hartree"
 expression = """
 1e-3 * if(R < 6, short, long) + 0.4 * pow(r - 2.2, 2)
-+ 1e-4 * (min(R, 6.5) + max(R * c, 0) + abs(r - 2.3))
++ 1e-4 * (min(R, 6.5) + max(R * c, 0) + abs(r - 2.3)) + 1e-4 * erf(R - 7)
 """
 "#;
 
@@ -101,4 +101,29 @@ fn piecewise_potential_gradient_matches_central_differences() {
     assert!(lanes.contains("T::select_lt("), "the lane form selects lane-wise");
     assert!(lanes.contains("T::select_le("), "min and max select with <=");
     assert!(m.source.contains("if "), "the f64 form is an if expression");
+    assert!(m.source.contains("::rovib_runtime::special::erf("), "erf in the f64 form");
+    assert!(lanes.contains(".erf()"), "erf in the lane form");
+}
+
+/// The build notes name every condition at whose boundary the potential or its gradient jumps,
+/// and none where the branches meet smoothly.
+#[test]
+fn jumps_at_branch_boundaries_are_reported() {
+    let m = generate_molecule("tests/pw.toml", DEFINITION).expect("valid");
+    let notes = m.notes.join("\n");
+    assert_eq!(m.notes.len(), 4, "{notes}");
+    let note = |condition: &str| m.notes.iter().find(|n| n.contains(condition)).unwrap_or_else(|| panic!("{notes}"));
+    // The value jumps at R = 6 (by the difference of the two branches there, some 1e-3).
+    assert!(note("`R < 6.0`").contains("value jumps by 2.866e-3 hartree"), "{notes}");
+    // min, max and abs have kinks: the gradient jumps by twice the slope of |x| (1e-4 · 2), the
+    // slope of min(R, 6.5) (1e-4) and of max(R cos θ, 0) (1e-4 · |∇(R cos θ)|).
+    assert!(note("`(r - 2.3) < 0.0`").contains("gradient by 2.000e-4"), "{notes}");
+    assert!(note("`R <= 6.5`").contains("gradient by 1.000e-4"), "{notes}");
+    assert!(note("`0.0 <= (R * cos(theta))`").contains("near r = "), "{notes}");
+    // Branches that meet with value and gradient: no note.
+    let smooth = DEFINITION
+        .replace("if(R < 6, short, long)", "if(R < 6, pow(R - 6, 2), 0)")
+        .replace("+ 1e-4 * (min(R, 6.5) + max(R * c, 0) + abs(r - 2.3))", "+ 1e-4 * if(r > 2.3, pow(r - 2.3, 3), 0)");
+    let m = generate_molecule("tests/pw.toml", &smooth).expect("valid");
+    assert!(m.notes.is_empty(), "{:?}", m.notes);
 }

@@ -95,6 +95,8 @@ pub trait Real:
     fn max(self, other: Self) -> Self;
     /// Bit `i` set where lane `i` of `self` is greater than that of `other` (false for NaN).
     fn gt_mask(self, other: Self) -> u32;
+    /// Lane-wise error function ([`crate::special::erf`], lane by lane).
+    fn erf(self) -> Self;
     /// Lane-wise `if x < y { a } else { b }` (a NaN comparison gives `b`), branch-free.
     fn select_lt(x: Self, y: Self, a: Self, b: Self) -> Self;
     /// Lane-wise `if x <= y { a } else { b }` (a NaN comparison gives `b`), branch-free.
@@ -201,6 +203,10 @@ impl Real for f64 {
     #[inline(always)]
     fn gt_mask(self, other: Self) -> u32 {
         u32::from(self > other)
+    }
+    #[inline(always)]
+    fn erf(self) -> Self {
+        crate::special::erf(self)
     }
     #[inline(always)]
     fn select_lt(x: Self, y: Self, a: Self, b: Self) -> Self {
@@ -391,12 +397,16 @@ macro_rules! lane_type {
                 self.0.simd_gt(other.0).to_bitmask()
             }
             #[inline(always)]
+            fn erf(self) -> Self {
+                self.map(crate::special::erf)
+            }
+            #[inline(always)]
             fn select_lt(x: Self, y: Self, a: Self, b: Self) -> Self {
-                Self(x.0.simd_lt(y.0).blend(a.0, b.0))
+                Self(x.0.simd_lt(y.0).select(a.0, b.0))
             }
             #[inline(always)]
             fn select_le(x: Self, y: Self, a: Self, b: Self) -> Self {
-                Self(x.0.simd_le(y.0).blend(a.0, b.0))
+                Self(x.0.simd_le(y.0).select(a.0, b.0))
             }
             #[inline(always)]
             fn not_nan_mask(self) -> u32 {
@@ -517,6 +527,7 @@ mod tests {
             same(v.abs(), &|a, _| a.abs());
             same(v.max(u), &|a, b| a.max(b));
             // Piecewise: both branches computed, one chosen per lane (NaN compares false).
+            same(v.erf(), &|a, _| crate::special::erf(a));
             same(F64x4::select_lt(v, u, v * u, v - u), &|a, b| f64::select_lt(a, b, a * b, a - b));
             same(F64x4::select_le(v, u, v * u, v - u), &|a, b| f64::select_le(a, b, a * b, a - b));
             same(F64x4::select_le(v, v, u, v), &|a, b| if a <= a { b } else { a });

@@ -144,6 +144,10 @@ fn eval(e: &syn::Expr, env: &mut HashMap<String, Value>, q: &[f64], out: &mut [f
                 _ => Func::from_name(&name).expect("a known function").apply(x),
             }
         }
+        // `::rovib_runtime::special::erf(x)`, the one path call.
+        syn::Expr::Call(c) if quote!(#c).to_string().contains("special :: erf") => {
+            Func::Erf.apply(num(c.args.first().expect("an argument")))
+        }
         other => panic!("unexpected expression {}", quote!(#other)),
     })
 }
