@@ -194,11 +194,8 @@ fn check_shape(text: &str, scope: &Scope<'_>) -> Result<(), ExprError> {
                         column += 1;
                     }
                 }
-                let is_if_call = word == "if"
-                    && text[text.len() - chars.clone().map(char::len_utf8).sum::<usize>()..]
-                        .trim_start()
-                        .starts_with('(');
-                if !is_if_call
+                // `if` is the piecewise function (see `spell_if`).
+                if word != "if"
                     && syn::parse_str::<syn::Ident>(&word).is_err()
                     && !word.starts_with(|d: char| d.is_ascii_digit())
                 {
@@ -928,6 +925,13 @@ impl Builder<'_, '_> {
         if let Some(&id) = self.scope.names.get(name) {
             return Ok(id);
         }
+        if name == IF_SPELLING {
+            return Err(ExprError::at(
+                span,
+                format!("`if` is not called in {}", self.scope.context),
+                "write `if(x < y, a, b)`",
+            ));
+        }
         if name == "pi" {
             return Ok(self.graph.constant(std::f64::consts::PI));
         }
@@ -1067,6 +1071,9 @@ mod tests {
         let e = parse("2 * if(x < 1, 2)").unwrap_err();
         assert_eq!(e.message, "`if` takes 3 arguments but 2 were given in the test");
         assert!(e.help.contains("if(x < y, a, b)"));
+        assert_eq!((e.line, e.column), (1, 4));
+        let e = parse("2 * if + x").unwrap_err();
+        assert_eq!(e.message, "`if` is not called in the test");
         assert_eq!((e.line, e.column), (1, 4));
         let e = parse("if(x == 1, 1, 2)").unwrap_err();
         assert_eq!(e.message, "unexpected character `=` in the test");
