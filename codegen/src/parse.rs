@@ -892,8 +892,11 @@ impl Builder<'_, '_> {
         if let Some(&v) = self.inlined.cache.get(&key) {
             return Ok(v);
         }
+        // The constants' nodes in name order, so that node ids never depend on hashing.
+        let mut constants: Vec<(&String, &f64)> = library.constants.iter().collect();
+        constants.sort_unstable_by(|a, b| a.0.cmp(b.0));
         let mut names: HashMap<String, ExprId> =
-            self.scope.library.constants.iter().map(|(k, &v)| (k.clone(), self.graph.constant(v))).collect();
+            constants.into_iter().map(|(k, &v)| (k.clone(), self.graph.constant(v))).collect();
         names.extend(f.params.iter().cloned().zip(key.1.iter().copied()));
         let context = format!("the function `{name}`");
         let scope = Scope { names: &names, context: &context, library, named: false };

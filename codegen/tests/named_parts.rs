@@ -92,3 +92,16 @@ fn repeated_calls_are_built_once() {
     let u = |s: &str| common::interpret(&method(s, "potential"), &q, 0).1.expect("returns U");
     assert!(close(u(&m.source), u(&flat.source)), "{} vs {}", u(&m.source), u(&flat.source));
 }
+
+/// Generation is deterministic: the library's tables are hash maps (each with its own random
+/// seed), and nothing in the output may depend on their order.
+#[test]
+fn generation_with_functions_is_deterministic() {
+    let with_constants = NAMED
+        .replace("deg = \"pi / 180\"", "deg = \"pi / 180\"\na1 = 1.5\na2 = 2.5\na3 = 3.5\na4 = 4.5")
+        .replace("\"morse(r, d, a, re)\" = \"d * ", "\"morse(r, d, a, re)\" = \"(a1 + a2 + a3 + a4) / 12 * d * ");
+    let first = generate_molecule("tests/fixtures/co2ar/co2ar.toml", &with_constants).expect("valid").source;
+    for _ in 0..8 {
+        assert_eq!(generate_molecule("tests/fixtures/co2ar/co2ar.toml", &with_constants).expect("valid").source, first);
+    }
+}
