@@ -1108,6 +1108,23 @@ mod tests {
         }
     }
 
+    /// The reverse sweep (`crate::adjoint`, used for large molecules) gives the branch's
+    /// derivative too, also where the branch operand appears twice (`abs(x)` is
+    /// `if(x < 0, -x, x)`).
+    #[test]
+    fn reverse_mode_derivatives_of_piecewise_functions() {
+        use crate::diff::Differentiator;
+        for text in ["abs(x)", "3 * abs(x) + min(x, x * x)", "max(2 * x, abs(x - 1))", "if(x < 1, x * x, -x)"] {
+            for x in [-1.5, -0.25, 0.25, 0.75, 1.5, 3.0] {
+                let (mut g, id) = parse(text).unwrap();
+                let forward = Differentiator::new().derivative(&mut g, id, 0);
+                let reverse = crate::adjoint::gradient(&mut g, id, &[0])[0];
+                let v = g.eval(&[forward, reverse], &[x]);
+                assert_eq!(v[0], v[1], "d/dx {text} at {x}");
+            }
+        }
+    }
+
     #[test]
     fn caret_is_rejected_with_the_spelling_to_use() {
         let e = parse("x^2").unwrap_err();
