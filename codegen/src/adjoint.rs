@@ -69,8 +69,14 @@ pub fn gradient(g: &mut Graph, root: ExprId, vars: &[u32]) -> Vec<ExprId> {
             continue;
         }
         let e = ExprId::from_index(i);
-        let mut children: Vec<ExprId> = g.node(e).children().filter(|c| active[c.index()]).collect();
-        children.dedup();
+        // Each distinct operand once, in operand order (a branch `if(x < 0, -x, x)` has `x` twice,
+        // apart).
+        let mut children: Vec<ExprId> = Vec::new();
+        for c in g.node(e).children().filter(|c| active[c.index()]) {
+            if !children.contains(&c) {
+                children.push(c);
+            }
+        }
         for c in children {
             // The chain rule with operand c's derivative set to the adjoint and every other
             // operand's to zero is bar · ∂e/∂c (both operands when they are the same node).

@@ -128,6 +128,7 @@ pub fn substitute(g: &mut Graph, e: ExprId, map: &[Option<ExprId>]) -> ExprId {
             Node::Powf(a, b) => g.pow(m(a), m(b)),
             Node::Call(f, a) => g.call(f, m(a)),
             Node::Atan2(y, x) => g.atan2(m(y), m(x)),
+            Node::Select(cmp, x, y, a, b) => g.select(cmp, m(x), m(y), m(a), m(b)),
         });
     }
     image[e.index()].expect("the root is reachable")

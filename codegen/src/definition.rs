@@ -56,7 +56,7 @@ use toml::Spanned;
 use crate::diagnostic::{FileError, Source};
 use crate::elements;
 use crate::expr::{ExprId, Func, Graph, Node};
-use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Scope};
+use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Library, Scope};
 use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, DipoleUnit, EnergyUnit, LengthUnit};
 
 /// A problem in a definition file, with its place and a suggested fix (file, line, column,
@@ -124,6 +124,11 @@ pub struct Definition {
     pub potential_scope: HashMap<String, ExprId>,
     /// See `potential_scope`.
     pub potential_text: String,
+    /// The functions and named expressions, inlined where used (also when the potential is
+    /// built again).
+    pub library: Library,
+    /// The data files the definition read (CSV files of `[arrays]`).
+    pub data_files: Vec<std::path::PathBuf>,
     /// The dipole moment surface, if the file has a `[dipole]` table.
     pub dipole: Option<DipoleDef>,
 }
@@ -147,6 +152,12 @@ struct RawDefinition {
     length_unit: Option<Spanned<String>>,
     #[serde(default)]
     constants: BTreeMap<Spanned<String>, Spanned<RawValue>>,
+    #[serde(default)]
+    functions: BTreeMap<Spanned<String>, Spanned<String>>,
+    #[serde(default)]
+    expressions: BTreeMap<Spanned<String>, Spanned<String>>,
+    #[serde(default)]
+    arrays: BTreeMap<Spanned<String>, Spanned<crate::arrays::RawArray>>,
     #[serde(default)]
     coordinates: Vec<RawCoordinate>,
     atoms: Vec<RawAtom>,
@@ -227,7 +238,7 @@ pub fn default_range(unit: CoordinateUnit) -> (f64, f64) {
 }
 
 /// Places inside expression strings.
-trait ExpressionPlace {
+pub(crate) trait ExpressionPlace {
     /// Turns an error inside the string value at `span` into an error at its place in the file.
     fn expression_error(&self, span: Range<usize>, value: &str, e: ExprError) -> DefinitionError;
 }
@@ -273,6 +284,16 @@ fn unit_help<T>(spellings: &[(&str, T)]) -> String {
 /// error or an unknown or missing key stops the reading at that place (the rest of the file
 /// cannot be read reliably); after that, every independent mistake gets its own error.
 pub fn parse_definition(path: &str, text: &str) -> Result<Definition, Vec<DefinitionError>> {
+    parse_definition_in(path, text, std::path::Path::new(path).parent())
+}
+
+/// [`parse_definition`] with the directory that paths in the definition (CSV files of
+/// `[arrays]`) are relative to; `None` if there is none.
+pub fn parse_definition_in(
+    path: &str,
+    text: &str,
+    base: Option<&std::path::Path>,
+) -> Result<Definition, Vec<DefinitionError>> {
     let src = Source { path, text };
     let raw = toml::from_str::<RawDefinition>(text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
@@ -280,20 +301,33 @@ pub fn parse_definition(path: &str, text: &str) -> Result<Definition, Vec<Defini
             "check the spelling; the README lists every key of a molecule definition".to_owned()
         } else if message.starts_with("missing field") {
             "add it; the README lists every key of a molecule definition".to_owned()
+        } else if message.contains("did not match any variant of untagged enum RawArray") {
+            "an array is a list of numbers, c = [1.0, 0.5], or a CSV file, c = { file = \"c.csv\", column = 2 }"
+                .to_owned()
         } else if message.contains("did not match any variant of untagged enum RawValue") {
             "a position component or constant is a number or a string holding an expression".to_owned()
         } else {
             "see the TOML syntax at https://toml.io and the README's example definition".to_owned()
         };
         let message = message.replace("data did not match any variant of untagged enum RawValue", "invalid value");
+        let message = message.replace("data did not match any variant of untagged enum RawArray", "invalid array");
         match e.span() {
             Some(span) => src.error(span, message, help),
             None => src.whole_file(message, help),
         }
     });
     let raw = raw.map_err(|e| vec![e])?;
-    Validator { src: &src, graph: Graph::new(), names: HashMap::new(), declared: HashMap::new(), errors: Vec::new() }
-        .run(raw)
+    Validator {
+        src: &src,
+        graph: Graph::new(),
+        names: HashMap::new(),
+        declared: HashMap::new(),
+        errors: Vec::new(),
+        library: Library::default(),
+        base,
+        data_files: Vec::new(),
+    }
+    .run(raw)
 }
 
 /// State of one validation: the graph being built and the names declared so far.
@@ -306,6 +340,12 @@ struct Validator<'s> {
     declared: HashMap<String, (&'static str, Range<usize>)>,
     /// Every problem found so far.
     errors: Vec<DefinitionError>,
+    /// The functions and named expressions (empty until the constants are known).
+    library: Library,
+    /// The definition's directory, for data files.
+    base: Option<&'s std::path::Path>,
+    /// The data files read.
+    data_files: Vec<std::path::PathBuf>,
 }
 
 /// The molecule's name becomes a module and a type, and `--molecule NAME` finds it by file
@@ -395,7 +435,11 @@ impl Validator<'_> {
                 "names start with a letter and contain only letters, digits and `_` (and are not Rust keywords)",
             ));
         }
-        if n == "pi" || Func::from_name(n).is_some() || BINARY_FUNCTIONS.contains(&n.as_str()) {
+        if n == "pi"
+            || Func::from_name(n).is_some()
+            || BINARY_FUNCTIONS.contains(&n.as_str())
+            || parse::SPECIAL_FUNCTIONS.iter().any(|(f, _)| f == n)
+        {
             return Err(self.src.error(
                 name.span(),
                 format!("the {what} name `{n}` is reserved"),
@@ -417,7 +461,7 @@ impl Validator<'_> {
     }
 
     fn expression(&mut self, value: &Spanned<String>, context: &str) -> Result<ExprId, DefinitionError> {
-        let scope = Scope { names: &self.names, context };
+        let scope = Scope { names: &self.names, context, library: &self.library, named: true };
         parse::parse_expression(&mut self.graph, value.get_ref(), &scope)
             .map_err(|e| self.src.expression_error(value.span(), value.get_ref(), e))
     }
@@ -548,8 +592,42 @@ impl Validator<'_> {
         }
         let coordinate_names: HashMap<String, ExprId> = std::mem::take(&mut self.names);
         self.resolve_constants(&constants);
+        let constant_values: HashMap<String, f64> = constants
+            .iter()
+            .filter_map(|(k, _)| {
+                let id = self.names.get(k.get_ref())?;
+                Some((k.get_ref().clone(), self.graph.as_const(*id)?))
+            })
+            .collect();
         self.names.extend(coordinate_names);
-        let constants_ok = self.errors.len() == before_constants;
+
+        // Functions and named expressions, checked once here and inlined where they are used.
+        let mut names: Vec<String> = self.names.keys().cloned().collect();
+        names.extend(raw.potential.get_ref().parameters.keys().map(|k| k.get_ref().clone()));
+        names.extend(raw.dipole.iter().flat_map(|d| d.get_ref().parameters.keys().map(|k| k.get_ref().clone())));
+        let (arrays, data_files, array_errors) = crate::arrays::read(src, &raw.arrays, self.base);
+        let arrays_ok = array_errors.is_empty();
+        self.errors.extend(array_errors);
+        self.data_files = data_files;
+        for (k, _) in &arrays {
+            let declared = self.declare(k, "array");
+            self.check(declared);
+        }
+        let input = crate::library::Input {
+            functions: &raw.functions,
+            expressions: &raw.expressions,
+            constants: constant_values,
+            arrays: arrays.into_iter().map(|(k, v)| (k.into_inner(), v)).collect(),
+            names,
+        };
+        let (library, library_errors) = {
+            let mut declare = |k: &Spanned<String>, what: &'static str| self.declare(k, what);
+            crate::library::validate(src, input, &mut declare)
+        };
+        let library_ok = library_errors.is_empty() && arrays_ok;
+        self.errors.extend(library_errors);
+        self.library = library;
+        let constants_ok = self.errors.len() == before_constants && library_ok;
 
         // Atoms and their positions (`None` where a position has a problem).
         if raw.atoms.len() < 2 {
@@ -831,6 +909,8 @@ impl Validator<'_> {
             parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
             potential_scope,
             potential_text: pot.expression.get_ref().clone(),
+            library: self.library,
+            data_files: self.data_files,
             dipole,
         })
     }
@@ -959,7 +1039,8 @@ impl Validator<'_> {
                 RawValue::Expr(text) => {
                     let mut g = Graph::new();
                     let names = HashMap::new();
-                    let scope = Scope { names: &names, context: "a range" };
+                    let library = Library::default();
+                    let scope = Scope { names: &names, context: "a range", library: &library, named: true };
                     let e = parse::parse_expression(&mut g, text, &scope)
                         .map_err(|e| src.expression_error(v.span(), text, e))?;
                     g.as_const(e).unwrap_or(f64::NAN)

@@ -131,6 +131,14 @@ pub fn chain_rule(g: &mut Graph, e: ExprId, d: impl Fn(ExprId) -> ExprId, dvar: 
                     }
                     Func::Sinh => g.call(Func::Cosh, a),
                     Func::Cosh => g.call(Func::Sinh, a),
+                    Func::Erf => {
+                        // 2/√π · exp(−a²)
+                        let a2 = g.powi(a, 2);
+                        let m = g.neg(a2);
+                        let e = g.call(Func::Exp, m);
+                        let c = g.constant(std::f64::consts::FRAC_2_SQRT_PI);
+                        g.mul(c, e)
+                    }
                     Func::Tanh => {
                         let one = g.one();
                         let t2 = g.powi(e, 2);
@@ -138,6 +146,10 @@ pub fn chain_rule(g: &mut Graph, e: ExprId, d: impl Fn(ExprId) -> ExprId, dvar: 
                     }
                 };
                 g.mul(outer, da)
+            }
+            Node::Select(cmp, x, y, a, b) => {
+                // By branch: the derivative of the branch chosen.
+                g.select(cmp, x, y, d(a), d(b))
             }
             Node::Atan2(y, x) => {
                 // atan2(y, x)' = (x·y' − y·x') / (x² + y²)

@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 
-use crate::expr::{ExprId, Func, Graph, Node};
+use crate::expr::{Cmp, ExprId, Func, Graph, Node};
 use crate::scopes::{self, Statement};
 
 /// A single-use expression heavier than this many operations gets its own `let`, so that no
@@ -154,6 +154,7 @@ impl Lowering {
                 Node::Powf(a, b) => self.out.pow(m(a), m(b)),
                 Node::Call(f, a) => self.out.call(f, m(a)),
                 Node::Atan2(a, b) => self.out.atan2(m(a), m(b)),
+                Node::Select(cmp, x, y, a, b) => self.out.select(cmp, m(x), m(y), m(a), m(b)),
                 Node::Powi(a, n) => {
                     let p = self.power(m(a), n.unsigned_abs());
                     if n < 0 {
@@ -304,6 +305,11 @@ impl Emitter<'_> {
                 let (ra, tb) = (a.at_least(4), &b.tokens);
                 Printed { tokens: quote!(#ra.powf(#tb)), prec: 4, weight: a.weight + b.weight + 1 }
             }
+            Node::Call(Func::Erf, a) if self.flavor == Flavor::F64 => {
+                let a = self.get(a);
+                let t = &a.tokens;
+                Printed { tokens: quote!(::rovib_runtime::special::erf(#t)), prec: 4, weight: a.weight + 1 }
+            }
             Node::Call(f, a) => {
                 let a = receiver(self.lg, a, &self.printed, self.flavor);
                 let ra = a.at_least(4);
@@ -314,6 +320,19 @@ impl Emitter<'_> {
                 let (y, x) = (receiver(self.lg, y, &self.printed, self.flavor), self.get(x));
                 let (ry, tx) = (y.at_least(4), &x.tokens);
                 Printed { tokens: quote!(#ry.atan2(#tx)), prec: 4, weight: y.weight + x.weight + 1 }
+            }
+            Node::Select(cmp, x, y, a, b) => {
+                let [x, y, a, b] = [x, y, a, b].map(|c| self.get(c));
+                let weight = x.weight + y.weight + a.weight + b.weight + 1;
+                let [tx, ty, ta, tb] = [&x, &y, &a, &b].map(|p| p.tokens.clone());
+                let tokens = match (self.flavor, cmp) {
+                    (Flavor::F64, Cmp::Lt) => quote!(if #tx < #ty { #ta } else { #tb }),
+                    (Flavor::F64, Cmp::Le) => quote!(if #tx <= #ty { #ta } else { #tb }),
+                    (Flavor::Lanes, Cmp::Lt) => quote!(T::select_lt(#tx, #ty, #ta, #tb)),
+                    (Flavor::Lanes, Cmp::Le) => quote!(T::select_le(#tx, #ty, #ta, #tb)),
+                };
+                // Always bound to a `let`: an `if` is not an operand everywhere.
+                Printed { tokens, prec: 0, weight: weight.max(MAX_INLINE_WEIGHT + 1) }
             }
         };
         if self.uses[i] > 1 || expr.weight > MAX_INLINE_WEIGHT {

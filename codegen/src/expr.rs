@@ -86,11 +86,13 @@ pub enum Func {
     Cosh,
     /// Hyperbolic tangent.
     Tanh,
+    /// The error function (`rovib_runtime::special::erf`, libm's; `f64` has no method).
+    Erf,
 }
 
 impl Func {
     /// Every function, with the name definitions use for it (also the `f64` method name).
-    pub const ALL: [(Func, &'static str); 12] = [
+    pub const ALL: [(Func, &'static str); 13] = [
         (Func::Sin, "sin"),
         (Func::Cos, "cos"),
         (Func::Tan, "tan"),
@@ -103,6 +105,7 @@ impl Func {
         (Func::Sinh, "sinh"),
         (Func::Cosh, "cosh"),
         (Func::Tanh, "tanh"),
+        (Func::Erf, "erf"),
     ];
 
     /// The function's name, which is also the name of the `f64` method that computes it.
@@ -130,6 +133,34 @@ impl Func {
             Func::Sinh => x.sinh(),
             Func::Cosh => x.cosh(),
             Func::Tanh => x.tanh(),
+            Func::Erf => libm::erf(x),
+        }
+    }
+}
+
+/// The comparison of a [`Node::Select`]; `>` and `>=` are these with the operands swapped.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Cmp {
+    /// `x < y`.
+    Lt,
+    /// `x <= y`.
+    Le,
+}
+
+impl Cmp {
+    /// Whether `x cmp y` holds (false if either is NaN).
+    pub fn holds(self, x: f64, y: f64) -> bool {
+        match self {
+            Cmp::Lt => x < y,
+            Cmp::Le => x <= y,
+        }
+    }
+
+    /// The operator as written.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Cmp::Lt => "<",
+            Cmp::Le => "<=",
         }
     }
 }
@@ -159,22 +190,26 @@ pub enum Node {
     Call(Func, ExprId),
     /// `atan2(y, x)`, the angle of the point (x, y).
     Atan2(ExprId, ExprId),
+    /// `if x cmp y { a } else { b }` (`Select(cmp, x, y, a, b)`): both branches are computed
+    /// and one is chosen, so the lane form is branch-free; a NaN comparison chooses `b`.
+    Select(Cmp, ExprId, ExprId, ExprId, ExprId),
 }
 
 impl Node {
     /// The operands of this node, in order.
     pub fn children(&self) -> impl Iterator<Item = ExprId> {
-        let (a, b) = match *self {
-            Node::Const(_) | Node::Var(_) => (None, None),
-            Node::Neg(a) | Node::Powi(a, _) | Node::Call(_, a) => (Some(a), None),
+        let children = match *self {
+            Node::Const(_) | Node::Var(_) => [None; 4],
+            Node::Neg(a) | Node::Powi(a, _) | Node::Call(_, a) => [Some(a), None, None, None],
             Node::Add(a, b)
             | Node::Sub(a, b)
             | Node::Mul(a, b)
             | Node::Div(a, b)
             | Node::Powf(a, b)
-            | Node::Atan2(a, b) => (Some(a), Some(b)),
+            | Node::Atan2(a, b) => [Some(a), Some(b), None, None],
+            Node::Select(_, x, y, a, b) => [Some(x), Some(y), Some(a), Some(b)],
         };
-        a.into_iter().chain(b)
+        children.into_iter().flatten()
     }
 }
 
@@ -671,7 +706,7 @@ impl Graph {
         if let Node::Neg(x) = self.node(a) {
             match f {
                 // Odd functions.
-                Func::Sin | Func::Tan | Func::Asin | Func::Atan | Func::Sinh | Func::Tanh => {
+                Func::Sin | Func::Tan | Func::Asin | Func::Atan | Func::Sinh | Func::Tanh | Func::Erf => {
                     let y = self.call(f, x);
                     return self.neg(y);
                 }
@@ -692,6 +727,20 @@ impl Graph {
             return id;
         }
         self.push(Node::Atan2(y, x))
+    }
+
+    /// `if x cmp y { a } else { b }`: a constant comparison chooses its branch, equal branches
+    /// are the branch.
+    pub fn select(&mut self, cmp: Cmp, x: ExprId, y: ExprId, a: ExprId, b: ExprId) -> ExprId {
+        if self.simplify {
+            if a == b {
+                return a;
+            }
+            if let (Some(xv), Some(yv)) = (self.as_const(x), self.as_const(y)) {
+                return if cmp.holds(xv, yv) { a } else { b };
+            }
+        }
+        self.push(Node::Select(cmp, x, y, a, b))
     }
 
     /// Evaluates the given roots at the point `vars` (indexed by variable number), computing
@@ -716,6 +765,13 @@ impl Graph {
                 Node::Powf(a, b) => v(a).powf(v(b)),
                 Node::Call(f, a) => f.apply(v(a)),
                 Node::Atan2(y, x) => v(y).atan2(v(x)),
+                Node::Select(cmp, x, y, a, b) => {
+                    if cmp.holds(v(x), v(y)) {
+                        v(a)
+                    } else {
+                        v(b)
+                    }
+                }
             };
         }
         roots.iter().map(|r| values[r.index()]).collect()
@@ -772,6 +828,9 @@ impl fmt::Display for DisplayExpr<'_> {
             Node::Powf(a, b) => write!(f, "pow({}, {})", sub(a), sub(b)),
             Node::Call(func, a) => write!(f, "{}({})", func.name(), sub(a)),
             Node::Atan2(y, x) => write!(f, "atan2({}, {})", sub(y), sub(x)),
+            Node::Select(cmp, x, y, a, b) => {
+                write!(f, "if({} {} {}, {}, {})", sub(x), cmp.symbol(), sub(y), sub(a), sub(b))
+            }
         }
     }
 }

@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 pub mod adjoint;
+pub mod arrays;
 pub mod cartesian;
 pub mod definition;
 pub mod diff;
@@ -30,10 +31,13 @@ pub mod emit;
 pub mod emit_lanes;
 pub mod expr;
 pub mod kinetic;
+pub mod library;
 pub mod names;
 pub mod parametric;
 pub mod parse;
+pub mod piecewise;
 pub mod scopes;
+pub mod special;
 pub mod template;
 pub mod zmatrix;
 
@@ -74,6 +78,8 @@ pub struct GeneratedMolecule {
     /// (atom, coordinate) pairs whose raw position depends on the coordinate: the sparsity the
     /// generated code exploits (out of `atoms · coordinates`).
     pub nonzero_derivatives: usize,
+    /// The data files the definition read (CSV files of `[arrays]`).
+    pub data_files: Vec<PathBuf>,
 }
 
 impl GeneratedMolecule {
@@ -144,11 +150,25 @@ pub fn generate_molecule_with(
     text: &str,
     options: &Options,
 ) -> Result<GeneratedMolecule, Vec<DefinitionError>> {
+    generate_molecule_in(path, text, options, Path::new(path).parent())
+}
+
+/// [`generate_molecule_with`] with the directory that data files named in the definition (CSV
+/// files of `[arrays]`) are relative to (`path` is then used in messages only).
+pub fn generate_molecule_in(
+    path: &str,
+    text: &str,
+    options: &Options,
+    base: Option<&Path>,
+) -> Result<GeneratedMolecule, Vec<DefinitionError>> {
     let start = Instant::now();
-    let mut def = parse_definition(path, text)?;
+    let mut def = definition::parse_definition_in(path, text, base)?;
     let exprs = kinetic::build(&mut def, options);
     let nonzero_derivatives = exprs.nonzero_derivatives;
-    let notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
+    let mut notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
+    if piecewise::has_branches(&def.graph) {
+        notes.extend(piecewise::jump_notes(&def, exprs.potential, &exprs.potential_gradient));
+    }
     // Variables: coordinates, ω, velocities (kinetic), then positions (cartesian), then the
     // parameters (parametric, last); the dipole adds none.
     let mut cartesian = cartesian::build(&mut def);
@@ -184,6 +204,7 @@ pub fn generate_molecule_with(
         codegen_time: start.elapsed(),
         notes,
         nonzero_derivatives,
+        data_files: def.data_files.clone(),
     })
 }
 
@@ -235,7 +256,7 @@ pub fn singular_reference_note(def: &Definition, exprs: &kinetic::KineticExprs) 
 pub struct Report {
     /// The molecules, in name order.
     pub molecules: Vec<GeneratedMolecule>,
-    /// Every definition file read (for `rerun-if-changed`).
+    /// Every definition and data file read (for `rerun-if-changed`).
     pub inputs: Vec<PathBuf>,
 }
 
@@ -291,7 +312,7 @@ pub fn generate_with(
                 continue;
             }
         };
-        match generate_molecule_with(&display, &text, options) {
+        match generate_molecule_in(&display, &text, options, input.parent()) {
             Ok(m) => molecules.push(m),
             Err(e) => errors.extend(e),
         }
@@ -339,6 +360,8 @@ pub fn generate_with(
         write(&template::file_name(&m.name), &m.source).map_err(|e| vec![e])?;
     }
     write("molecules.rs", &template::registry(&molecules, display_dir)).map_err(|e| vec![e])?;
+    // Data files too, so that a changed CSV file regenerates its molecule.
+    inputs.extend(molecules.iter().flat_map(|m| m.data_files.iter().cloned()));
     Ok(Report { molecules, inputs })
 }
 
@@ -363,6 +386,7 @@ mod tests {
                 temporaries: 0,
             }],
             graph_nodes: 0,
+            data_files: Vec::new(),
             codegen_time: Duration::from_millis(1500),
             notes: Vec::new(),
             nonzero_derivatives: 0,

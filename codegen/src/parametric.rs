@@ -33,7 +33,7 @@ pub fn build(def: &mut Definition) -> Option<ParametricExprs> {
         let v = def.graph.var(&format!("param{i}"));
         names.insert(name.clone(), v);
     }
-    let scope = Scope { names: &names, context: "the potential" };
+    let scope = Scope { names: &names, context: "the potential", library: &def.library, named: true };
     let u = parse_expression(&mut def.graph, &def.potential_text, &scope).ok()?;
     let scale = def.graph.constant(def.energy_unit.in_hartree());
     let potential = def.graph.mul(scale, u);

@@ -460,3 +460,97 @@ fn atom_labels_are_one_short_word() {
         assert!(generate_molecule("molecules/xy2.toml", &text).is_ok(), "{label}");
     }
 }
+
+/// The good definition with `tables` (e.g. `[expressions]` and `[functions]`) after line 2.
+fn with_tables(tables: &str) -> String {
+    with("length_unit = \"bohr\"\n", &format!("length_unit = \"bohr\"\n{tables}\n"))
+}
+
+#[test]
+fn named_expressions_and_functions_generate() {
+    let text =
+        with_tables("[functions]\n\"sq(x)\" = \"x * x\"\n[expressions]\nhalf = \"alpha / 2\"\nd1 = \"r1 - 1.8\"")
+            .replace("pow(r1 - 1.8, 2)", "sq(d1)")
+            .replace("\"r1 * sin(alpha / 2)\"", "\"r1 * sin(half)\"");
+    generate_molecule("molecules/xy2.toml", &text).expect("valid");
+}
+
+#[test]
+fn unknown_names_in_named_expressions_and_functions() {
+    let e = error(&with_tables("[expressions]\nhalf = \"alfa / 2\""));
+    assert_error(&e, 4, 9, "unknown name `alfa` in the named expression `half`", "did you mean `alpha`?");
+    // A function sees its parameters and the constants, not the coordinates.
+    let e = error(&with_tables("[functions]\n\"f(x)\" = \"x * r1\""));
+    assert_error(&e, 4, 15, "unknown name `r1` in the function `f`", "the names available here are: pi, x");
+}
+
+#[test]
+fn cycles_and_recursion_are_located_errors() {
+    let e = error(&with_tables("[expressions]\na = \"b + 1\"\nb = \"2 * a\""));
+    assert_error(
+        &e,
+        4,
+        6,
+        "the named expression `a` uses `b`, which is defined below it (line 5)",
+        "move `b` above `a`",
+    );
+    let e = error(&with_tables("[expressions]\na = \"r1 + a\""));
+    assert_error(&e, 4, 11, "the named expression `a` refers to itself", "no recursion");
+    let e = error(&with_tables("[functions]\n\"f(x)\" = \"1 + f(x - 1)\""));
+    assert_error(&e, 4, 15, "the function `f` refers to itself", "no recursion");
+    let e = error(&with_tables("[functions]\n\"f(x)\" = \"g(x)\"\n\"g(x)\" = \"f(x)\""));
+    assert_error(&e, 4, 11, "the function `f` uses `g`, which is defined below it (line 5)", "move `g` above `f`");
+}
+
+#[test]
+fn wrong_arity_of_a_function_is_located_at_the_call() {
+    let text =
+        with_tables("[functions]\n\"lj(r, eps, sigma)\" = \"4 * eps * (pow(sigma / r, 12) - pow(sigma / r, 6))\"")
+            .replace("k * (pow(r1", "lj(r1, 1) + k * (pow(r1");
+    let e = error(&text);
+    assert_eq!(e.message, "`lj` takes 3 arguments but 2 were given in the potential");
+    assert!(e.help.contains("write `lj(r, eps, sigma)`"), "{e}");
+    assert_eq!((e.line, e.column), (32, 15), "{e}");
+}
+
+#[test]
+fn a_named_expression_is_usable_only_where_its_names_are() {
+    // `k` is a potential parameter: fine in the potential, an error in a position.
+    let text =
+        with_tables("[expressions]\nkr = \"k * r1\"").replace("\"r1 * cos(alpha / 2)\"", "\"kr * cos(alpha / 2)\"");
+    let e = error(&text);
+    assert_eq!(e.message, "unknown name `k` in the position of atom H1 (inside `kr`)");
+    assert_eq!((e.line, e.column), (24, 40), "{e}");
+    let text = with_tables("[expressions]\nkr = \"k * r1\"").replace("k * (pow", "kr / r1 * (pow");
+    generate_molecule("molecules/xy2.toml", &text).expect("a parameter is known in the potential");
+}
+
+#[test]
+fn bad_library_entries_are_reported_once() {
+    // A broken named expression used in a position and in the potential: one error.
+    let text = with_tables("[expressions]\nh = \"alpha / \"")
+        .replace("\"r1 * sin(alpha / 2)\"", "\"r1 * sin(h)\"")
+        .replace("k * (", "h * k * (");
+    let e = error(&text);
+    assert!(e.message.starts_with("syntax error in the named expression `h`"), "{e}");
+    let e = error(&with_tables("[expressions]\nr1 = \"2\""));
+    assert!(e.message.starts_with("duplicate name `r1`"), "{e}");
+    let e = error(&with_tables("[functions]\nsq = \"x * x\""));
+    assert_error(&e, 4, 1, "function `sq` has no parameter list", "\"lj(r, eps, sigma)\"");
+    let e = error(&with_tables("[functions]\n\"sin(x)\" = \"x\""));
+    assert!(e.message.contains("the function name `sin` is reserved"), "{e}");
+    let e = error(&with_tables("[functions]\n\"f(x, x)\" = \"x\""));
+    assert_eq!(e.message, "function `f` has two parameters named `x`");
+    let e = error(&with_tables("[functions]\n\"f()\" = \"1\""));
+    assert!(e.help.contains("[expressions]"), "{e}");
+}
+
+#[test]
+fn nesting_of_named_expressions_is_bounded() {
+    let mut tables = String::from("[expressions]\ne0 = \"r1\"\n");
+    for i in 1..=70 {
+        tables.push_str(&format!("e{i} = \"e{} + 1\"\n", i - 1));
+    }
+    let all = errors(&with_tables(&tables));
+    assert!(all[0].message.contains("nested more than 64 deep"), "{all:#?}");
+}

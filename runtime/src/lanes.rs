@@ -95,6 +95,12 @@ pub trait Real:
     fn max(self, other: Self) -> Self;
     /// Bit `i` set where lane `i` of `self` is greater than that of `other` (false for NaN).
     fn gt_mask(self, other: Self) -> u32;
+    /// Lane-wise error function ([`crate::special::erf`], lane by lane).
+    fn erf(self) -> Self;
+    /// Lane-wise `if x < y { a } else { b }` (a NaN comparison gives `b`), branch-free.
+    fn select_lt(x: Self, y: Self, a: Self, b: Self) -> Self;
+    /// Lane-wise `if x <= y { a } else { b }` (a NaN comparison gives `b`), branch-free.
+    fn select_le(x: Self, y: Self, a: Self, b: Self) -> Self;
     /// Bit `i` set where lane `i` is not NaN.
     fn not_nan_mask(self) -> u32;
     /// `self` with its sign flipped in the lanes where `x` has its sign bit set (`−0` included).
@@ -197,6 +203,18 @@ impl Real for f64 {
     #[inline(always)]
     fn gt_mask(self, other: Self) -> u32 {
         u32::from(self > other)
+    }
+    #[inline(always)]
+    fn erf(self) -> Self {
+        crate::special::erf(self)
+    }
+    #[inline(always)]
+    fn select_lt(x: Self, y: Self, a: Self, b: Self) -> Self {
+        if x < y { a } else { b }
+    }
+    #[inline(always)]
+    fn select_le(x: Self, y: Self, a: Self, b: Self) -> Self {
+        if x <= y { a } else { b }
     }
     #[inline(always)]
     fn not_nan_mask(self) -> u32 {
@@ -379,6 +397,18 @@ macro_rules! lane_type {
                 self.0.simd_gt(other.0).to_bitmask()
             }
             #[inline(always)]
+            fn erf(self) -> Self {
+                self.map(crate::special::erf)
+            }
+            #[inline(always)]
+            fn select_lt(x: Self, y: Self, a: Self, b: Self) -> Self {
+                Self(x.0.simd_lt(y.0).select(a.0, b.0))
+            }
+            #[inline(always)]
+            fn select_le(x: Self, y: Self, a: Self, b: Self) -> Self {
+                Self(x.0.simd_le(y.0).select(a.0, b.0))
+            }
+            #[inline(always)]
             fn not_nan_mask(self) -> u32 {
                 self.0.simd_eq(self.0).to_bitmask()
             }
@@ -496,6 +526,11 @@ mod tests {
             same(v.powf(u), &|a, b| a.powf(b));
             same(v.abs(), &|a, _| a.abs());
             same(v.max(u), &|a, b| a.max(b));
+            // Piecewise: both branches computed, one chosen per lane (NaN compares false).
+            same(v.erf(), &|a, _| crate::special::erf(a));
+            same(F64x4::select_lt(v, u, v * u, v - u), &|a, b| f64::select_lt(a, b, a * b, a - b));
+            same(F64x4::select_le(v, u, v * u, v - u), &|a, b| f64::select_le(a, b, a * b, a - b));
+            same(F64x4::select_le(v, v, u, v), &|a, b| if a <= a { b } else { a });
             let gt = v.gt_mask(u);
             let nn = v.not_nan_mask();
             for i in 0..4 {

@@ -23,6 +23,7 @@ pub mod modes;
 pub mod molecule;
 pub mod polarization;
 pub mod sample;
+pub mod special;
 pub mod spectrum;
 pub mod transcendental;
 pub mod units;

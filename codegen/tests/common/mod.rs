@@ -97,6 +97,21 @@ fn eval(e: &syn::Expr, env: &mut HashMap<String, Value>, q: &[f64], out: &mut [f
     if let syn::Expr::Tuple(t) = e {
         return Value::Tuple(t.elems.iter().map(|x| eval(x, env, q, out).num()).collect());
     }
+    if let syn::Expr::If(i) = e {
+        // `if x < y { a } else { b }`: a piecewise node.
+        let syn::Expr::Binary(c) = &*i.cond else { panic!("the condition is a comparison") };
+        let (x, y) = (eval(&c.left, env, q, out).num(), eval(&c.right, env, q, out).num());
+        let holds = match c.op {
+            syn::BinOp::Lt(_) => x < y,
+            syn::BinOp::Le(_) => x <= y,
+            _ => panic!("unexpected comparison"),
+        };
+        let (_, other) = i.else_branch.as_ref().expect("an else branch");
+        return match holds {
+            true => run(&i.then_branch, env, q, out).expect("a value"),
+            false => eval(other, env, q, out),
+        };
+    }
     let mut num = |e: &syn::Expr| eval(e, env, q, out).num();
     Value::Num(match e {
         syn::Expr::Lit(l) => match &l.lit {
@@ -128,6 +143,10 @@ fn eval(e: &syn::Expr, env: &mut HashMap<String, Value>, q: &[f64], out: &mut [f
                 "atan2" => x.atan2(arg.expect("an argument")),
                 _ => Func::from_name(&name).expect("a known function").apply(x),
             }
+        }
+        // `::rovib_runtime::special::erf(x)`, the one path call.
+        syn::Expr::Call(c) if quote!(#c).to_string().contains("special :: erf") => {
+            Func::Erf.apply(num(c.args.first().expect("an argument")))
         }
         other => panic!("unexpected expression {}", quote!(#other)),
     })
