@@ -375,7 +375,12 @@ fn trajectories_in_the_cartesian_chart_stop_on_their_closed_form_coordinates() {
     let (fa, fb) = (failed(&a), failed(&b));
     let keep = |i: u64| !fa.contains(&i) && !fb.contains(&i);
     let stops = |r: &EnsembleReport| {
-        r.outcome.first_stops.iter().filter(|s| keep(s.index)).map(|s| (s.index, s.time, s.condition, s.side)).collect::<Vec<_>>()
+        r.outcome
+            .first_stops
+            .iter()
+            .filter(|s| keep(s.index))
+            .map(|s| (s.index, s.time, s.condition, s.side))
+            .collect::<Vec<_>>()
     };
     assert!(a.outcome.failed_count() <= 10 && b.outcome.failed_count() <= 10, "every failure is listed");
     assert_eq!(stops(&a), stops(&b));

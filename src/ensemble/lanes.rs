@@ -265,7 +265,15 @@ where
                     outcome.charts.add(index, &crate::runtime::charts::ChartReport::default());
                 }
                 outcome.count_lifetime(plan, index, observed, stop);
-                fold(plan, &mut outcome.statistics, &buffer, observed, workspace.as_mut(), &mut series, &mut correlation);
+                fold(
+                    plan,
+                    &mut outcome.statistics,
+                    &buffer,
+                    observed,
+                    workspace.as_mut(),
+                    &mut series,
+                    &mut correlation,
+                );
                 progress.done();
             }
             Fate::Failed(f) => {

@@ -1,5 +1,6 @@
 //! What an ensemble writes: ensemble.csv (means and standard errors against time),
-//! histograms.csv, correlations.csv, summary.json, ensemble.svg and histograms.svg.
+//! histograms.csv, correlations.csv, summary.json, ensemble.svg and histograms.svg (and, with
+//! stop conditions, lifetimes.csv and stops.csv: `super::lifetimes`).
 //!
 //! Numbers are written with full round-trip precision (`{:?}`); a statistic that does not
 //! exist (the standard error of fewer than two values) is written `NaN`. All values are in

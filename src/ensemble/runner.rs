@@ -242,7 +242,8 @@ pub struct Accumulators {
     pub means: Vec<Moments>,
     /// One histogram per (histogram, time), in scene order.
     pub histograms: Vec<Histogram>,
-    /// Per correlated quantity, the moments of `C(τ)` over trajectories, per lag.
+    /// Per correlated quantity, the moments of `C(τ)` over the trajectories spanning the lag,
+    /// per lag ([`Plan::correlation_lags`] of them).
     pub correlations: Vec<Vec<Moments>>,
 }
 
