@@ -94,7 +94,7 @@ pub fn summary<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         "stopped": l.total_stopped(),
         "ran_to_end": o.completed - l.total_stopped().min(o.completed),
         "survival_at_end": l.survival(last).0,
-        "first_stop_time": o.first_stops.iter().map(|s| s.time).reduce(f64::min).map(|t| t / ts),
+        "first_stop_time": (0..plan.times.len()).find(|&k| l.stopped(k) > 0).map(|k| plan.times[k] / ts),
         "lifetimes_file": "lifetimes.csv",
         "stops_file": "stops.csv",
         "stops_listed": listed,
