@@ -257,7 +257,7 @@ fn lanes_equal_no_lanes_and_a_resumed_run_equals_an_uninterrupted_one() {
     let sampler = Gaussian { seed: 33, stop_at: None };
     let a = run_with_sampler(&H2o, &s, &sampler, "gaussian", &options("lanes", true)).unwrap();
     let b = run_with_sampler(&H2o, &s, &sampler, "gaussian", &options("nolanes", false)).unwrap();
-    assert!(rovib::ensemble::lanes::LANES >= 2);
+    const { assert!(rovib::ensemble::lanes::LANES >= 2) };
     assert_eq!(a.outcome.lifetimes, b.outcome.lifetimes, "the counts are exact");
     assert!(a.outcome.lifetimes.total_stopped() > 30);
     assert_eq!(a.outcome.first_stops.len(), b.outcome.first_stops.len());
@@ -318,7 +318,7 @@ fn a_short_last_interval_is_left_out_of_the_correlations() {
     assert_eq!(rows.len(), 11, "lags 0, 10, …, 100 only");
     assert_eq!(rows[10][0], 100.0);
     let col = column(&h, "r1_C_bohr^2");
-    let mut sum = vec![0.0; 11];
+    let mut sum = [0.0; 11];
     for i in 0..12 {
         let x = &series(&s, &sampler, i)[0][..11];
         let mean = x.iter().sum::<f64>() / 11.0;
