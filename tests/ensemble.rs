@@ -435,6 +435,7 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
         keep: None,
         time_scale: 1.0,
         lanes: false,
+        stops: Vec::new(),
     };
     let sampler = Gaussian::new(31);
     let stop = AtomicBool::new(false);
@@ -502,6 +503,7 @@ fn a_block_on_lanes_has_the_scalar_outcome_to_round_off() {
         keep: None,
         time_scale: 1.0,
         lanes,
+        stops: Vec::new(),
     };
     let sampler = Troubled(Gaussian::new(37));
     let stop = AtomicBool::new(false);

@@ -509,8 +509,9 @@ fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const 
 /// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
 type StopCondition = (usize, &'static str, [f64; 2]);
 
-/// `run.stop_outside` bound to the molecule; an unknown name is an error at its place.
-fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+/// `run.stop_outside` bound to the molecule; an unknown name is an error at its place (also
+/// used by ensembles, per trajectory).
+pub(crate) fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
 ) -> Result<Vec<StopCondition>, CliError> {

@@ -23,7 +23,7 @@
 use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::runner::{Accumulators, Failure, Outcome, Plan, Progress, Watch, fold, run_block_scalar};
+use super::runner::{Accumulators, Failure, Outcome, Plan, Progress, Stop, Watch, fold, run_block_scalar};
 use crate::runtime::Molecule;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
@@ -67,8 +67,9 @@ pub fn applies<M: Molecule<N, NA>, const N: usize, const NA: usize>(plan: &Plan<
 
 /// What became of one trajectory of the block.
 enum Fate {
-    /// Completed: its observations and statistics.
-    Completed(Vec<f64>, Stats),
+    /// Completed: its observations, the outputs observed (all, or up to a stop condition met),
+    /// the stop condition and its statistics.
+    Completed(Vec<f64>, usize, Option<Stop>, Stats),
     /// Failed before integration (sampler, initial state).
     Failed(Failure),
     /// Stopped by the stop flag (or never started).
@@ -86,6 +87,7 @@ struct Slot<'m, M, const N: usize, const NA: usize> {
     initial_energy: f64,
     failure: Option<(&'static str, f64, String)>,
     interrupted: bool,
+    stopped: Option<Stop>,
 }
 
 struct Feeder<'a, 'm, M, const N: usize, const NA: usize> {
@@ -155,6 +157,7 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
                 initial_energy: 0.0,
                 failure: None,
                 interrupted: false,
+                stopped: None,
             });
             return true;
         }
@@ -178,9 +181,11 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             cartesian: None,
             // Lanes hold internal-chart states only: no Cartesian state, so no branch to follow.
             last_q: crate::runtime::nalgebra::SVector::zeros(),
+            stopped: None,
         };
         let flow = crate::runtime::integrate::Observer::observe(&mut watch, t, y);
         (slot.k, slot.initial_energy, slot.interrupted) = (watch.k, watch.initial_energy, watch.interrupted);
+        slot.stopped = watch.stopped;
         slot.failure = watch.failure.take();
         flow
     }
@@ -190,7 +195,10 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
         let n_times = self.plan.times.len();
         let r = match (result, slot.failure) {
             (Ok(_), None) if slot.interrupted => Fate::Interrupted,
-            (Ok(stats), None) if slot.k == n_times => Fate::Completed(slot.buffer, stats),
+            // A stop condition ends the lane's trajectory as `Break` does, successfully.
+            (Ok(stats), None) if slot.k == n_times || slot.stopped.is_some() => {
+                Fate::Completed(slot.buffer, slot.k, slot.stopped, stats)
+            }
             // A failed lane, an observer's failure or a short run: the scalar path reports it.
             _ => Fate::Redo,
         };
@@ -240,15 +248,15 @@ where
 
     // In index order, as the scalar path folds them.
     let mut outcome = Outcome::new(Accumulators::new(plan));
-    let n_times = plan.times.len();
+    let lags = plan.correlation_lags();
     let mut workspace =
-        (!plan.correlations.is_empty()).then(|| crate::runtime::ensemble::CorrelationWorkspace::new(n_times));
-    let mut series = vec![0.0; n_times];
-    let mut correlation = vec![0.0; n_times];
+        (!plan.correlations.is_empty()).then(|| crate::runtime::ensemble::CorrelationWorkspace::new(lags));
+    let mut series = vec![0.0; lags];
+    let mut correlation = vec![0.0; lags];
     for (offset, result) in feeder.results.into_iter().enumerate() {
         let index = indices.start + offset as u64;
         match result.unwrap_or(Fate::Interrupted) {
-            Fate::Completed(buffer, stats) => {
+            Fate::Completed(buffer, observed, stop, stats) => {
                 outcome.completed += 1;
                 outcome.steps += stats.steps;
                 outcome.rhs_evaluations += stats.rhs_evals;
@@ -256,7 +264,16 @@ where
                     // Never below the switch threshold: no switch, as the scalar path counts it.
                     outcome.charts.add(index, &crate::runtime::charts::ChartReport::default());
                 }
-                fold(plan, &mut outcome.statistics, &buffer, workspace.as_mut(), &mut series, &mut correlation);
+                outcome.count_lifetime(plan, index, observed, stop);
+                fold(
+                    plan,
+                    &mut outcome.statistics,
+                    &buffer,
+                    observed,
+                    workspace.as_mut(),
+                    &mut series,
+                    &mut correlation,
+                );
                 progress.done();
             }
             Fate::Failed(f) => {

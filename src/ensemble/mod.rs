@@ -24,6 +24,7 @@
 
 pub mod checkpoint;
 pub mod lanes;
+pub mod lifetimes;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod output;
@@ -336,6 +337,7 @@ where
         keep: ensemble.keep_trajectories.map(|k| (k, options.out_dir.join("trajectories"))),
         time_scale: scene.time_unit.in_au(),
         lanes: options.lanes,
+        stops: crate::cli::run::stop_conditions(m, scene)?,
     };
     let threads = options
         .threads

@@ -1,5 +1,6 @@
 //! What an ensemble writes: ensemble.csv (means and standard errors against time),
-//! histograms.csv, correlations.csv, summary.json, ensemble.svg and histograms.svg.
+//! histograms.csv, correlations.csv, summary.json, ensemble.svg and histograms.svg (and, with
+//! stop conditions, lifetimes.csv and stops.csv: `super::lifetimes`).
 //!
 //! Numbers are written with full round-trip precision (`{:?}`); a statistic that does not
 //! exist (the standard error of fewer than two values) is written `NaN`. All values are in
@@ -51,7 +52,8 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     }
     lines.push(header.join(","));
     for (k, t) in plan.times.iter().enumerate() {
-        let mut row = format!("{:?},{}", t / ts, acc.means.get(k * nm).map_or(0, |m| m.count()));
+        // The trajectories observed at this time: all completed ones, less those stopped earlier.
+        let mut row = format!("{:?},{}", t / ts, report.outcome.lifetimes.observed(k));
         for j in 0..nm {
             let m = &acc.means[k * nm + j];
             row.push_str(&format!(",{:?},{:?}", m.mean(), m.standard_error()));
@@ -88,7 +90,7 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     csv("histograms.csv", lines)?;
 
     // correlations.csv
-    let mut header = vec![format!("tau_{tu}")];
+    let mut header = vec![format!("tau_{tu}"), "n".to_owned()];
     for &qi in &plan.correlations {
         let (name, unit) = (plan.quantities[qi].name(m), plan.quantities[qi].unit(m));
         header.push(format!("{name}_C_{unit}^2"));
@@ -96,8 +98,11 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         header.push(format!("{name}_C_normalised"));
     }
     let mut lines = vec![header.join(",")];
-    for (lag, t) in plan.times.iter().enumerate() {
-        let mut row = format!("{:?}", t / ts);
+    // Lags on the uniform grid only (`Plan::correlation_lags`); `n`: the trajectories whose
+    // span covers the lag, which every correlated quantity shares.
+    for (lag, t) in plan.times.iter().enumerate().take(plan.correlation_lags()) {
+        let n = acc.correlations.first().map_or(0, |c| c[lag].count());
+        let mut row = format!("{:?},{n}", t / ts);
         for c in &acc.correlations {
             let (mean, c0) = (c[lag].mean(), c[0].mean());
             row.push_str(&format!(",{mean:?},{:?},{:?}", c[lag].standard_error(), mean / c0));
@@ -105,6 +110,10 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         lines.push(row);
     }
     csv("correlations.csv", lines)?;
+    if !plan.stops.is_empty() {
+        csv("lifetimes.csv", super::lifetimes::lifetimes_csv(m, plan, &report.outcome, tu, ts))?;
+        csv("stops.csv", super::lifetimes::stops_csv(m, plan, &report.outcome, tu, ts))?;
+    }
     let temperature = match &ensemble.method {
         super::scene::MethodSpec::Thermal { temperature, .. } => Some(*temperature),
         _ => None,
@@ -191,7 +200,8 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             })
         }).collect::<Vec<_>>(),
         "charts": charts_json(plan, &o.charts, ts),
-        "correlation": "C(tau) = sum_t dx(t) dx(t+tau) / (n - tau), dx = x - (time mean of x along the trajectory), averaged over trajectories",
+        "stops": super::lifetimes::summary(m, plan, o, ts),
+        "correlation": "C(tau) = sum_t dx(t) dx(t+tau) / (n - tau), dx = x - (time mean of x along the trajectory), n its outputs, averaged over the trajectories whose outputs span the lag (count per lag: column n of correlations.csv); lags on the uniform grid k * output_interval only",
     });
     files.push(write_summary(dir, &summary)?);
     Ok(files)

@@ -22,7 +22,7 @@ use crate::runtime::HamiltonianError;
 use crate::runtime::Molecule;
 use crate::runtime::cartesian_system::{CartesianError, CartesianSystem};
 use crate::runtime::charts::{ChartError, ChartIntegrator, ChartObserver, ChartReport, ChartStart, ChartState};
-use crate::runtime::ensemble::{CorrelationWorkspace, Histogram, Moments};
+use crate::runtime::ensemble::{CorrelationWorkspace, Histogram, Lifetimes, Moments, Side};
 use crate::runtime::frames::body_of_lab_exact;
 use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
@@ -75,7 +75,13 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     /// Run the trajectories on SIMD lanes where the plan allows it (DOP853, nothing frozen, no
     /// kept trajectories): the same results to round-off, faster (see `super::lanes`).
     pub lanes: bool,
+    /// `run.stop_outside`: a trajectory stops at the first output time at which one of these
+    /// coordinates (index, name, bounds in a.u.) is outside its bounds; that output is its last.
+    pub stops: Vec<StopCondition>,
 }
+
+/// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
+pub type StopCondition = (usize, &'static str, [f64; 2]);
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Plan<'_, M, N, NA> {
     /// Whether the trajectories switch charts: `cartesian_fallback`, DOP853 (an adaptive method
@@ -87,6 +93,69 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Plan<'_, M, N, NA> {
             && self.reduction.active.iter().all(|&a| a)
             && CartesianSystem::new(self.molecule).is_ok()
     }
+}
+
+impl<M, const N: usize, const NA: usize> Plan<'_, M, N, NA> {
+    /// The lags of the correlations: the output times on the uniform grid `k · interval`. When
+    /// `t_end` is not a multiple of the interval (within 1e-9 of one), the last output closes a
+    /// shorter interval and is left out: a correlation (and its FFT spectrum) needs equal lags.
+    pub fn correlation_lags(&self) -> usize {
+        let n = self.times.len();
+        match n {
+            0 | 1 => n,
+            _ if self.times[n - 1] - self.times[n - 2] < self.interval * (1.0 - 1e-9) => n - 1,
+            _ => n,
+        }
+    }
+
+    /// The first stop condition `q` meets (outside its bounds): its index, the side and the
+    /// coordinate's value.
+    fn stop_met(&self, q: &[f64]) -> Option<Stop> {
+        self.stops.iter().enumerate().find_map(|(c, &(i, _, [low, high]))| {
+            let v = q[i];
+            let side = if v < low {
+                Side::Below
+            } else if v > high {
+                Side::Above
+            } else if v.is_nan() {
+                // Not inside: as `rovib run` treats it, outside (reported on the upper side).
+                Side::Above
+            } else {
+                return None;
+            };
+            Some(Stop { condition: c, side, value: v })
+        })
+    }
+}
+
+/// The stop condition a trajectory met at its last output.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stop {
+    /// Index into [`Plan::stops`].
+    pub condition: usize,
+    /// Which side of the interval.
+    pub side: Side,
+    /// The coordinate's value, a.u.
+    pub value: f64,
+}
+
+/// How many stopped trajectories an outcome lists individually (the first, by index); all are
+/// counted in [`Outcome::lifetimes`].
+pub const LISTED_STOPS: usize = 10_000;
+
+/// One stopped trajectory.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StoppedTrajectory {
+    /// Trajectory index.
+    pub index: u64,
+    /// The output time at which it stopped, a.u.
+    pub time: f64,
+    /// The stop condition (index into the plan's stop conditions).
+    pub condition: usize,
+    /// Which side of the interval.
+    pub side: Side,
+    /// The coordinate's value there, a.u.
+    pub value: f64,
 }
 
 /// How many listed trajectories [`ChartCounts`] keeps (the first, by index).
@@ -173,7 +242,8 @@ pub struct Accumulators {
     pub means: Vec<Moments>,
     /// One histogram per (histogram, time), in scene order.
     pub histograms: Vec<Histogram>,
-    /// Per correlated quantity, the moments of `C(τ)` over trajectories, per lag.
+    /// Per correlated quantity, the moments of `C(τ)` over the trajectories spanning the lag,
+    /// per lag ([`Plan::correlation_lags`] of them).
     pub correlations: Vec<Vec<Moments>>,
 }
 
@@ -192,7 +262,7 @@ impl Accumulators {
             n_means: plan.n_means,
             means: vec![Moments::new(); plan.times.len() * plan.n_means],
             histograms,
-            correlations: vec![vec![Moments::new(); plan.times.len()]; plan.correlations.len()],
+            correlations: vec![vec![Moments::new(); plan.correlation_lags()]; plan.correlations.len()],
         }
     }
 
@@ -248,6 +318,13 @@ pub struct Outcome {
     /// Chart switches of the completed trajectories (all zero for a plan that does not switch).
     #[serde(default)]
     pub charts: ChartCounts,
+    /// Completed trajectories observed per output time and stopped by `run.stop_outside`
+    /// (a trajectory that stops is completed: its outputs up to the stop are in the statistics).
+    #[serde(default)]
+    pub lifetimes: Lifetimes,
+    /// The first [`LISTED_STOPS`] stopped trajectories by index.
+    #[serde(default)]
+    pub first_stops: Vec<StoppedTrajectory>,
 }
 
 impl Outcome {
@@ -262,6 +339,8 @@ impl Outcome {
             steps: 0,
             rhs_evaluations: 0,
             charts: ChartCounts::default(),
+            lifetimes: Lifetimes::default(),
+            first_stops: Vec::new(),
         }
     }
 
@@ -281,6 +360,32 @@ impl Outcome {
         self.steps += other.steps;
         self.rhs_evaluations += other.rhs_evaluations;
         self.charts.merge(&other.charts);
+        self.lifetimes.merge(&other.lifetimes);
+        let room = LISTED_STOPS.saturating_sub(self.first_stops.len());
+        self.first_stops.extend(other.first_stops.iter().take(room).cloned());
+    }
+
+    /// Counts a completed trajectory observed at `observed` output times, stopped by `stop` at
+    /// the last of them (or run to the end).
+    pub(super) fn count_lifetime<M, const N: usize, const NA: usize>(
+        &mut self,
+        plan: &Plan<'_, M, N, NA>,
+        index: u64,
+        observed: usize,
+        stop: Option<Stop>,
+    ) {
+        self.lifetimes.add(plan.times.len(), plan.stops.len(), observed, stop.map(|s| (s.condition, s.side)));
+        if let Some(s) = stop
+            && self.first_stops.len() < LISTED_STOPS
+        {
+            self.first_stops.push(StoppedTrajectory {
+                index,
+                time: plan.times[observed - 1],
+                condition: s.condition,
+                side: s.side,
+                value: s.value,
+            });
+        }
     }
 
     /// Failed trajectories in all.
@@ -426,6 +531,8 @@ pub(super) struct Watch<'a, 'm, M, const N: usize, const NA: usize> {
     pub(super) cartesian: Option<CartesianSystem<'m, M, N, NA>>,
     /// q at the last output (the branch for the closed-form coordinates of a Cartesian state).
     pub(super) last_q: crate::runtime::nalgebra::SVector<f64, N>,
+    /// The stop condition met at the last output (`plan.stops`), which ended the trajectory.
+    pub(super) stopped: Option<Stop>,
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_, '_, M, N, NA> {
@@ -511,6 +618,12 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
             }
         }
         self.k += 1;
+        // Checked on q at output times, as `rovib run` does: the output where a coordinate is
+        // outside is the trajectory's last.
+        if let Some(stop) = self.plan.stop_met(body.q.as_slice()) {
+            self.stopped = Some(stop);
+            return ControlFlow::Break(());
+        }
         ControlFlow::Continue(())
     }
 }
@@ -568,9 +681,10 @@ where
     let needs_dipole = plan.quantities.iter().any(Quantity::needs_dipole);
     let mut buffer = vec![0.0; n_times * nq];
     let mut y0 = vec![0.0; dim];
-    let mut workspace = (!plan.correlations.is_empty()).then(|| CorrelationWorkspace::new(n_times));
-    let mut series = vec![0.0; n_times];
-    let mut correlation = vec![0.0; n_times];
+    let lags = plan.correlation_lags();
+    let mut workspace = (!plan.correlations.is_empty()).then(|| CorrelationWorkspace::new(lags));
+    let mut series = vec![0.0; lags];
+    let mut correlation = vec![0.0; lags];
     let panic_at = panic_hook();
 
     for index in indices {
@@ -642,6 +756,7 @@ where
             csv,
             cartesian: if switching { CartesianSystem::new(plan.molecule).ok() } else { None },
             last_q: state.q,
+            stopped: None,
         };
         let mut chart_report = ChartReport::default();
         let result = match &mut integrator {
@@ -679,7 +794,7 @@ where
         {
             watch.failure.get_or_insert(("output", plan.t_end, e));
         }
-        let (k, interrupted, observed) = (watch.k, watch.interrupted, watch.failure.take());
+        let (k, interrupted, observed, stopped) = (watch.k, watch.interrupted, watch.failure.take(), watch.stopped);
         match (result, observed) {
             (Err((reason, detail, time)), _) => {
                 outcome.fail(failure(reason, time, detail), progress);
@@ -689,7 +804,7 @@ where
                 outcome.interrupted += 1;
                 continue;
             }
-            (Ok(_), None) if k != n_times => {
+            (Ok(_), None) if k != n_times && stopped.is_none() => {
                 let detail = format!("{k} output times observed, {n_times} expected");
                 outcome.fail(failure("output", Some(plan.t_end), detail), progress);
             }
@@ -700,7 +815,8 @@ where
                 if switching {
                     outcome.charts.add(index, &chart_report);
                 }
-                fold(plan, &mut outcome.statistics, &buffer, workspace.as_mut(), &mut series, &mut correlation);
+                outcome.count_lifetime(plan, index, k, stopped);
+                fold(plan, &mut outcome.statistics, &buffer, k, workspace.as_mut(), &mut series, &mut correlation);
             }
         }
         progress.done();
@@ -724,18 +840,23 @@ fn write_chart_report(dir: &std::path::Path, r: &ChartReport, time_scale: f64) -
     f.flush()
 }
 
-/// Folds one completed trajectory's observations into the accumulators.
+/// Folds one completed trajectory's observations at its first `observed` output times (all of
+/// them, or up to the one where it stopped) into the accumulators: each output time's means and
+/// histograms are over the trajectories observed there, and a trajectory's correlation is that
+/// of its own series (`series` and `correlation` are [`Plan::correlation_lags`] long), added
+/// at the lags it spans.
 pub(super) fn fold<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     acc: &mut Accumulators,
     buffer: &[f64],
+    observed: usize,
     workspace: Option<&mut CorrelationWorkspace>,
     series: &mut [f64],
     correlation: &mut [f64],
 ) {
     let nq = plan.quantities.len();
     let nm = plan.n_means;
-    for k in 0..plan.times.len() {
+    for k in 0..observed {
         for j in 0..nm {
             acc.means[k * nm + j].add(buffer[k * nq + j]);
         }
@@ -743,11 +864,17 @@ pub(super) fn fold<M, const N: usize, const NA: usize>(
     let mut h = 0;
     for (qi, _, _, at) in &plan.histograms {
         for &k in at {
-            acc.histograms[h].add(buffer[k * nq + qi]);
+            if k < observed {
+                acc.histograms[h].add(buffer[k * nq + qi]);
+            }
             h += 1;
         }
     }
-    if let Some(ws) = workspace {
+    let span = observed.min(series.len());
+    if let Some(ws) = workspace
+        && span > 0
+    {
+        let (series, correlation) = (&mut series[..span], &mut correlation[..span]);
         for (ci, &qi) in plan.correlations.iter().enumerate() {
             for (k, s) in series.iter_mut().enumerate() {
                 *s = buffer[k * nq + qi];

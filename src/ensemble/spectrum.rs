@@ -25,19 +25,23 @@ pub const PADDING: usize = 4;
 pub const MAX_WAVENUMBER: f64 = 5000.0;
 
 /// The summed dipole autocorrelation ⟨μ_lab(0)·μ_lab(τ)⟩ (e²·bohr²) per lag, if the plan
-/// correlates all three components.
+/// correlates all three components and some trajectory completed: the lags on the uniform grid
+/// (`Plan::correlation_lags`) that some trajectory spans.
 pub fn dipole_correlation<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     acc: &Accumulators,
 ) -> Option<Vec<f64>> {
-    let mut c = vec![0.0; plan.times.len()];
+    // The lags some trajectory spans (trajectories stopped by `run.stop_outside` span fewer):
+    // the counts fall with the lag, so these are the first lags.
+    let spanned = acc.correlations.first().map_or(0, |c| c.iter().take_while(|m| m.count() > 0).count());
+    let mut c = vec![0.0; spanned.min(plan.correlation_lags())];
     for axis in 0..3 {
         let ci = plan.correlations.iter().position(|&qi| plan.quantities[qi] == Quantity::LabDipole(axis))?;
         for (sum, m) in c.iter_mut().zip(&acc.correlations[ci]) {
             *sum += m.mean();
         }
     }
-    Some(c)
+    (!c.is_empty()).then_some(c)
 }
 
 /// The spectrum of the plan's dipole correlation, if it has one.

@@ -56,11 +56,14 @@ impl CorrelationWorkspace {
         false
     }
 
-    /// Writes `C(τ)` of `x` for `τ = 0..n` into `out` (both of length [`Self::len`]).
+    /// Writes `C(τ)` of `x` for `τ = 0..n` into `out`. Both have the same length `n`, at least 1
+    /// and at most [`Self::len`]; every method of the workspace takes a series that long, and
+    /// treats it as a whole series of `n` values (normalisation, time mean and taper over `n`).
     ///
     /// # Panics
     ///
-    /// If `x` or `out` does not have the workspace's length (a programming error).
+    /// If `x` and `out` differ in length, are empty or longer than the workspace's length (a
+    /// programming error).
     pub fn autocorrelation(&mut self, x: &[f64], out: &mut [f64]) {
         self.correlate(x, 0.0, out);
     }
@@ -95,12 +98,15 @@ impl CorrelationWorkspace {
     }
 
     fn correlate_with(&mut self, x: &[f64], shift: f64, taper: bool, out: &mut [f64]) {
-        let n = self.n;
+        // A series shorter than the workspace's (a trajectory that stopped early) is its own
+        // series: its own length in the normalisation and the taper; the padding stays ≥ 2n − 1.
+        let n = x.len();
         assert!(
-            x.len() == n && out.len() == n,
-            "series of length {} and {} for a workspace of {n}",
+            n >= 1 && n <= self.n && out.len() == n,
+            "series of length {} and {} for a workspace of {}",
             x.len(),
-            out.len()
+            out.len(),
+            self.n
         );
         let mut taper_power = 0.0;
         for (t, (b, &v)) in self.buffer.iter_mut().zip(x).enumerate() {
@@ -159,6 +165,27 @@ mod tests {
                     c[tau],
                     direct[tau]
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn a_shorter_series_in_a_longer_workspace_is_its_own_series() {
+        let mut ws = CorrelationWorkspace::new(64);
+        for n in [1, 2, 17, 33, 64] {
+            let x = series(n);
+            let mut own = CorrelationWorkspace::new(n);
+            for f in [
+                CorrelationWorkspace::autocorrelation,
+                CorrelationWorkspace::fluctuation_autocorrelation,
+                CorrelationWorkspace::tapered_autocorrelation,
+            ] {
+                let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+                f(&mut ws, &x, &mut a);
+                f(&mut own, &x, &mut b);
+                for tau in 0..n {
+                    assert!((a[tau] - b[tau]).abs() <= 1e-13 * (1.0 + b[0].abs()), "n = {n}, tau = {tau}");
+                }
             }
         }
     }

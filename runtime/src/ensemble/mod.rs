@@ -1,5 +1,5 @@
-//! Mergeable accumulators for ensemble statistics: means and variances, histograms and
-//! time-correlation functions, folded one trajectory at a time and merged block by block.
+//! Mergeable accumulators for ensemble statistics: means and variances, histograms,
+//! time-correlation functions and lifetimes, folded one trajectory at a time and merged block by block.
 //!
 //! An ensemble of millions of trajectories keeps no histories: each finished trajectory is
 //! folded into accumulators of fixed size, and the accumulators of blocks of trajectories are
@@ -9,8 +9,10 @@
 
 mod correlation;
 mod histogram;
+mod lifetimes;
 mod moments;
 
 pub use correlation::{CorrelationWorkspace, autocorrelation_direct};
 pub use histogram::{Histogram, HistogramError};
+pub use lifetimes::{Lifetimes, Side};
 pub use moments::Moments;
