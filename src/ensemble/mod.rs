@@ -441,7 +441,7 @@ fn open_checkpoint(
         bytes.push(0);
         bytes.extend_from_slice(&b);
     }
-    let header = Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK);
+    let header = Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK).with_lanes(options.lanes);
     if options.resume {
         let (c, resumed) = Checkpoint::resume(&path, &header, checkpoint::size_limit(&header, empty))
             .map_err(|e| CliError::Message(e.to_string()))?;
