@@ -130,10 +130,14 @@ impl Link<'_> {
 /// Whether the ensemble ran to the end.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum Status {
-    /// Every trajectory was run (completed or failed).
+    /// Every trajectory was run, and at least one completed (the statistics cover the completed
+    /// ones; the failed ones are counted by reason in summary.json).
     Completed,
     /// Stopped by the stop flag (Ctrl-C): the statistics cover the trajectories that finished.
     Interrupted,
+    /// Every trajectory was run and every one failed: there are no statistics
+    /// (`rovib ensemble` exits with an error).
+    Failed,
 }
 
 impl Status {
@@ -142,6 +146,7 @@ impl Status {
         match self {
             Status::Completed => "completed",
             Status::Interrupted => "interrupted",
+            Status::Failed => "failed",
         }
     }
 }
@@ -315,10 +320,14 @@ where
         ));
     }
     let worker = matches!(link, Link::Worker(_));
-    if !worker {
+    // One run per folder, held until the last output is written (the other ranks write nothing).
+    let _lock = if worker {
+        None
+    } else {
         std::fs::create_dir_all(&options.out_dir)
             .map_err(|e| CliError::context(format!("cannot create {}", options.out_dir.display()), e))?;
-    }
+        Some(crate::dir_lock::DirLock::acquire(&options.out_dir)?)
+    };
     let plan = Plan {
         molecule: m,
         reduction,
@@ -364,6 +373,19 @@ where
     };
     let empty = Outcome::new(Accumulators::new(&plan));
     let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options, &empty)?;
+    // From here on the folder is this run's: nothing of an earlier run stays, and the summary
+    // says "running" until it says how the run ended.
+    let dir = &options.out_dir;
+    let failed = |error: &str| {
+        let checkpoint = options.checkpoint.then(|| dir.join(CHECKPOINT_FILE));
+        // The error itself is what matters; a summary that cannot be written is mentioned.
+        match output::write_failed(dir, scene, m.name(), n, error, checkpoint.as_deref()) {
+            Ok(_) => CliError::Message(error.to_owned()),
+            Err(e) => CliError::Message(format!("{error}; also {e} (summary.json may still say \"running\")")),
+        }
+    };
+    output::remove_stale_outputs(dir, options.resume)?;
+    output::write_running(dir, scene, m.name(), n, options.resume)?;
     let mut collector = Collector::new(n, empty, resumed, checkpoint, ranks);
     if let Some(bar) = &progress.bar {
         bar.inc(collector.resumed());
@@ -383,12 +405,14 @@ where
         } else {
             String::new()
         };
-        return Err(CliError::Message(format!("the ensemble stopped: {e}{kept}")));
+        return Err(failed(&format!("the ensemble stopped: {e}{kept}")));
     }
     let resumed = collector.resumed();
     let (total, blocks_by_rank, checkpoint) = collector.finish();
     let status = if options.stop.load(Ordering::Relaxed) && total.interrupted > 0 {
         Status::Interrupted
+    } else if total.completed == 0 && total.failed_count() > 0 {
+        Status::Failed
     } else {
         Status::Completed
     };
@@ -408,11 +432,12 @@ where
         sampler: description.to_owned(),
         files: Vec::new(),
     };
-    report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)?;
+    report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)
+        .map_err(|e| failed(&format!("the ensemble ran, but its outputs could not be written: {e}")))?;
     if let Some(c) = checkpoint
-        && status == Status::Completed
+        && status != Status::Interrupted
     {
-        // The outputs are written: the checkpoint has served.
+        // Every trajectory ran and the outputs are written: the checkpoint has served.
         std::fs::remove_file(c.path())
             .map_err(|e| CliError::context(format!("cannot remove {}", c.path().display()), e))?;
     }
