@@ -141,7 +141,7 @@ fn main() {
             parse.push(per_op(|| {
                 black_box(read_message(black_box(&bytes)));
             }));
-            merge.push(per_op(|| total.merge(black_box(&block))));
+            merge.push(per_op(|| total.merge(black_box(&block)).expect("one layout")));
             line_cpu.push(per_op(|| {
                 black_box(serde_json::to_vec(black_box(&block)).unwrap());
             }));

@@ -144,7 +144,8 @@ fn run_scene(d: &Path) -> PathBuf {
 }
 
 fn names(d: &Path) -> Vec<String> {
-    let mut n: Vec<String> = std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    let mut n: Vec<String> =
+        std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     n.sort();
     n
 }
@@ -157,7 +158,9 @@ fn every_trajectory_failing_is_status_failed_with_a_non_zero_exit_and_no_stale_f
     ok(&ensemble(&scene, &out, &["--threads", "2"]));
     assert_eq!(summary(&out)["status"], "completed");
     // Files an earlier run of another kind (or with a spectrum, or kept trajectories) left.
-    for f in ["spectrum.csv", "spectrum.svg", "trajectory.csv", "lab.xyz", "restart.json", "trajectories/64/trajectory.csv"] {
+    for f in
+        ["spectrum.csv", "spectrum.svg", "trajectory.csv", "lab.xyz", "restart.json", "trajectories/64/trajectory.csv"]
+    {
         std::fs::create_dir_all(out.join(f).parent().unwrap()).unwrap();
         std::fs::write(out.join(f), "stale\n").unwrap();
     }

@@ -354,8 +354,12 @@ fn an_empty_molecule_name_is_not_told_to_add_molecules_dot_toml() {
 /// Runs `rovib` with `args`, at most `limit`: its exit status and stderr (a hang fails).
 fn rovib_within(args: &[&str], limit: Duration) -> (std::process::ExitStatus, String) {
     use std::io::Read as _;
-    let mut child =
-        Command::new(env!("CARGO_BIN_EXE_rovib")).args(args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     let begin = Instant::now();
     let status = loop {
         if let Some(s) = child.try_wait().unwrap() {
@@ -393,8 +397,7 @@ fn a_resume_from_endless_files_is_refused_with_the_file_and_its_limit() {
         assert!(s.success(), "{err}");
         std::fs::remove_file(out.join(file)).unwrap();
         std::os::unix::fs::symlink("/dev/zero", out.join(file)).unwrap();
-        let (s, err) =
-            rovib_within(&["run", "--resume", out.to_str().unwrap(), longer.to_str().unwrap(), "-q"], limit);
+        let (s, err) = rovib_within(&["run", "--resume", out.to_str().unwrap(), longer.to_str().unwrap(), "-q"], limit);
         assert!(!s.success(), "a resume from /dev/zero as {file} succeeded");
         assert!(err.contains(&out.join(file).display().to_string()) && err.contains(&expected), "{file}: {err}");
     }

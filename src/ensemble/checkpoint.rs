@@ -55,7 +55,14 @@ impl Header {
     /// The header of an ensemble of `trajectories` from the scene file's `scene` bytes.
     /// Lanes on (the default; see [`Header::with_lanes`]).
     pub fn new(scene: &[u8], seed: u64, trajectories: u64, block: u64) -> Self {
-        Self { format: FORMAT, scene_hash: format!("{:016x}", scene_hash(scene)), seed, trajectories, block, lanes: true }
+        Self {
+            format: FORMAT,
+            scene_hash: format!("{:016x}", scene_hash(scene)),
+            seed,
+            trajectories,
+            block,
+            lanes: true,
+        }
     }
 
     /// The same header with the lane setting `lanes`.
@@ -70,6 +77,76 @@ impl Header {
 
     fn blocks(&self) -> u64 {
         self.trajectories.div_ceil(self.block.max(1))
+    }
+}
+
+/// What makes blocks of two processes (MPI ranks) mergeable: the run's [`Header`] (hash of the
+/// scene and states file, seed, N, block size, lane setting) and the layout of its statistics.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Identity {
+    /// The run, as its checkpoint records it.
+    pub header: Header,
+    /// The statistics' layout.
+    pub layout: Layout,
+}
+
+/// The shape of a run's accumulators.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Layout {
+    /// Output times.
+    pub n_times: usize,
+    /// Quantities with means.
+    pub n_means: usize,
+    /// Each histogram's bins, low and high edge.
+    pub histograms: Vec<(usize, f64, f64)>,
+    /// Each correlation function's lags.
+    pub correlations: Vec<usize>,
+}
+
+impl Layout {
+    /// The layout of `a`.
+    pub fn of(a: &super::runner::Accumulators) -> Self {
+        Self {
+            n_times: a.n_times,
+            n_means: a.n_means,
+            histograms: a.histograms.iter().map(|h| (h.counts().len(), h.low(), h.high())).collect(),
+            correlations: a.correlations.iter().map(Vec::len).collect(),
+        }
+    }
+}
+
+impl Identity {
+    /// What differs in `other` from this identity, one phrase each (`other`'s value, then
+    /// this one's); empty when the two runs are the same.
+    pub fn differences(&self, other: &Identity, this: &str) -> Vec<String> {
+        let (a, b) = (&self.header, &other.header);
+        let mut d = Vec::new();
+        if a.format != b.format {
+            d.push(format!("message format {} ({this}: {}): another rovib version", b.format, a.format));
+        }
+        if a.scene_hash != b.scene_hash {
+            d.push(format!(
+                "scene hash {} ({this}: {}): another scene file or states file",
+                b.scene_hash, a.scene_hash
+            ));
+        }
+        if a.seed != b.seed {
+            d.push(format!("seed {} ({this}: {})", b.seed, a.seed));
+        }
+        if a.trajectories != b.trajectories {
+            d.push(format!("{} trajectories ({this}: {})", b.trajectories, a.trajectories));
+        }
+        if a.block != b.block {
+            d.push(format!("blocks of {} ({this}: {})", b.block, a.block));
+        }
+        if a.lanes != b.lanes {
+            let s = |l: bool| if l { "lanes" } else { "--no-lanes" };
+            d.push(format!("{} ({this}: {})", s(b.lanes), s(a.lanes)));
+        }
+        if self.layout != other.layout {
+            d.push(format!("statistics layout {:?} ({this}: {:?})", other.layout, self.layout));
+        }
+        d
     }
 }
 
@@ -230,7 +307,8 @@ impl Checkpoint {
             ));
         }
         if found == header.clone().with_lanes(found.lanes) && found.lanes != header.lanes {
-            let setting = |lanes: bool| if lanes { "on SIMD lanes (the default)" } else { "one at a time (--no-lanes)" };
+            let setting =
+                |lanes: bool| if lanes { "on SIMD lanes (the default)" } else { "one at a time (--no-lanes)" };
             return Err(fail(
                 Some(1),
                 format!(
@@ -472,7 +550,7 @@ mod tests {
         let mut c = Checkpoint::create(&path, &header).unwrap();
         c.append_all(&[(0, &outcome(0)), (1, &outcome(1)), (4, &outcome(4))]).unwrap();
         let mut merged = outcome(0);
-        merged.merge(&outcome(1));
+        merged.merge(&outcome(1)).unwrap();
         let pending = BTreeMap::from([(4, outcome(4))]);
         c.compact(&header, 2, &merged, &pending).unwrap();
         c.append(3, &outcome(3)).unwrap();

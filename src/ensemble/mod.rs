@@ -43,7 +43,7 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
-use self::checkpoint::{Checkpoint, Header, Resumed};
+use self::checkpoint::{Checkpoint, Header, Identity, Layout, Resumed};
 use self::runner::{Accumulators, BLOCK, Outcome, Plan, Progress, run_block};
 use self::scene::{Bound, EnsembleScene, MethodSpec, parse_ensemble};
 use self::schedule::{BlockResult, Collector, Remote, Work, block_range, caught, coordinate};
@@ -110,8 +110,9 @@ pub enum Link<'a> {
 /// A process that runs blocks for rank 0 (see [`mpi`](self)).
 pub trait Serve {
     /// Asks rank 0 for blocks, runs them with `work` and sends their outcomes back, until rank 0
-    /// has no more.
-    fn serve(&mut self, work: &Work<'_>) -> Result<(), CliError>;
+    /// has no more; every message carries `identity` (this run), which rank 0 checks against its
+    /// own before it accepts any block.
+    fn serve(&mut self, work: &Work<'_>, identity: &Identity) -> Result<(), CliError>;
 
     /// Processes in all.
     fn ranks(&self) -> usize;
@@ -363,15 +364,19 @@ where
     };
     let work = Work { threads, pool: &pool, run: &run, stop: &options.stop, progress: &progress };
 
+    let empty = Outcome::new(Accumulators::new(&plan));
+    let identity = Identity { header: run_header(scene, ensemble, options), layout: Layout::of(&empty.statistics) };
     let remote = match link {
         Link::Worker(w) => {
-            w.serve(&work)?;
+            w.serve(&work, &identity)?;
             return Ok(None);
         }
-        Link::Root(r) => Some(r),
+        Link::Root(r) => {
+            r.expect(identity);
+            Some(r)
+        }
         Link::Alone => None,
     };
-    let empty = Outcome::new(Accumulators::new(&plan));
     let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options, &empty)?;
     // From here on the folder is this run's: nothing of an earlier run stays, and the summary
     // says "running" until it says how the run ended.
@@ -408,7 +413,8 @@ where
         return Err(failed(&format!("the ensemble stopped: {e}{kept}")));
     }
     let resumed = collector.resumed();
-    let (total, blocks_by_rank, checkpoint) = collector.finish();
+    let (total, blocks_by_rank, checkpoint) =
+        collector.finish().map_err(|e| failed(&format!("the ensemble stopped: {e}")))?;
     let status = if options.stop.load(Ordering::Relaxed) && total.interrupted > 0 {
         Status::Interrupted
     } else if total.completed == 0 && total.failed_count() > 0 {
@@ -444,6 +450,20 @@ where
     Ok(Some(report))
 }
 
+/// What identifies this run in its checkpoint and to the other MPI ranks: the hash of the
+/// scene's bytes and, for a states file, the file's, the seed, N, the block size and the lane
+/// setting.
+fn run_header(scene: &Scene, ensemble: &EnsembleScene, options: &EnsembleOptions) -> Header {
+    let mut bytes = scene.text.clone().into_bytes();
+    if let MethodSpec::File { path: states, .. } = &ensemble.method
+        && let Ok(b) = std::fs::read(states)
+    {
+        bytes.push(0);
+        bytes.extend_from_slice(&b);
+    }
+    Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK).with_lanes(options.lanes)
+}
+
 /// The checkpoint of this run (new, or continued with `options.resume`) and what it held.
 fn open_checkpoint(
     scene: &Scene,
@@ -458,15 +478,7 @@ fn open_checkpoint(
         }
         return Ok((None, Resumed::default()));
     }
-    // The scene's bytes and, for a states file, the file's: a resume with either changed is refused.
-    let mut bytes = scene.text.clone().into_bytes();
-    if let MethodSpec::File { path: states, .. } = &ensemble.method
-        && let Ok(b) = std::fs::read(states)
-    {
-        bytes.push(0);
-        bytes.extend_from_slice(&b);
-    }
-    let header = Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK).with_lanes(options.lanes);
+    let header = run_header(scene, ensemble, options);
     if options.resume {
         let (c, resumed) = Checkpoint::resume(&path, &header, checkpoint::size_limit(&header, empty))
             .map_err(|e| CliError::Message(e.to_string()))?;

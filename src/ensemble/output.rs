@@ -100,7 +100,13 @@ fn remove_kept(dir: &Path) -> Result<(), String> {
 }
 
 /// The summary of an ensemble that has started: status "running", replaced when it ends.
-pub fn write_running(dir: &Path, scene: &Scene, molecule: &str, requested: u64, resume: bool) -> Result<PathBuf, String> {
+pub fn write_running(
+    dir: &Path,
+    scene: &Scene,
+    molecule: &str,
+    requested: u64,
+    resume: bool,
+) -> Result<PathBuf, String> {
     write_summary(
         dir,
         &json!({
