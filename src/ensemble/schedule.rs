@@ -371,6 +371,26 @@ mod tests {
         Outcome::new(statistics)
     }
 
+    /// A block of another layout (another scene's histogram shape) fails the run with what
+    /// differs; it neither panics nor is merged.
+    #[test]
+    fn a_block_of_another_layout_is_an_error_not_a_panic() {
+        use crate::runtime::ensemble::Histogram;
+        let with = |bins: usize| {
+            let mut o = empty();
+            o.statistics.histograms = vec![Histogram::new(bins, 0.0, 1.0).unwrap()];
+            o
+        };
+        let mut c = Collector::new(2 * BLOCK, with(20), Resumed::default(), None, 1);
+        c.add(0, 0, Ok(with(30)));
+        c.flush().unwrap();
+        let e = c.error().expect("a block of another layout must fail the run");
+        assert!(e.contains("block 0 cannot be merged") && e.contains("histogram 0"), "{e}");
+        let mut a = with(20);
+        assert!(a.merge(&outcome(0)).is_err());
+        assert_eq!(a, with(20), "nothing is merged from accumulators of another layout");
+    }
+
     #[test]
     fn blocks_arriving_in_any_order_merge_in_block_order() {
         let n = 10 * BLOCK;
