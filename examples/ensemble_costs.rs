@@ -42,7 +42,10 @@ fn process_cpu() -> f64 {
 /// The message a rank sends to rank 0 with `results` (exactly what src/ensemble/mpi.rs sends).
 #[cfg(feature = "mpi")]
 fn message(results: Vec<(u64, BlockResult)>) -> Vec<u8> {
-    serde_json::to_vec(&rovib::ensemble::mpi::ToRoot::Ready { want: 2, results }).unwrap()
+    use rovib::ensemble::checkpoint::{Identity, Layout};
+    let statistics = &results[0].1.as_ref().expect("a block's outcome").statistics;
+    let identity = Identity { header: Header::new(b"costs", 1, 1 << 20, BLOCK), layout: Layout::of(statistics) };
+    serde_json::to_vec(&rovib::ensemble::mpi::ToRoot::Ready { identity, want: 2, results }).unwrap()
 }
 
 #[cfg(feature = "mpi")]
@@ -141,7 +144,7 @@ fn main() {
             parse.push(per_op(|| {
                 black_box(read_message(black_box(&bytes)));
             }));
-            merge.push(per_op(|| total.merge(black_box(&block))));
+            merge.push(per_op(|| total.merge(black_box(&block)).expect("one layout")));
             line_cpu.push(per_op(|| {
                 black_box(serde_json::to_vec(black_box(&block)).unwrap());
             }));

@@ -1,66 +1,87 @@
-//! One run per output directory: a lock file `.rovib.lock`, created with `create_new` (atomic on
-//! every local file system) and holding the owner's process id, removed when the run ends.
+//! One run per output directory: an exclusive `flock(2)` on the lock file `.rovib.lock`, which
+//! holds the owner's process id and is removed when the run ends.
 //!
-//! A second run into the same directory fails at once. A lock left by a process that no longer
-//! exists (killed with SIGKILL, a power cut) is not taken over silently: the error says that its
-//! process is gone and how to remove it.
+//! A second run into the same directory (`rovib run` or `rovib ensemble`, a resume or not)
+//! fails at once, naming the process that holds it. The kernel releases the lock when its
+//! process ends, however it ends: a lock file left by a run that was killed (SIGKILL, out of
+//! memory) holds no lock, and the next run takes it over, so `--resume` after a kill needs no
+//! manual step. (On a network file system the lock is as good as its `flock` support; Linux
+//! NFS emulates it with byte-range locks, which do work across clients.)
 
+use std::fs::File;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
+
+use nix::errno::Errno;
+use nix::fcntl::{Flock, FlockArg};
 
 /// The lock file's name inside an output directory.
 pub const LOCK_FILE: &str = ".rovib.lock";
 
-/// A held lock on an output directory; dropping it removes the lock file.
+/// A held lock on an output directory; dropping it removes the lock file and releases the lock.
 #[derive(Debug)]
 pub struct DirLock {
     path: PathBuf,
+    _file: Flock<File>,
 }
 
 impl DirLock {
     /// Locks `dir` (which must exist) for this process, or says who holds it.
     pub fn acquire(dir: &Path) -> Result<Self, String> {
         let path = dir.join(LOCK_FILE);
-        match std::fs::OpenOptions::new().write(true).create_new(true).open(&path) {
-            Ok(mut file) => {
-                let lock = DirLock { path };
-                writeln!(file, "{}", std::process::id())
-                    .and_then(|()| file.sync_all())
-                    .map_err(|e| format!("cannot write {}: {e}", lock.path.display()))?;
-                Ok(lock)
+        // A holder that ends removes the file while still holding its lock: a file opened just
+        // before that is then locked but no longer the one at `path`; open again.
+        for _ in 0..16 {
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .open(&path)
+                .map_err(|e| format!("cannot create {}: {e}", path.display()))?;
+            let mut file = match Flock::lock(file, FlockArg::LockExclusiveNonblock) {
+                Ok(f) => f,
+                Err((_, Errno::EWOULDBLOCK)) => return Err(held_by(dir, &path)),
+                Err((_, e)) => return Err(format!("cannot lock {}: {e}", path.display())),
+            };
+            if !same_file(&file, &path) {
+                continue;
             }
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(held_by(dir, &path)),
-            Err(e) => Err(format!("cannot create {}: {e}", path.display())),
+            file.set_len(0)
+                .and_then(|()| writeln!(*file, "{}", std::process::id()))
+                .and_then(|()| file.sync_all())
+                .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+            return Ok(DirLock { path, _file: file });
         }
+        Err(format!("cannot lock {}: other runs keep replacing it; try again", path.display()))
     }
 }
 
-/// The message for a directory that is already locked.
+/// Whether `path` still names the open `file`.
+fn same_file(file: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt as _;
+    match (file.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+/// The message for a directory that is locked.
 fn held_by(dir: &Path, path: &Path) -> String {
     let pid = std::fs::read_to_string(path).ok().and_then(|s| s.trim().parse::<u32>().ok());
-    match pid {
-        // /proc/PID exists while the process does (Linux); elsewhere assume it is running.
-        Some(pid) if Path::new("/proc/self").exists() && !Path::new(&format!("/proc/{pid}")).exists() => format!(
-            "{} is locked by process {pid}, which is no longer running (a run that was killed); \
-             if no other run uses this directory, remove {} and try again",
-            dir.display(),
-            path.display()
-        ),
-        Some(pid) => format!(
-            "{} is in use by another run (process {pid}); wait for it to end or choose another --out directory",
-            dir.display()
-        ),
-        None => format!(
-            "{} is locked by another run ({} exists); if no other run uses this directory, remove it and try again",
-            dir.display(),
-            path.display()
-        ),
-    }
+    let by = pid.map_or(String::new(), |pid| format!(" (process {pid})"));
+    format!(
+        "{} is in use by another run{by}, which holds the lock {}; wait for it to end or choose another --out \
+         directory",
+        dir.display(),
+        path.display()
+    )
 }
 
 impl Drop for DirLock {
     fn drop(&mut self) {
-        // Nothing to do about a failure here: the next run reports the stale lock.
+        // Removed while still locked (the lock is released after this, when the file closes).
+        // Nothing to do about a failure here: the file holds no lock once this process ends.
         let _ = std::fs::remove_file(&self.path);
     }
 }
@@ -89,12 +110,14 @@ mod tests {
     }
 
     #[test]
-    fn a_stale_lock_names_its_dead_process_and_the_file_to_remove() {
+    fn a_lock_file_left_by_a_killed_run_is_taken_over() {
         let d = dir("stale");
-        // Process ids on Linux stay below 2^22; this one cannot exist.
+        // A killed run leaves its file but no lock (the kernel released it).
         std::fs::write(d.join(LOCK_FILE), "4294967295\n").unwrap();
-        let e = DirLock::acquire(&d).unwrap_err();
-        assert!(e.contains("no longer running") && e.contains("remove"), "{e}");
-        assert!(e.contains(&d.join(LOCK_FILE).display().to_string()), "{e}");
+        let lock = DirLock::acquire(&d).unwrap();
+        let text = std::fs::read_to_string(d.join(LOCK_FILE)).unwrap();
+        assert_eq!(text.trim(), std::process::id().to_string());
+        drop(lock);
+        assert!(!d.join(LOCK_FILE).exists());
     }
 }

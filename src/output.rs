@@ -20,6 +20,10 @@ use crate::runtime::nalgebra::Vector3;
 use crate::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM, HARTREE_IN_EV};
 use crate::scene::Scene;
 
+/// The longest line [`OutputFile::append`] reads from a file it continues: 1 MiB, far above a
+/// trajectory.csv row (tens of columns of at most 25 characters) or a lab.xyz line.
+pub const MAX_LINE_BYTES: u64 = 1 << 20;
+
 /// A writer that remembers its path for error messages.
 pub struct OutputFile {
     path: PathBuf,
@@ -38,24 +42,54 @@ impl OutputFile {
     /// `first_line` (the header this run would write), that it ends with a whole line and that
     /// it has `lines` lines (what the run being continued wrote, no more and no less).
     pub fn append(dir: &Path, name: &str, first_line: &str, lines: usize) -> Result<Self, String> {
-        use std::io::Read as _;
+        use std::io::{BufRead as _, Read as _};
         let path = dir.join(name);
-        let mut text = String::new();
-        File::open(&path)
-            .and_then(|mut f| f.read_to_string(&mut text))
-            .map_err(|e| format!("cannot read {} to continue it: {e}", path.display()))?;
-        let found = text.lines().next().unwrap_or("");
-        if found != first_line {
-            return Err(format!(
-                "{} starts with `{found}`, not `{first_line}` as this run writes it: it is not this run's (resume \
-                 into the directory of the run that wrote the restart file)",
-                path.display()
-            ));
+        // Read a line at a time, each of at most MAX_LINE_BYTES, and stop past `lines`: memory
+        // stays bounded whatever the file is (a link to /dev/zero, a huge file).
+        let file = File::open(&path).map_err(|e| format!("cannot read {} to continue it: {e}", path.display()))?;
+        let mut reader = std::io::BufReader::new(file);
+        let mut line = Vec::new();
+        let mut found_lines = 0;
+        loop {
+            line.clear();
+            let read = (&mut reader)
+                .take(MAX_LINE_BYTES + 1)
+                .read_until(b'\n', &mut line)
+                .map_err(|e| format!("cannot read {} to continue it: {e}", path.display()))?;
+            if read == 0 {
+                break;
+            }
+            if !line.ends_with(b"\n") {
+                if line.len() as u64 > MAX_LINE_BYTES {
+                    return Err(format!(
+                        "{}: line {} is longer than {MAX_LINE_BYTES} bytes, the most a line of this output can be: it \
+                         is not this run's file (resume into the directory of the run that wrote the restart file)",
+                        path.display(),
+                        found_lines + 1
+                    ));
+                }
+                return Err(format!("{} ends inside a line; it was cut and cannot be continued", path.display()));
+            }
+            if found_lines == 0 {
+                let found = String::from_utf8_lossy(&line);
+                let found = found.trim_end_matches('\n').trim_end_matches('\r');
+                if found != first_line {
+                    return Err(format!(
+                        "{} starts with `{found}`, not `{first_line}` as this run writes it: it is not this run's \
+                         (resume into the directory of the run that wrote the restart file)",
+                        path.display()
+                    ));
+                }
+            }
+            found_lines += 1;
+            if found_lines > lines {
+                return Err(format!(
+                    "{} has more than the {lines} lines the run that wrote the restart file left: it was changed or \
+                     already continued",
+                    path.display()
+                ));
+            }
         }
-        if !text.is_empty() && !text.ends_with('\n') {
-            return Err(format!("{} ends inside a line; it was cut and cannot be continued", path.display()));
-        }
-        let found_lines = text.lines().count();
         if found_lines != lines {
             return Err(format!(
                 "{} has {found_lines} lines, but the run that wrote the restart file left {lines}: it was changed or \

@@ -30,6 +30,12 @@ use crate::runtime::integrate::Dop853Resume;
 /// The file name in a run's output directory.
 pub const RESTART_FILE: &str = "restart.json";
 
+/// The largest `restart.json` read: the scene's text (at most
+/// [`MAX_INPUT_BYTES`](crate::runtime::diagnostic::MAX_INPUT_BYTES), 16 MiB, and at most 6 bytes
+/// per byte once escaped in JSON) and 1 MiB for the state and integrator memory. A larger file,
+/// or an endless one (a link to `/dev/zero`), is refused with this figure instead of read.
+pub const MAX_RESTART_BYTES: u64 = 6 * crate::runtime::diagnostic::MAX_INPUT_BYTES + (1 << 20);
+
 /// What identifies the file's format; a different value is refused.
 pub const FORMAT: &str = "rovib restart 1";
 
@@ -128,13 +134,14 @@ impl Restart {
     /// Reads `dir/restart.json`.
     pub fn read(dir: &Path) -> Result<Self, String> {
         let path = dir.join(RESTART_FILE);
-        let text = std::fs::read_to_string(&path).map_err(|e| {
-            format!(
-                "cannot read {} ({e}): only a run that completed or was interrupted, with \"restart\" in its outputs, \
-                 can be continued",
+        if !path.exists() {
+            return Err(format!(
+                "cannot read {}: it does not exist; only a run that completed or was interrupted, with \"restart\" \
+                 in its outputs, can be continued",
                 path.display()
-            )
-        })?;
+            ));
+        }
+        let text = crate::runtime::diagnostic::read_text_capped(&path, MAX_RESTART_BYTES)?;
         let restart: Restart =
             serde_json::from_str(&text).map_err(|e| format!("{} is not a rovib restart file: {e}", path.display()))?;
         if restart.format != FORMAT {

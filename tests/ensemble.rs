@@ -447,9 +447,9 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
     assert!(shipped == blocks, "the JSON round trip is exact");
     let whole = run_block(&plan, &sampler, 0..120, &stop, &progress);
     let mut f2 = Outcome::new(rovib::ensemble::runner::Accumulators::new(&plan));
-    shipped.iter().for_each(|b| f2.merge(b));
+    shipped.iter().for_each(|b| f2.merge(b).unwrap());
     let mut b2 = Outcome::new(rovib::ensemble::runner::Accumulators::new(&plan));
-    shipped.iter().rev().for_each(|b| b2.merge(b));
+    shipped.iter().rev().for_each(|b| b2.merge(b).unwrap());
     for o in [&f2, &b2] {
         assert_eq!(o.completed, 120);
         assert_eq!(o.statistics.histograms, whole.statistics.histograms, "counts merge exactly");

@@ -236,3 +236,49 @@ fn sigterm_to_mpirun_ends_the_job_and_the_run_resumes_to_the_same_bytes() {
     assert_same_statistics(&reference, &out);
     assert!(summary(&out)["resumed_trajectories"].as_u64().unwrap() >= 3 * 64);
 }
+
+/// `mpirun -np 1 rovib ensemble A : -np 1 rovib ensemble B` (an MPMD launch, each rank its own
+/// scene): rank 0 compares every rank's run (scene hash, seed, N, lanes, statistics layout)
+/// with its own before it accepts a block, so B's blocks are never merged into A's statistics
+/// and a different histogram shape is an error, not a panic and a hang.
+#[test]
+fn ranks_running_different_scenes_are_refused_naming_the_rank_and_what_differs() {
+    let d = dir("mpmd");
+    let a = thermal_scene(&d, 640, 300.0);
+    let text = std::fs::read_to_string(&a).unwrap();
+    let hot = d.join("hot.toml");
+    std::fs::write(&hot, text.replace("temperature = 300.0", "temperature = 3000.0")).unwrap();
+    let bins = d.join("bins.toml");
+    std::fs::write(&bins, text.replace("bins = 20", "bins = 30")).unwrap();
+    let exe = env!("CARGO_BIN_EXE_rovib");
+    for (b, expected) in [(&hot, "scene hash"), (&bins, "statistics layout")] {
+        let out = d.join(format!("out-{}", b.file_stem().unwrap().to_str().unwrap()));
+        let rank = |scene: &Path| {
+            vec![
+                "-np".to_owned(),
+                "1".to_owned(),
+                exe.to_owned(),
+                "ensemble".to_owned(),
+                scene.display().to_string(),
+                "--out".to_owned(),
+                out.display().to_string(),
+                "--threads".to_owned(),
+                "1".to_owned(),
+                "--quiet".to_owned(),
+            ]
+        };
+        let mut c = Command::new("mpirun");
+        c.args(["--oversubscribe", "--bind-to", "none", "--allow-run-as-root"])
+            .args(rank(&a))
+            .arg(":")
+            .args(rank(b))
+            .env_remove(rovib::ensemble::runner::PANIC_HOOK)
+            .stdin(Stdio::null());
+        let (status, err) = finish(spawn(c), Duration::from_secs(120));
+        assert!(!status.success(), "ranks on {} and {} were merged", a.display(), b.display());
+        assert!(err.contains("rank 1 runs another ensemble than rank 0") && err.contains(expected), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!out.join("ensemble.csv").exists(), "statistics written from mixed ranks");
+        assert_eq!(summary(&out)["status"], "failed");
+    }
+}

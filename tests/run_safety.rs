@@ -350,3 +350,55 @@ fn an_empty_molecule_name_is_not_told_to_add_molecules_dot_toml() {
     assert!(err.contains("unknown molecule ``") && !err.contains("molecules/.toml"), "{err}");
     assert!(err.contains("s.toml:1:12"), "{err}");
 }
+
+/// Runs `rovib` with `args`, at most `limit`: its exit status and stderr (a hang fails).
+fn rovib_within(args: &[&str], limit: Duration) -> (std::process::ExitStatus, String) {
+    use std::io::Read as _;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let begin = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if begin.elapsed() > limit {
+            let _ = child.kill();
+            panic!("rovib {args:?} did not end within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    (status, err)
+}
+
+/// `run --resume` reads restart.json, and the trajectory.csv and lab.xyz it appends to, with a
+/// bound: a link to /dev/zero in their place is refused at once, naming the file and the limit.
+#[test]
+fn a_resume_from_endless_files_is_refused_with_the_file_and_its_limit() {
+    if !Path::new("/dev/zero").exists() {
+        return;
+    }
+    let d = dir("resume-zero");
+    let first = scene(&d, "first.toml", 2.0, "\"trajectory\", \"lab\", \"summary\", \"restart\"");
+    let longer = scene(&d, "longer.toml", 4.0, "\"trajectory\", \"lab\", \"summary\", \"restart\"");
+    let limit = Duration::from_secs(20);
+    for (file, expected) in [
+        ("restart.json", format!("it is larger than {} bytes", rovib::restart::MAX_RESTART_BYTES)),
+        ("trajectory.csv", format!("line 1 is longer than {} bytes", rovib::output::MAX_LINE_BYTES)),
+        ("lab.xyz", format!("line 1 is longer than {} bytes", rovib::output::MAX_LINE_BYTES)),
+    ] {
+        let out = d.join(file);
+        let (s, err) = rovib_within(&["run", first.to_str().unwrap(), "--out", out.to_str().unwrap(), "-q"], limit);
+        assert!(s.success(), "{err}");
+        std::fs::remove_file(out.join(file)).unwrap();
+        std::os::unix::fs::symlink("/dev/zero", out.join(file)).unwrap();
+        let (s, err) = rovib_within(&["run", "--resume", out.to_str().unwrap(), longer.to_str().unwrap(), "-q"], limit);
+        assert!(!s.success(), "a resume from /dev/zero as {file} succeeded");
+        assert!(err.contains(&out.join(file).display().to_string()) && err.contains(&expected), "{file}: {err}");
+    }
+}

@@ -241,6 +241,16 @@ fn run_ensemble(
     if !quiet {
         say(&ensemble::describe(&report))?;
     }
+    if report.status == crate::ensemble::Status::Failed {
+        let dir = report.files.first().and_then(|f| f.parent()).map_or(String::new(), |d| d.display().to_string());
+        let reasons: Vec<String> = report.outcome.failed.iter().map(|(r, n)| format!("{n} {r}")).collect();
+        return Err(CliError::Message(format!(
+            "every one of the {} trajectories failed ({}): there are no statistics; the first failures are in \
+             {dir}/summary.json",
+            report.requested,
+            reasons.join(", ")
+        )));
+    }
     if report.status == crate::ensemble::Status::Interrupted {
         let dir = report.files.first().and_then(|f| f.parent()).map_or(String::new(), |d| d.display().to_string());
         return Err(CliError::Message(format!(

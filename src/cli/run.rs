@@ -232,6 +232,7 @@ impl Run<'_> {
 
         // One run per directory, then no file of an earlier run may remain looking like this one's.
         let _lock = DirLock::acquire(self.out_dir)?;
+        crate::ensemble::output::clear_for_run(self.out_dir)?;
         let mut keep = Vec::new();
         if scene.outputs.trajectory {
             keep.extend(["trajectory.csv", TRAJECTORY_UNITS_FILE]);

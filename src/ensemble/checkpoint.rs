@@ -1,9 +1,14 @@
 //! Checkpoint file of an ensemble: one JSON line per finished block, so a killed run resumes.
 //!
-//! The first line is a [`Header`] (format, scene hash, seed, trajectory count, block size). Then
-//! optionally one `merged` line, the outcome of blocks `0..merged` already merged in block order
-//! (what an uninterrupted run holds at that point), then one line per further finished block
-//! (index and [`Outcome`]), in the order they finished. Every batch of lines is written whole,
+//! The first line is a [`Header`] (format, scene hash, seed, trajectory count, block size, lane
+//! setting). Then optionally one `merged` line, the outcome of blocks `0..merged` already merged
+//! in block order (what an uninterrupted run holds at that point), then one line per further
+//! finished block (index and [`Outcome`]), in the order they finished. Each of these lines is
+//! `{"sum":"<16 hex digits>","record":<the record>}`, the sum being [`scene_hash`] (FNV-1a) of
+//! the header line, a newline and the record's exact bytes: a line changed by hand (a mean, a
+//! count, a block index) or copied from another run's checkpoint is refused with its file and
+//! line instead of resumed into different outputs. (The sum detects edits and mix-ups, not a
+//! forger who recomputes it: it has no secret.) Every batch of lines is written whole,
 //! flushed and `fsync`ed before the next is recorded, so a run killed at any moment leaves at most
 //! one torn last line, which [`Checkpoint::resume`] drops (and truncates away). Floats go through
 //! serde_json with `float_roundtrip`, so a resumed run merges exactly the numbers the killed run
@@ -25,7 +30,7 @@ use serde::{Deserialize, Serialize};
 use super::runner::Outcome;
 
 /// Version of the checkpoint layout; a file of another version is refused, not misread.
-pub const FORMAT: u32 = 1;
+pub const FORMAT: u32 = 2;
 
 /// What a checkpoint belongs to; a resume with any field different is refused.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -40,16 +45,108 @@ pub struct Header {
     pub trajectories: u64,
     /// Trajectories per block.
     pub block: u64,
+    /// Whether trajectories ran on SIMD lanes (`--no-lanes`: false). Lanes and one trajectory
+    /// at a time agree to round-off only, so a resume must use the setting of the run it
+    /// continues for its outputs to be those of an uninterrupted run.
+    pub lanes: bool,
 }
 
 impl Header {
     /// The header of an ensemble of `trajectories` from the scene file's `scene` bytes.
+    /// Lanes on (the default; see [`Header::with_lanes`]).
     pub fn new(scene: &[u8], seed: u64, trajectories: u64, block: u64) -> Self {
-        Self { format: FORMAT, scene_hash: format!("{:016x}", scene_hash(scene)), seed, trajectories, block }
+        Self {
+            format: FORMAT,
+            scene_hash: format!("{:016x}", scene_hash(scene)),
+            seed,
+            trajectories,
+            block,
+            lanes: true,
+        }
+    }
+
+    /// The same header with the lane setting `lanes`.
+    pub fn with_lanes(self, lanes: bool) -> Self {
+        Self { lanes, ..self }
+    }
+
+    /// The header as written on the checkpoint's first line (and covered by every line's sum).
+    fn text(&self) -> String {
+        serde_json::to_string(self).expect("a header serialises")
     }
 
     fn blocks(&self) -> u64 {
         self.trajectories.div_ceil(self.block.max(1))
+    }
+}
+
+/// What makes blocks of two processes (MPI ranks) mergeable: the run's [`Header`] (hash of the
+/// scene and states file, seed, N, block size, lane setting) and the layout of its statistics.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Identity {
+    /// The run, as its checkpoint records it.
+    pub header: Header,
+    /// The statistics' layout.
+    pub layout: Layout,
+}
+
+/// The shape of a run's accumulators.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Layout {
+    /// Output times.
+    pub n_times: usize,
+    /// Quantities with means.
+    pub n_means: usize,
+    /// Each histogram's bins, low and high edge.
+    pub histograms: Vec<(usize, f64, f64)>,
+    /// Each correlation function's lags.
+    pub correlations: Vec<usize>,
+}
+
+impl Layout {
+    /// The layout of `a`.
+    pub fn of(a: &super::runner::Accumulators) -> Self {
+        Self {
+            n_times: a.n_times,
+            n_means: a.n_means,
+            histograms: a.histograms.iter().map(|h| (h.counts().len(), h.low(), h.high())).collect(),
+            correlations: a.correlations.iter().map(Vec::len).collect(),
+        }
+    }
+}
+
+impl Identity {
+    /// What differs in `other` from this identity, one phrase each (`other`'s value, then
+    /// this one's); empty when the two runs are the same.
+    pub fn differences(&self, other: &Identity, this: &str) -> Vec<String> {
+        let (a, b) = (&self.header, &other.header);
+        let mut d = Vec::new();
+        if a.format != b.format {
+            d.push(format!("message format {} ({this}: {}): another rovib version", b.format, a.format));
+        }
+        if a.scene_hash != b.scene_hash {
+            d.push(format!(
+                "scene hash {} ({this}: {}): another scene file or states file",
+                b.scene_hash, a.scene_hash
+            ));
+        }
+        if a.seed != b.seed {
+            d.push(format!("seed {} ({this}: {})", b.seed, a.seed));
+        }
+        if a.trajectories != b.trajectories {
+            d.push(format!("{} trajectories ({this}: {})", b.trajectories, a.trajectories));
+        }
+        if a.block != b.block {
+            d.push(format!("blocks of {} ({this}: {})", b.block, a.block));
+        }
+        if a.lanes != b.lanes {
+            let s = |l: bool| if l { "lanes" } else { "--no-lanes" };
+            d.push(format!("{} ({this}: {})", s(b.lanes), s(a.lanes)));
+        }
+        if self.layout != other.layout {
+            d.push(format!("statistics layout {:?} ({this}: {:?})", other.layout, self.layout));
+        }
+        d
     }
 }
 
@@ -68,7 +165,7 @@ const FAILURE_TEXT_BYTES: u64 = 64 << 10;
 /// refused with the figures instead of read into memory without bound.
 pub fn size_limit(header: &Header, empty: &Outcome) -> u64 {
     let mut bytes = Vec::new();
-    line(&mut bytes, &Line::Merged { merged: header.blocks(), outcome: empty.clone() });
+    line(&mut bytes, &header.text(), &Line::Merged { merged: header.blocks(), outcome: empty.clone() });
     let per_line = (bytes.len() as u64).saturating_mul(NUMBER_GROWTH).saturating_add(FAILURE_TEXT_BYTES);
     header.blocks().saturating_add(2).saturating_mul(per_line)
 }
@@ -91,9 +188,41 @@ pub struct Resumed {
     pub blocks: BTreeMap<u64, Outcome>,
 }
 
-fn line(bytes: &mut Vec<u8>, line: &Line) {
-    serde_json::to_writer(&mut *bytes, line).expect("an outcome serialises");
-    bytes.push(b'\n');
+/// Appends `line` to `bytes` as `{"sum":"…","record":…}` and a newline; `header` is the text of
+/// the checkpoint's first line.
+fn line(bytes: &mut Vec<u8>, header: &str, line: &Line) {
+    let record = serde_json::to_vec(line).expect("an outcome serialises");
+    bytes.extend_from_slice(format!("{SUM_PREFIX}{:016x}{RECORD_PREFIX}", line_sum(header, &record)).as_bytes());
+    bytes.extend_from_slice(&record);
+    bytes.extend_from_slice(b"}\n");
+}
+
+const SUM_PREFIX: &str = "{\"sum\":\"";
+const RECORD_PREFIX: &str = "\",\"record\":";
+
+/// The sum of a record line: FNV-1a of the header line, a newline and the record's bytes.
+fn line_sum(header: &str, record: &[u8]) -> u64 {
+    let h = header.bytes().chain(std::iter::once(b'\n')).chain(record.iter().copied());
+    h.fold(0xcbf2_9ce4_8422_2325_u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3))
+}
+
+/// The record of a line written by [`line`], after checking its sum against `header` (the
+/// checkpoint's first line); the error says what is wrong.
+fn checked_record<'a>(header: &str, text: &'a str) -> Result<&'a str, String> {
+    let malformed = || "not a checkpoint record line (`{\"sum\":…,\"record\":…}`); delete this line".to_owned();
+    let rest = text.strip_prefix(SUM_PREFIX).ok_or_else(malformed)?;
+    let (sum, rest) = rest.split_at_checked(16).ok_or_else(malformed)?;
+    let record = rest.strip_prefix(RECORD_PREFIX).and_then(|r| r.strip_suffix('}')).ok_or_else(malformed)?;
+    let sum = u64::from_str_radix(sum, 16).map_err(|_| malformed())?;
+    let expected = line_sum(header, record.as_bytes());
+    if sum != expected {
+        return Err(format!(
+            "the line's sum {sum:016x} does not match its content and the header ({expected:016x}): the line was \
+             changed, or copied from another checkpoint; delete this line and every line after it (their blocks \
+             run again), or run without --resume after deleting the file"
+        ));
+    }
+    Ok(record)
 }
 
 /// FNV-1a (64 bit) of `bytes`: stable across platforms and Rust versions, unlike `DefaultHasher`.
@@ -128,6 +257,8 @@ impl std::error::Error for CheckpointError {}
 pub struct Checkpoint {
     file: File,
     path: PathBuf,
+    /// The header line's text, covered by every record line's sum.
+    header: String,
 }
 
 impl Checkpoint {
@@ -139,8 +270,8 @@ impl Checkpoint {
             message: format!("cannot write the checkpoint: {e}"),
         };
         let file = File::create(path).map_err(err)?;
-        let mut c = Self { file, path: path.to_owned() };
-        let text = serde_json::to_string(header).expect("a header serialises");
+        let mut c = Self { file, path: path.to_owned(), header: header.text() };
+        let text = c.header.clone();
         c.write_line(&text)?;
         Ok(c)
     }
@@ -165,6 +296,30 @@ impl Checkpoint {
         let first = lines.next().ok_or_else(|| fail(Some(1), "no header; run without --resume".into()))?;
         let found: Header = serde_json::from_str(first)
             .map_err(|e| fail(Some(1), format!("not a checkpoint header ({e}); run without --resume")))?;
+        if found.format != header.format {
+            return Err(fail(
+                Some(1),
+                format!(
+                    "the checkpoint has format {}, this rovib writes format {}; run without --resume (after deleting \
+                     the file) to start again",
+                    found.format, header.format
+                ),
+            ));
+        }
+        if found == header.clone().with_lanes(found.lanes) && found.lanes != header.lanes {
+            let setting =
+                |lanes: bool| if lanes { "on SIMD lanes (the default)" } else { "one at a time (--no-lanes)" };
+            return Err(fail(
+                Some(1),
+                format!(
+                    "the checkpoint was written with trajectories run {}, this resume runs them {}: the two agree \
+                     to round-off only, so the outputs would not be those of an uninterrupted run; resume {}",
+                    setting(found.lanes),
+                    setting(header.lanes),
+                    if found.lanes { "without --no-lanes" } else { "with --no-lanes" }
+                ),
+            ));
+        }
         if found != *header {
             return Err(fail(
                 Some(1),
@@ -177,7 +332,8 @@ impl Checkpoint {
         let mut resumed = Resumed::default();
         for (i, l) in lines.enumerate() {
             let n = i + 2;
-            let line: Line = serde_json::from_str(l)
+            let record = checked_record(first, l).map_err(|m| fail(Some(n), m))?;
+            let line: Line = serde_json::from_str(record)
                 .map_err(|e| fail(Some(n), format!("not a block record ({e}); delete this line")))?;
             match line {
                 Line::Merged { merged, outcome } if n == 2 && merged <= header.blocks() => {
@@ -212,7 +368,7 @@ impl Checkpoint {
         file.set_len(end)
             .and_then(|()| file.seek(SeekFrom::Start(end)).map(drop))
             .map_err(|e| fail(None, format!("cannot drop the torn last line: {e}")))?;
-        Ok((Self { file, path: path.to_owned() }, resumed))
+        Ok((Self { file, path: path.to_owned(), header: first.to_owned() }, resumed))
     }
 
     /// Records `block`'s outcome, durably (written, flushed and synced) before returning.
@@ -224,7 +380,7 @@ impl Checkpoint {
     pub fn append_all(&mut self, blocks: &[(u64, &Outcome)]) -> Result<(), CheckpointError> {
         let mut bytes = Vec::new();
         for &(block, outcome) in blocks {
-            line(&mut bytes, &Line::Block { block, outcome: outcome.clone() });
+            line(&mut bytes, &self.header, &Line::Block { block, outcome: outcome.clone() });
         }
         self.write_bytes(&bytes)
     }
@@ -244,13 +400,14 @@ impl Checkpoint {
             line: None,
             message: format!("cannot rewrite the checkpoint: {e}"),
         };
-        let mut bytes = serde_json::to_vec(header).expect("a header serialises");
+        let text = header.text();
+        let mut bytes = text.clone().into_bytes();
         bytes.push(b'\n');
         if next > 0 {
-            line(&mut bytes, &Line::Merged { merged: next, outcome: merged.clone() });
+            line(&mut bytes, &text, &Line::Merged { merged: next, outcome: merged.clone() });
         }
         for (&block, outcome) in pending {
-            line(&mut bytes, &Line::Block { block, outcome: outcome.clone() });
+            line(&mut bytes, &text, &Line::Block { block, outcome: outcome.clone() });
         }
         let mut name = self.path.file_name().unwrap_or_default().to_owned();
         name.push(".tmp");
@@ -265,6 +422,7 @@ impl Checkpoint {
             let _ = dir.sync_all();
         }
         self.file = OpenOptions::new().append(true).open(&self.path).map_err(err)?;
+        self.header = text;
         Ok(())
     }
 
@@ -392,7 +550,7 @@ mod tests {
         let mut c = Checkpoint::create(&path, &header).unwrap();
         c.append_all(&[(0, &outcome(0)), (1, &outcome(1)), (4, &outcome(4))]).unwrap();
         let mut merged = outcome(0);
-        merged.merge(&outcome(1));
+        merged.merge(&outcome(1)).unwrap();
         let pending = BTreeMap::from([(4, outcome(4))]);
         c.compact(&header, 2, &merged, &pending).unwrap();
         c.append(3, &outcome(3)).unwrap();
@@ -405,8 +563,9 @@ mod tests {
         assert_eq!(resumed.blocks[&3], outcome(3));
         // A block below the merged prefix is a duplicate.
         let mut f = OpenOptions::new().append(true).open(&path).unwrap();
-        f.write_all(serde_json::to_string(&Line::Block { block: 1, outcome: outcome(1) }).unwrap().as_bytes()).unwrap();
-        f.write_all(b"\n").unwrap();
+        let mut bytes = Vec::new();
+        line(&mut bytes, &header.text(), &Line::Block { block: 1, outcome: outcome(1) });
+        f.write_all(&bytes).unwrap();
         drop(f);
         let e = Checkpoint::resume(&path, &header, limit(&header)).err().unwrap();
         assert_eq!(e.line, Some(5));
@@ -461,6 +620,72 @@ mod tests {
         let shown = e.to_string();
         assert!(shown.contains(&format!("larger than {} bytes", limit(&header))), "{shown}");
         assert!(shown.contains("run without --resume"), "{shown}");
+    }
+
+    /// A checkpoint of blocks 0 and 1 whose text is then edited by `edit`; the resume's error.
+    fn edited(name: &str, edit: impl Fn(&str) -> String) -> CheckpointError {
+        let path = dir(name);
+        let header = Header::new(b"scene", 7, 200, 64);
+        let mut c = Checkpoint::create(&path, &header).unwrap();
+        c.append_all(&[(0, &outcome(0)), (1, &outcome(1))]).unwrap();
+        drop(c);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let changed = edit(&text);
+        assert_ne!(changed, text, "the edit must change the file");
+        std::fs::write(&path, changed).unwrap();
+        Checkpoint::resume(&path, &header, limit(&header)).err().expect("an edited checkpoint must be refused")
+    }
+
+    #[test]
+    fn an_edited_or_moved_line_is_refused_with_file_and_line() {
+        // A changed count.
+        let e = edited("count", |t| t.replacen("\"completed\":5", "\"completed\":6", 1));
+        assert_eq!(e.line, Some(2));
+        assert!(e.to_string().contains("does not match its content"), "{e}");
+        // A changed mean: one digit of the first sum.
+        let e = edited("mean", |t| {
+            let at = t.find("\"sum\":").unwrap() + 200;
+            let lines: Vec<&str> = t.lines().collect();
+            let mut second = lines[1].to_owned();
+            let digit = second[..].char_indices().skip(at.min(second.len() - 2)).find(|(_, c)| c.is_ascii_digit());
+            let (i, c) = digit.unwrap();
+            second.replace_range(i..i + 1, if c == '9' { "8" } else { "9" });
+            format!("{}\n{second}\n{}\n", lines[0], lines[2])
+        });
+        assert_eq!(e.line, Some(2));
+        // Block 1's record under index 2 (a block copied under another index).
+        let e = edited("moved", |t| {
+            let last = t.lines().nth(2).unwrap();
+            format!("{t}{}\n", last.replace("{\"block\":1,", "{\"block\":2,"))
+        });
+        assert_eq!(e.line, Some(4));
+        assert!(e.to_string().contains("does not match"), "{e}");
+        // A line of another run's checkpoint (another seed) pasted in: its sum covers its header.
+        let e = edited("pasted", |t| {
+            let other = Header::new(b"scene", 8, 200, 64);
+            let mut bytes = t.as_bytes().to_vec();
+            line(&mut bytes, &other.text(), &Line::Block { block: 3, outcome: outcome(3) });
+            String::from_utf8(bytes).unwrap()
+        });
+        assert_eq!(e.line, Some(4));
+    }
+
+    #[test]
+    fn a_resume_with_the_other_lane_setting_is_refused_naming_both() {
+        let path = dir("lanes");
+        let header = Header::new(b"scene", 7, 200, 64);
+        Checkpoint::create(&path, &header).unwrap();
+        let other = header.clone().with_lanes(false);
+        let e = Checkpoint::resume(&path, &other, limit(&other)).err().unwrap();
+        assert_eq!(e.line, Some(1));
+        let shown = e.to_string();
+        assert!(shown.contains("SIMD lanes (the default)") && shown.contains("one at a time (--no-lanes)"), "{shown}");
+        assert!(shown.contains("resume without --no-lanes"), "{shown}");
+        let path = dir("no-lanes");
+        Checkpoint::create(&path, &other).unwrap();
+        let e = Checkpoint::resume(&path, &header, limit(&header)).err().unwrap();
+        assert!(e.to_string().contains("resume with --no-lanes"), "{e}");
+        assert!(Checkpoint::resume(&path, &other, limit(&other)).is_ok());
     }
 
     #[test]

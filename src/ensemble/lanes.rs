@@ -281,7 +281,10 @@ where
                 progress.done();
             }
             Fate::Interrupted => outcome.interrupted += 1,
-            Fate::Redo => outcome.merge(&run_block_scalar(plan, sampler, index..index + 1, stop, progress)),
+            // Both are of this plan, so of one layout.
+            Fate::Redo => outcome
+                .merge(&run_block_scalar(plan, sampler, index..index + 1, stop, progress))
+                .expect("accumulators of one plan have one layout"),
         }
     }
     outcome

@@ -44,7 +44,7 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
-use self::checkpoint::{Checkpoint, Header, Resumed};
+use self::checkpoint::{Checkpoint, Header, Identity, Layout, Resumed};
 use self::runner::{Accumulators, BLOCK, Outcome, Plan, Progress, run_block};
 use self::scene::{Bound, EnsembleScene, MethodSpec, parse_ensemble};
 use self::schedule::{BlockResult, Collector, Remote, Work, block_range, caught, coordinate};
@@ -111,8 +111,9 @@ pub enum Link<'a> {
 /// A process that runs blocks for rank 0 (see [`mpi`](self)).
 pub trait Serve {
     /// Asks rank 0 for blocks, runs them with `work` and sends their outcomes back, until rank 0
-    /// has no more.
-    fn serve(&mut self, work: &Work<'_>) -> Result<(), CliError>;
+    /// has no more; every message carries `identity` (this run), which rank 0 checks against its
+    /// own before it accepts any block.
+    fn serve(&mut self, work: &Work<'_>, identity: &Identity) -> Result<(), CliError>;
 
     /// Processes in all.
     fn ranks(&self) -> usize;
@@ -131,10 +132,14 @@ impl Link<'_> {
 /// Whether the ensemble ran to the end.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum Status {
-    /// Every trajectory was run (completed or failed).
+    /// Every trajectory was run, and at least one completed (the statistics cover the completed
+    /// ones; the failed ones are counted by reason in summary.json).
     Completed,
     /// Stopped by the stop flag (Ctrl-C): the statistics cover the trajectories that finished.
     Interrupted,
+    /// Every trajectory was run and every one failed: there are no statistics
+    /// (`rovib ensemble` exits with an error).
+    Failed,
 }
 
 impl Status {
@@ -143,6 +148,7 @@ impl Status {
         match self {
             Status::Completed => "completed",
             Status::Interrupted => "interrupted",
+            Status::Failed => "failed",
         }
     }
 }
@@ -316,10 +322,14 @@ where
         ));
     }
     let worker = matches!(link, Link::Worker(_));
-    if !worker {
+    // One run per folder, held until the last output is written (the other ranks write nothing).
+    let _lock = if worker {
+        None
+    } else {
         std::fs::create_dir_all(&options.out_dir)
             .map_err(|e| CliError::context(format!("cannot create {}", options.out_dir.display()), e))?;
-    }
+        Some(crate::dir_lock::DirLock::acquire(&options.out_dir)?)
+    };
     let plan = Plan {
         molecule: m,
         reduction,
@@ -356,16 +366,33 @@ where
     };
     let work = Work { threads, pool: &pool, run: &run, stop: &options.stop, progress: &progress };
 
+    let empty = Outcome::new(Accumulators::new(&plan));
+    let identity = Identity { header: run_header(scene, ensemble, options), layout: Layout::of(&empty.statistics) };
     let remote = match link {
         Link::Worker(w) => {
-            w.serve(&work)?;
+            w.serve(&work, &identity)?;
             return Ok(None);
         }
-        Link::Root(r) => Some(r),
+        Link::Root(r) => {
+            r.expect(identity);
+            Some(r)
+        }
         Link::Alone => None,
     };
-    let empty = Outcome::new(Accumulators::new(&plan));
     let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options, &empty)?;
+    // From here on the folder is this run's: nothing of an earlier run stays, and the summary
+    // says "running" until it says how the run ended.
+    let dir = &options.out_dir;
+    let failed = |error: &str| {
+        let checkpoint = options.checkpoint.then(|| dir.join(CHECKPOINT_FILE));
+        // The error itself is what matters; a summary that cannot be written is mentioned.
+        match output::write_failed(dir, scene, m.name(), n, error, checkpoint.as_deref()) {
+            Ok(_) => CliError::Message(error.to_owned()),
+            Err(e) => CliError::Message(format!("{error}; also {e} (summary.json may still say \"running\")")),
+        }
+    };
+    output::remove_stale_outputs(dir, options.resume)?;
+    output::write_running(dir, scene, m.name(), n, options.resume)?;
     let mut collector = Collector::new(n, empty, resumed, checkpoint, ranks);
     if let Some(bar) = &progress.bar {
         bar.inc(collector.resumed());
@@ -385,12 +412,15 @@ where
         } else {
             String::new()
         };
-        return Err(CliError::Message(format!("the ensemble stopped: {e}{kept}")));
+        return Err(failed(&format!("the ensemble stopped: {e}{kept}")));
     }
     let resumed = collector.resumed();
-    let (total, blocks_by_rank, checkpoint) = collector.finish();
+    let (total, blocks_by_rank, checkpoint) =
+        collector.finish().map_err(|e| failed(&format!("the ensemble stopped: {e}")))?;
     let status = if options.stop.load(Ordering::Relaxed) && total.interrupted > 0 {
         Status::Interrupted
+    } else if total.completed == 0 && total.failed_count() > 0 {
+        Status::Failed
     } else {
         Status::Completed
     };
@@ -410,15 +440,30 @@ where
         sampler: description.to_owned(),
         files: Vec::new(),
     };
-    report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)?;
+    report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)
+        .map_err(|e| failed(&format!("the ensemble ran, but its outputs could not be written: {e}")))?;
     if let Some(c) = checkpoint
-        && status == Status::Completed
+        && status != Status::Interrupted
     {
-        // The outputs are written: the checkpoint has served.
+        // Every trajectory ran and the outputs are written: the checkpoint has served.
         std::fs::remove_file(c.path())
             .map_err(|e| CliError::context(format!("cannot remove {}", c.path().display()), e))?;
     }
     Ok(Some(report))
+}
+
+/// What identifies this run in its checkpoint and to the other MPI ranks: the hash of the
+/// scene's bytes and, for a states file, the file's, the seed, N, the block size and the lane
+/// setting.
+fn run_header(scene: &Scene, ensemble: &EnsembleScene, options: &EnsembleOptions) -> Header {
+    let mut bytes = scene.text.clone().into_bytes();
+    if let MethodSpec::File { path: states, .. } = &ensemble.method
+        && let Ok(b) = std::fs::read(states)
+    {
+        bytes.push(0);
+        bytes.extend_from_slice(&b);
+    }
+    Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK).with_lanes(options.lanes)
 }
 
 /// The checkpoint of this run (new, or continued with `options.resume`) and what it held.
@@ -435,15 +480,7 @@ fn open_checkpoint(
         }
         return Ok((None, Resumed::default()));
     }
-    // The scene's bytes and, for a states file, the file's: a resume with either changed is refused.
-    let mut bytes = scene.text.clone().into_bytes();
-    if let MethodSpec::File { path: states, .. } = &ensemble.method
-        && let Ok(b) = std::fs::read(states)
-    {
-        bytes.push(0);
-        bytes.extend_from_slice(&b);
-    }
-    let header = Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK);
+    let header = run_header(scene, ensemble, options);
     if options.resume {
         let (c, resumed) = Checkpoint::resume(&path, &header, checkpoint::size_limit(&header, empty))
             .map_err(|e| CliError::Message(e.to_string()))?;

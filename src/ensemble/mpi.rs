@@ -15,6 +15,12 @@
 //! (none: the run is over, the rank ends). Only each process's main thread calls MPI
 //! (`MPI_THREAD_FUNNELED`).
 //!
+//! Every request carries the rank's run ([`Identity`]: the hash of its scene and states file,
+//! seed, N, block size, lane setting and statistics layout). Rank 0 compares it with its own
+//! before it accepts any block: a rank started on another scene (an MPMD launch `mpirun -np 1
+//! rovib ensemble A.toml : -np 1 rovib ensemble B.toml`) or with other options gets no block,
+//! none of its results is merged, and the run fails naming the rank and what differs.
+//!
 //! A trajectory that panics is caught with its block and reported to rank 0, which hands out no
 //! more blocks, waits for the running ones (recorded in the checkpoint), releases every rank and
 //! fails with the panic's message. A rank that dies (killed, out of memory, a lost node) cannot
@@ -31,6 +37,7 @@ use mpi::traits::*;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::checkpoint::Identity;
 use super::schedule::{BlockResult, Dispatcher, Remote, Work};
 use super::{EnsembleOptions, EnsembleReport, Link, Serve, load_scene, run_linked};
 use crate::cli::CliError;
@@ -50,6 +57,8 @@ pub const LAUNCHER_VARIABLES: [&str; 4] = ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "
 pub enum ToRoot {
     /// The outcomes of the last batch (none at first) and a request for `want` more blocks.
     Ready {
+        /// The rank's run; rank 0 accepts blocks only of its own.
+        identity: Identity,
         /// Blocks wanted.
         want: u64,
         /// The last batch's blocks and their outcomes (or panics).
@@ -77,7 +86,7 @@ pub fn run(path: &Path, options: &EnsembleOptions) -> Result<Option<EnsembleRepo
     let world = universe.world();
     let ranks = usize::try_from(world.size()).unwrap_or(1);
     if world.rank() == 0 {
-        let mut root = Root { world: &world, active: ranks - 1, ranks };
+        let mut root = Root { world: &world, active: ranks - 1, ranks, expected: None };
         let result = load_scene(path).and_then(|scene| run_linked(&scene, options, Link::Root(&mut root)));
         // Whatever happened here, every other rank is told to end before MPI is finalised.
         let released = root.release();
@@ -104,6 +113,8 @@ struct Root<'w> {
     /// Ranks not yet told to end.
     active: usize,
     ranks: usize,
+    /// Rank 0's run: a rank whose run differs gets no block and its results are dropped.
+    expected: Option<Identity>,
 }
 
 impl Root<'_> {
@@ -143,11 +154,24 @@ impl Remote for Root<'_> {
             let (bytes, status) = probed.matched_receive_vec::<u8>();
             let from = status.source_rank();
             let want = match serde_json::from_slice::<ToRoot>(&bytes) {
-                Ok(ToRoot::Ready { want, results }) => {
-                    for (b, r) in results {
-                        sink(usize::try_from(from).unwrap_or(0), b, r);
+                Ok(ToRoot::Ready { identity, want, results }) => {
+                    let differences = match &self.expected {
+                        Some(e) => e.differences(&identity, "rank 0"),
+                        None => vec!["rank 0 has not started its run".to_owned()],
+                    };
+                    if differences.is_empty() {
+                        for (b, r) in results {
+                            sink(usize::try_from(from).unwrap_or(0), b, r);
+                        }
+                        want
+                    } else {
+                        error.get_or_insert(format!(
+                            "rank {from} runs another ensemble than rank 0 ({}); none of its blocks was merged. \
+                             Start every rank with the same scene file, states file and options",
+                            differences.join("; ")
+                        ));
+                        0
                     }
-                    want
                 }
                 Ok(ToRoot::Failed(m)) => {
                     self.active -= 1;
@@ -179,6 +203,10 @@ impl Remote for Root<'_> {
         self.active == 0
     }
 
+    fn expect(&mut self, identity: Identity) {
+        self.expected = Some(identity);
+    }
+
     fn ranks(&self) -> usize {
         self.ranks
     }
@@ -199,12 +227,12 @@ impl Worker<'_> {
 }
 
 impl Serve for Worker<'_> {
-    fn serve(&mut self, work: &Work<'_>) -> Result<(), CliError> {
+    fn serve(&mut self, work: &Work<'_>, identity: &Identity) -> Result<(), CliError> {
         self.started = true;
         let want = 2 * work.threads as u64;
         let mut results = Vec::new();
         loop {
-            self.send(&ToRoot::Ready { want, results: std::mem::take(&mut results) });
+            self.send(&ToRoot::Ready { identity: identity.clone(), want, results: std::mem::take(&mut results) });
             let (blocks, _) = self.world.process_at_rank(0).receive_vec_with_tag::<u64>(TO_WORKER);
             if blocks.is_empty() {
                 return Ok(());

@@ -5,6 +5,13 @@
 //! Numbers are written with full round-trip precision (`{:?}`); a statistic that does not
 //! exist (the standard error of fewer than two values) is written `NaN`. All values are in
 //! atomic units, named in the column headers; times are in the scene's time unit.
+//!
+//! Integrity of the folder: the run holds the directory lock (`crate::dir_lock`) from before it
+//! touches anything to after its last write; at the start it removes every output an earlier run
+//! (an ensemble, or a `rovib run`) left there ([`remove_stale_outputs`]) and writes `summary.json`
+//! with status "running" ([`write_running`]); it ends by writing it again with the true status:
+//! "completed", "interrupted", or "failed" (every trajectory failed, or the run stopped on an
+//! error, [`write_failed`]). A summary that still says "running" is a run that was killed.
 
 use std::path::{Path, PathBuf};
 
@@ -18,6 +25,125 @@ use crate::cli::CliError;
 use crate::output::{OutputFile, write_summary};
 use crate::runtime::Molecule;
 use crate::scene::Scene;
+
+/// Every file `rovib ensemble` writes into its output folder, besides `checkpoint.jsonl` and the
+/// kept trajectories (`trajectories/INDEX/`).
+pub const ENSEMBLE_FILES: [&str; 8] = [
+    "ensemble.csv",
+    "histograms.csv",
+    "correlations.csv",
+    "spectrum.csv",
+    "spectrum.svg",
+    "ensemble.svg",
+    "histograms.svg",
+    "summary.json",
+];
+
+/// The folder of the kept trajectories (`ensemble.keep_trajectories`) in the output folder.
+pub const KEPT_FOLDER: &str = "trajectories";
+
+/// Removes what an earlier run left in `dir` that this ensemble would not rewrite at once: its
+/// outputs ([`ENSEMBLE_FILES`]), a `rovib run`'s (trajectory.csv, lab.xyz, dipole.csv,
+/// restart.json, …) and, unless `resume` (whose resumed blocks' kept trajectories stay), the
+/// kept trajectories (the numbered folders in `trajectories/`). Missing files are fine.
+pub fn remove_stale_outputs(dir: &Path, resume: bool) -> Result<(), String> {
+    remove_files(dir, &ENSEMBLE_FILES)?;
+    crate::output::remove_stale_outputs(dir, &[])?;
+    if !resume {
+        remove_kept(dir)?;
+    }
+    Ok(())
+}
+
+/// For `rovib run` into `dir`: refuses a folder with an unfinished ensemble's checkpoint (its
+/// finished blocks would be lost), else removes an ensemble's outputs and kept trajectories.
+pub fn clear_for_run(dir: &Path) -> Result<(), String> {
+    let checkpoint = dir.join(super::CHECKPOINT_FILE);
+    if checkpoint.exists() {
+        return Err(format!(
+            "{} holds the finished blocks of an ensemble that did not complete; continue it with              `rovib ensemble SCENE --out {} --resume`, delete the file, or choose another --out directory",
+            checkpoint.display(),
+            dir.display()
+        ));
+    }
+    let files: Vec<&str> = ENSEMBLE_FILES.iter().copied().filter(|&f| f != "summary.json").collect();
+    remove_files(dir, &files)?;
+    remove_kept(dir)
+}
+
+fn remove_files(dir: &Path, names: &[&str]) -> Result<(), String> {
+    for name in names {
+        let path = dir.join(name);
+        match std::fs::remove_file(&path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(format!("cannot remove {} left by an earlier run: {e}", path.display())),
+        }
+    }
+    Ok(())
+}
+
+/// Removes the numbered folders in `dir/trajectories` (what `keep_trajectories` writes), then
+/// the folder if it is left empty; anything else in it is left alone.
+fn remove_kept(dir: &Path) -> Result<(), String> {
+    let kept = dir.join(KEPT_FOLDER);
+    let Ok(entries) = std::fs::read_dir(&kept) else { return Ok(()) };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let numbered = name.to_str().is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
+        if numbered && entry.file_type().is_ok_and(|t| t.is_dir()) {
+            std::fs::remove_dir_all(entry.path())
+                .map_err(|e| format!("cannot remove {} left by an earlier run: {e}", entry.path().display()))?;
+        }
+    }
+    let _ = std::fs::remove_dir(&kept);
+    Ok(())
+}
+
+/// The summary of an ensemble that has started: status "running", replaced when it ends.
+pub fn write_running(
+    dir: &Path,
+    scene: &Scene,
+    molecule: &str,
+    requested: u64,
+    resume: bool,
+) -> Result<PathBuf, String> {
+    write_summary(
+        dir,
+        &json!({
+            "scene": scene.path,
+            "molecule": molecule,
+            "status": "running",
+            "process": std::process::id(),
+            "resume": resume,
+            "trajectories": { "requested": requested },
+            "note": "written when the ensemble started and replaced when it ends; a run that still says \"running\" \
+                     while no process holds the folder's lock was killed (continue it with --resume)",
+        }),
+    )
+}
+
+/// The summary of an ensemble that stopped on an error (no statistics were written).
+pub fn write_failed(
+    dir: &Path,
+    scene: &Scene,
+    molecule: &str,
+    requested: u64,
+    error: &str,
+    checkpoint: Option<&Path>,
+) -> Result<PathBuf, String> {
+    write_summary(
+        dir,
+        &json!({
+            "scene": scene.path,
+            "molecule": molecule,
+            "status": "failed",
+            "error": error,
+            "trajectories": { "requested": requested },
+            "checkpoint": checkpoint.filter(|c| c.exists()),
+        }),
+    )
+}
 
 /// Writes every output of `report` into `dir` and returns the files' paths.
 pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(

@@ -266,20 +266,53 @@ impl Accumulators {
         }
     }
 
-    /// Merges `other` (the trajectories after this one's) in.
-    pub fn merge(&mut self, other: &Accumulators) {
+    /// Merges `other` (the trajectories after this one's) in. Accumulators of another layout
+    /// (another number of times or quantities, another histogram's bins or range: another
+    /// scene's) are an error naming the difference, and nothing is merged.
+    pub fn merge(&mut self, other: &Accumulators) -> Result<(), String> {
+        self.same_layout(other)?;
         for (a, b) in self.means.iter_mut().zip(&other.means) {
             a.merge(b);
         }
         for (a, b) in self.histograms.iter_mut().zip(&other.histograms) {
-            // Same plan, same shapes.
-            a.merge(b).expect("histograms of one plan have one shape");
+            a.merge(b).map_err(|e| e.to_string())?;
         }
         for (a, b) in self.correlations.iter_mut().zip(&other.correlations) {
             for (x, y) in a.iter_mut().zip(b) {
                 x.merge(y);
             }
         }
+        Ok(())
+    }
+
+    /// Whether `other` has this layout; if not, what differs.
+    pub fn same_layout(&self, other: &Accumulators) -> Result<(), String> {
+        let shape = |a: &Accumulators| {
+            (a.n_times, a.n_means, a.means.len(), a.correlations.iter().map(Vec::len).collect::<Vec<_>>())
+        };
+        let (mine, theirs) = (shape(self), shape(other));
+        if mine != theirs {
+            return Err(format!(
+                "statistics of another layout: (output times, means per time, means, correlation lags) {theirs:?} \
+                 against {mine:?}"
+            ));
+        }
+        if self.histograms.len() != other.histograms.len() {
+            return Err(format!(
+                "statistics of another layout: {} histograms against {}",
+                other.histograms.len(),
+                self.histograms.len()
+            ));
+        }
+        for (i, (a, b)) in self.histograms.iter().zip(&other.histograms).enumerate() {
+            let (x, y) = ((a.counts().len(), a.low(), a.high()), (b.counts().len(), b.low(), b.high()));
+            if x.0 != y.0 || x.1.to_bits() != y.1.to_bits() || x.2.to_bits() != y.2.to_bits() {
+                return Err(format!(
+                    "statistics of another layout: histogram {i} has (bins, low, high) {y:?} against {x:?}"
+                ));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -345,8 +378,10 @@ impl Outcome {
     }
 
     /// Merges the outcome of the next block in.
-    pub fn merge(&mut self, other: &Outcome) {
-        self.statistics.merge(&other.statistics);
+    /// Merges `other` (the trajectories after this one's) in; statistics of another layout are
+    /// an error and nothing is merged (see [`Accumulators::merge`]).
+    pub fn merge(&mut self, other: &Outcome) -> Result<(), String> {
+        self.statistics.merge(&other.statistics)?;
         self.completed += other.completed;
         for (k, v) in &other.failed {
             *self.failed.entry(k.clone()).or_default() += v;
@@ -360,9 +395,10 @@ impl Outcome {
         self.steps += other.steps;
         self.rhs_evaluations += other.rhs_evaluations;
         self.charts.merge(&other.charts);
-        self.lifetimes.merge(&other.lifetimes);
+        self.lifetimes.merge(&other.lifetimes)?;
         let room = LISTED_STOPS.saturating_sub(self.first_stops.len());
         self.first_stops.extend(other.first_stops.iter().take(room).cloned());
+        Ok(())
     }
 
     /// Counts a completed trajectory observed at `observed` output times, stopped by `stop` at

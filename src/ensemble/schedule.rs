@@ -16,7 +16,7 @@ use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
-use super::checkpoint::{Checkpoint, CheckpointError, Header, Resumed};
+use super::checkpoint::{Checkpoint, CheckpointError, Header, Identity, Resumed};
 use super::runner::{BLOCK, Outcome, Progress};
 
 /// A block's outcome, or the message of the panic that ended it.
@@ -86,6 +86,10 @@ pub trait Remote {
 
     /// Whether every other process has been told to end.
     fn finished(&self) -> bool;
+
+    /// The run this process coordinates: the blocks of a process whose run differs (another
+    /// scene, seed, N, lane setting or statistics layout) are refused, never merged.
+    fn expect(&mut self, identity: Identity);
 
     /// Processes in all, this one included.
     fn ranks(&self) -> usize;
@@ -209,25 +213,31 @@ impl Collector {
     }
 
     fn advance(&mut self) {
+        if self.error.is_some() {
+            return;
+        }
         while let Some(o) = self.pending.remove(&self.next) {
-            self.total.merge(&o);
+            if let Err(e) = self.total.merge(&o) {
+                self.fail(format!("block {} cannot be merged: {e}", self.next));
+                return;
+            }
             self.next += 1;
         }
     }
 
     /// The ensemble's outcome: every block in block order; blocks that never ran (an
     /// interrupt) count as interrupted. Also the blocks each process ran, and the checkpoint.
-    pub fn finish(mut self) -> (Outcome, Vec<u64>, Option<Checkpoint>) {
+    pub fn finish(mut self) -> Result<(Outcome, Vec<u64>, Option<Checkpoint>), String> {
         for b in self.next..self.n_blocks {
             match self.pending.remove(&b) {
-                Some(o) => self.total.merge(&o),
+                Some(o) => self.total.merge(&o).map_err(|e| format!("block {b} cannot be merged: {e}"))?,
                 None => {
                     let r = block_range(b, self.n);
                     self.total.interrupted += r.end - r.start;
                 }
             }
         }
-        (self.total, self.by_rank, self.checkpoint.map(|(c, _)| c))
+        Ok((self.total, self.by_rank, self.checkpoint.map(|(c, _)| c)))
     }
 }
 
@@ -361,26 +371,46 @@ mod tests {
         Outcome::new(statistics)
     }
 
+    /// A block of another layout (another scene's histogram shape) fails the run with what
+    /// differs; it neither panics nor is merged.
+    #[test]
+    fn a_block_of_another_layout_is_an_error_not_a_panic() {
+        use crate::runtime::ensemble::Histogram;
+        let with = |bins: usize| {
+            let mut o = empty();
+            o.statistics.histograms = vec![Histogram::new(bins, 0.0, 1.0).unwrap()];
+            o
+        };
+        let mut c = Collector::new(2 * BLOCK, with(20), Resumed::default(), None, 1);
+        c.add(0, 0, Ok(with(30)));
+        c.flush().unwrap();
+        let e = c.error().expect("a block of another layout must fail the run");
+        assert!(e.contains("block 0 cannot be merged") && e.contains("histogram 0"), "{e}");
+        let mut a = with(20);
+        assert!(a.merge(&outcome(0)).is_err());
+        assert_eq!(a, with(20), "nothing is merged from accumulators of another layout");
+    }
+
     #[test]
     fn blocks_arriving_in_any_order_merge_in_block_order() {
         let n = 10 * BLOCK;
         let mut in_order = empty();
         for b in 0..10 {
-            in_order.merge(&outcome(b));
+            in_order.merge(&outcome(b)).unwrap();
         }
         let mut c = Collector::new(n, empty(), Resumed::default(), None, 3);
         for (i, b) in [3, 1, 0, 9, 2, 4, 8, 5, 7, 6].into_iter().enumerate() {
             c.add(i % 3, b, Ok(outcome(b)));
             c.flush().unwrap();
         }
-        let (total, by_rank, _) = c.finish();
+        let (total, by_rank, _) = c.finish().unwrap();
         assert_eq!(by_rank, vec![4, 3, 3]);
         // Bit for bit: the merge order is the block order, not the arrival order.
         assert_eq!(total, in_order);
         // A different order of merging does change the last bits (so the check above can fail).
         let mut reversed = empty();
         for b in (0..10).rev() {
-            reversed.merge(&outcome(b));
+            reversed.merge(&outcome(b)).unwrap();
         }
         assert_ne!(reversed.statistics, in_order.statistics);
     }
@@ -394,7 +424,7 @@ mod tests {
         c.add(0, 1, e);
         c.flush().unwrap();
         assert_eq!(c.error(), Some("a trajectory of block 1 (trajectories 64..128) panicked: boom"));
-        let (total, _, _) = c.finish();
+        let (total, _, _) = c.finish().unwrap();
         assert_eq!(total.completed, 3);
         assert_eq!(total.interrupted, n - 64);
     }
@@ -414,7 +444,7 @@ mod tests {
         let n = n_blocks * BLOCK - 7;
         let mut in_order = empty();
         for b in 0..n_blocks {
-            in_order.merge(&outcome(b));
+            in_order.merge(&outcome(b)).unwrap();
         }
         // The same directory on every run (removed first), so that runs do not pile up in /tmp.
         let dir = std::env::temp_dir().join("rovib-schedule-compaction");
@@ -451,7 +481,7 @@ mod tests {
             c.add(0, b, Ok(outcome(b)));
             c.flush().unwrap();
         }
-        let (total, _, _) = c.finish();
+        let (total, _, _) = c.finish().unwrap();
         assert_eq!(total, in_order);
         let _ = std::fs::remove_dir_all(&dir);
     }

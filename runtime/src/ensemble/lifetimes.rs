@@ -84,29 +84,40 @@ impl Lifetimes {
         }
     }
 
-    /// Adds the counts of `other` (of the same shape, or either empty).
-    ///
-    /// # Panics
-    ///
-    /// If both have counts and their shapes differ (a programming error).
-    pub fn merge(&mut self, other: &Lifetimes) {
+    /// Adds the counts of `other` (of the same shape, or either empty); counts of another shape
+    /// (another run's, read from a process or a file) are an error saying what differs.
+    pub fn merge(&mut self, other: &Lifetimes) -> Result<(), String> {
+        if other.stopped.len() != other.observed.len() * other.conditions * 2 {
+            return Err(format!(
+                "stop counts of an inconsistent shape ({} output times, {} conditions, {} counts)",
+                other.observed.len(),
+                other.conditions,
+                other.stopped.len()
+            ));
+        }
         if other.is_empty() {
-            return;
+            return Ok(());
         }
         if self.is_empty() {
             *self = other.clone();
-            return;
+            return Ok(());
         }
-        assert!(
-            self.observed.len() == other.observed.len() && self.conditions == other.conditions,
-            "lifetimes of one run have one shape"
-        );
+        if self.observed.len() != other.observed.len() || self.conditions != other.conditions {
+            return Err(format!(
+                "stop counts of another layout: {} output times and {} stop conditions against {} and {}",
+                other.observed.len(),
+                other.conditions,
+                self.observed.len(),
+                self.conditions
+            ));
+        }
         for (a, b) in self.observed.iter_mut().zip(&other.observed) {
             *a += b;
         }
         for (a, b) in self.stopped.iter_mut().zip(&other.stopped) {
             *a += b;
         }
+        Ok(())
     }
 
     /// Trajectories observed at output `k` (0 when empty).
@@ -182,9 +193,15 @@ mod tests {
         for chunk in runs.chunks(4).rev() {
             let mut part = Lifetimes::default();
             chunk.iter().for_each(|&(o, s)| part.add(5, 2, o, s));
-            merged.merge(&part);
+            merged.merge(&part).unwrap();
         }
-        merged.merge(&Lifetimes::default());
+        merged.merge(&Lifetimes::default()).unwrap();
+        assert_eq!(merged, whole);
+        // Counts of another run's shape are an error, not a panic, and leave the total unchanged.
+        let mut other = Lifetimes::default();
+        other.add(4, 2, 2, None);
+        let err = merged.merge(&other).unwrap_err();
+        assert!(err.contains("4 output times and 2 stop conditions against 5 and 2"), "{err}");
         assert_eq!(merged, whole);
         let text = serde_json::to_string(&whole).unwrap();
         assert_eq!(serde_json::from_str::<Lifetimes>(&text).unwrap(), whole);
