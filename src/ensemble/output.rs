@@ -160,6 +160,7 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         "seed_given": ensemble.seed_given,
         "sampler": report.sampler,
         "threads": report.threads,
+        "threads_note": report.threads_note,
         "ranks": report.ranks,
         "blocks_by_rank": report.blocks_by_rank,
         "resumed_trajectories": report.resumed,

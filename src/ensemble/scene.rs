@@ -142,6 +142,16 @@ pub struct Bound<const N: usize> {
 struct RawFile {
     ensemble: Option<Spanned<RawEnsemble>>,
     statistics: Option<Spanned<RawStatistics>>,
+    initial: Option<Spanned<toml::Value>>,
+    run: Option<RawRunKeys>,
+}
+
+/// The keys of `[run]` that a single run honours and an ensemble refuses (the others are parsed
+/// by `crate::scene`).
+#[derive(Deserialize)]
+struct RawRunKeys {
+    outputs: Option<Spanned<toml::Value>>,
+    euler_unwrapped: Option<Spanned<toml::Value>>,
 }
 
 #[derive(Deserialize)]
@@ -218,6 +228,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         ));
     };
 
+    refuse_single_run_keys(&src, &raw.initial, raw.run.as_ref())?;
     let e = ensemble.into_inner();
 
     let trajectories = *e.trajectories.get_ref();
@@ -496,6 +507,18 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
                         "write range = [low, high] in the quantity's atomic unit (bohr, rad, hartree, hbar)",
                     ));
                 }
+                if !histogram_range_is_representable([r[0], r[1]], bins as usize) {
+                    return Err(src.error(
+                        h.range.span(),
+                        format!(
+                            "the histogram range [{}, {}] in {bins} bins has a width or bin width that is not a \
+                             finite, resolvable number",
+                            r[0], r[1]
+                        ),
+                        "give a range whose width (high − low) is finite and whose bins are wider than the rounding \
+                         of numbers of its size, e.g. range = [0, 10]",
+                    ));
+                }
                 let times = match &h.times {
                     None => vec![0.0],
                     Some(t) => {
@@ -537,6 +560,49 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         method_span: e.method.span(),
         trajectories_span: e.trajectories.span(),
     })
+}
+
+/// `[initial]`, `run.outputs` and `run.euler_unwrapped` describe one trajectory and its files;
+/// an ensemble draws its own states and writes its own files, so each is an error at its place.
+fn refuse_single_run_keys(
+    src: &Source<'_>,
+    initial: &Option<Spanned<toml::Value>>,
+    run: Option<&RawRunKeys>,
+) -> Result<(), FileError> {
+    if let Some(i) = initial {
+        return Err(src.error(
+            i.span(),
+            "an ensemble does not use [initial]: every trajectory starts from a state drawn by ensemble.method",
+            "remove [initial]; to start the trajectories from given states use method = \"file\" with a states file, \
+             or run this one state with `rovib run` on a scene without [ensemble]",
+        ));
+    }
+    let Some(run) = run else { return Ok(()) };
+    if let Some(o) = &run.outputs {
+        return Err(src.error(
+            o.span(),
+            "`run.outputs` does not apply to an ensemble: it always writes ensemble.csv, histograms.csv, \
+             correlations.csv, summary.json and the plots",
+            "remove run.outputs; to keep the trajectory files of some members use ensemble.keep_trajectories = k",
+        ));
+    }
+    if let Some(u) = &run.euler_unwrapped {
+        return Err(src.error(
+            u.span(),
+            "`run.euler_unwrapped` does not apply to an ensemble (its kept trajectory files have no unwrapped columns)",
+            "remove it; for unwrapped Euler angles run one trajectory with `rovib run`",
+        ));
+    }
+    Ok(())
+}
+
+/// A histogram range whose width, and each bin's width, are finite and resolvable in f64 at the
+/// range's magnitude (else the bin edges are NaN, infinite or coincide).
+fn histogram_range_is_representable(range: [f64; 2], bins: usize) -> bool {
+    let width = range[1] - range[0];
+    let bin = width / bins as f64;
+    let scale = range[0].abs().max(range[1].abs());
+    width.is_finite() && bin.is_normal() && bin > 4.0 * f64::EPSILON * scale
 }
 
 fn quoted(names: &[&str]) -> String {
