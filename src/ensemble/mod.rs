@@ -29,6 +29,7 @@ pub mod mpi;
 pub mod output;
 mod plot;
 pub mod quantity;
+pub mod resources;
 pub mod runner;
 pub mod scene;
 pub mod schedule;

@@ -49,6 +49,10 @@ pub struct EnsembleScene {
     pub keep_trajectories: Option<u64>,
     /// What to reduce the ensemble to.
     pub statistics: StatisticsSpec,
+    /// The cap on the estimated memory, GB (`ensemble.max_memory_gb`), and where it is written.
+    pub max_memory_gb: (f64, Option<Range<usize>>),
+    /// The cap on the estimated disk use, GB (`ensemble.max_disk_gb`), and where it is written.
+    pub max_disk_gb: (f64, Option<Range<usize>>),
     method_span: Range<usize>,
     trajectories_span: Range<usize>,
 }
@@ -171,6 +175,8 @@ struct RawEnsemble {
     file: Option<Spanned<String>>,
     threads: Option<Spanned<i64>>,
     keep_trajectories: Option<Spanned<i64>>,
+    max_memory_gb: Option<Spanned<f64>>,
+    max_disk_gb: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -263,6 +269,20 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         .map(|t| t as usize);
     let keep_trajectories =
         count(&e.keep_trajectories, "keep_trajectories", "write k to keep the trajectory of every k-th trajectory")?;
+
+    let cap = |x: &Option<Spanned<f64>>, what: &str, default: f64| -> Result<(f64, Option<Range<usize>>), FileError> {
+        match x {
+            Some(v) if !(v.get_ref().is_finite() && *v.get_ref() > 0.0) => Err(src.error(
+                v.span(),
+                format!("`ensemble.{what}` must be a positive finite number of GB, got {}", v.get_ref()),
+                format!("leave it out for the default {default} GB, or give the most the ensemble may use"),
+            )),
+            Some(v) => Ok((*v.get_ref(), Some(v.span()))),
+            None => Ok((default, None)),
+        }
+    };
+    let max_memory_gb = cap(&e.max_memory_gb, "max_memory_gb", super::resources::DEFAULT_MAX_MEMORY_GB)?;
+    let max_disk_gb = cap(&e.max_disk_gb, "max_disk_gb", super::resources::DEFAULT_MAX_DISK_GB)?;
 
     let energy_unit = match &e.energy_unit {
         None => EnergyUnit::Hartree,
@@ -557,6 +577,8 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         threads,
         keep_trajectories,
         statistics,
+        max_memory_gb,
+        max_disk_gb,
         method_span: e.method.span(),
         trajectories_span: e.trajectories.span(),
     })
@@ -734,7 +756,68 @@ impl EnsembleScene {
         for c in &self.statistics.correlations {
             correlations.push(index_of(lookup(c)?));
         }
-        Ok(Bound { spec, description, quantities, n_means, histograms, correlations })
+        let bound = Bound { spec, description, quantities, n_means, histograms, correlations };
+        self.check_resources(&bound, scene, times.len(), 2 * N + 8)?;
+        Ok(bound)
+    }
+
+    /// Refuses an ensemble whose estimated memory or disk use (see [`super::resources`]) is above
+    /// `ensemble.max_memory_gb` or `ensemble.max_disk_gb`, before any trajectory runs.
+    fn check_resources<const N: usize>(
+        &self,
+        bound: &Bound<N>,
+        scene: &Scene,
+        times: usize,
+        row_numbers: usize,
+    ) -> Result<(), FileError> {
+        use super::resources::{Shape, gb};
+        let src = scene.source();
+        let blocks = self.trajectories.div_ceil(super::runner::BLOCK);
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let shape = Shape {
+            trajectories: self.trajectories,
+            blocks,
+            threads: super::worker_threads(self.threads, cores, blocks).0,
+            times,
+            quantities: bound.quantities.len(),
+            means: bound.n_means,
+            correlations: bound.correlations.len(),
+            histogram_bins: bound.histograms.iter().map(|h| h.1 as u64 * h.3.len() as u64).sum(),
+            row_numbers,
+            keep: self.keep_trajectories,
+        };
+        let e = shape.estimate();
+        let at = |given: &Option<Range<usize>>| given.clone().unwrap_or_else(|| self.trajectories_span.clone());
+        if e.memory > self.max_memory_gb.0 * 1e9 {
+            return Err(src.error(
+                at(&self.max_memory_gb.1),
+                format!(
+                    "the ensemble's statistics would need about {} of memory ({} output times, {} histogram bins \
+                     over their times, {} threads), more than ensemble.max_memory_gb = {}",
+                    gb(e.memory),
+                    times,
+                    shape.histogram_bins,
+                    shape.threads,
+                    self.max_memory_gb.0
+                ),
+                "use fewer histogram bins or times, a longer run.output_interval or fewer threads, \
+                 or raise ensemble.max_memory_gb if the machine has the memory",
+            ));
+        }
+        if e.disk > self.max_disk_gb.0 * 1e9 {
+            let kept = if e.kept > 0.0 { format!(", of which {} kept trajectories", gb(e.kept)) } else { String::new() };
+            return Err(src.error(
+                at(&self.max_disk_gb.1),
+                format!(
+                    "the ensemble would write about {} (checkpoint, tables{kept}), more than ensemble.max_disk_gb = {}",
+                    gb(e.disk),
+                    self.max_disk_gb.0
+                ),
+                "keep fewer trajectories (a larger keep_trajectories), use fewer histogram bins or times, \
+                 or raise ensemble.max_disk_gb if the disk has the room",
+            ));
+        }
+        Ok(())
     }
 
     /// Where `method = ...` is written, for errors of the sampler.
