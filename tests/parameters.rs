@@ -170,10 +170,14 @@ fn an_ensemble_runs_with_the_scene_parameters() {
         let (alpha, se_a) = report.mean("alpha", k).unwrap();
         let r1 = r1 * BOHR_IN_ANGSTROM;
         let se_r = se_r * BOHR_IN_ANGSTROM;
-        assert!((r1 - re).abs() < 0.003 + 4.0 * se_r, "t = {}: ⟨r1⟩ = {r1} ± {se_r} Å, minimum at {re}", report.times[k]);
+        assert!(
+            (r1 - re).abs() < 0.003 + 4.0 * se_r,
+            "t = {}: ⟨r1⟩ = {r1} ± {se_r} Å, minimum at {re}",
+            report.times[k]
+        );
         assert!((alpha - alpha_e).abs() < 0.01 + 4.0 * se_a, "t = {}: ⟨α⟩ = {alpha} ± {se_a}", report.times[k]);
         // The test sees the difference: the compiled-in minimum is far outside the tolerance.
-        assert!((0.95785 - re) .abs() > 10.0 * (0.003 + 4.0 * se_r));
+        assert!((0.95785 - re).abs() > 10.0 * (0.003 + 4.0 * se_r));
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

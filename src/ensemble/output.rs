@@ -156,6 +156,7 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             "detail": f.detail,
         })).collect::<Vec<_>>(),
         "statistics_cover": "completed trajectories only: failed and interrupted ones are left out",
+        "description": scene.description,
         "seed": report.seed,
         "seed_given": ensemble.seed_given,
         "sampler": report.sampler,

@@ -805,7 +805,8 @@ impl EnsembleScene {
             ));
         }
         if e.disk > self.max_disk_gb.0 * 1e9 {
-            let kept = if e.kept > 0.0 { format!(", of which {} kept trajectories", gb(e.kept)) } else { String::new() };
+            let kept =
+                if e.kept > 0.0 { format!(", of which {} kept trajectories", gb(e.kept)) } else { String::new() };
             return Err(src.error(
                 at(&self.max_disk_gb.1),
                 format!(
