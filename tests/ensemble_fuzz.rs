@@ -333,7 +333,12 @@ const KEYS: &[(&str, &str, &str, Expect)] = &[
 
 /// Keys whose valid change applies to other methods or integrators, checked from a base that
 /// uses them: (base changes, table, key, value, expectation).
-const KEYS_ELSEWHERE: &[(&[(&str, &str, &str)], &str, &str, &str, Expect)] = &[
+/// A key checked from a base scene changed by some `(table, key, value)` (an empty value removes
+/// the key).
+type Elsewhere =
+    (&'static [(&'static str, &'static str, &'static str)], &'static str, &'static str, &'static str, Expect);
+
+const KEYS_ELSEWHERE: &[Elsewhere] = &[
     (
         &[
             ("ensemble", "method", "\"microcanonical\""),

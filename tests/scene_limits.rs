@@ -217,7 +217,7 @@ fn ensembles_beyond_the_memory_and_disk_caps_are_refused_with_their_figures() {
     let e = bind_ensemble(&format!("{head}[statistics]\nhistograms = [{}]\n{run}", many.join(", "))).unwrap_err();
     assert!(e.message.contains("300000000 histogram bins"), "{e}");
     // Every trajectory kept, 10^5 trajectories × 10^4 output times: hundreds of GB.
-    let kept = format!("{}keep_trajectories = 1\n[run]\nend = 10000\noutput_interval = 1\n", head);
+    let kept = format!("{head}keep_trajectories = 1\n[run]\nend = 10000\noutput_interval = 1\n");
     let e = bind_ensemble(&kept).unwrap_err();
     assert!(e.message.contains("kept trajectories") && e.message.contains("max_disk_gb"), "{e}");
     assert!(e.help.contains("keep fewer trajectories"), "{e}");
