@@ -299,3 +299,70 @@ fn mutated_ensemble_scenes_never_panic_and_every_error_is_located() {
     }
     assert!(checked > 50, "{checked}");
 }
+
+/// Keys that describe one trajectory and its files are refused in an ensemble where they are
+/// written, with what to do instead (they were accepted and had no effect).
+#[test]
+fn single_run_keys_are_refused_in_an_ensemble() {
+    let ensemble = "[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\n";
+    let text = format!("molecule = \"h2o\"\n[initial]\nq = {{ r1 = 1.0 }}\n{ensemble}{RUN}");
+    let e = parse_ensemble(&parse_scene("bad.toml", &text).unwrap()).unwrap_err();
+    check(&e, 2, "an ensemble does not use [initial]", "method = \"file\"");
+    for (key, line, message, help) in [
+        ("outputs = [\"trajectory\"]", 9, "`run.outputs` does not apply to an ensemble", "keep_trajectories"),
+        ("euler_unwrapped = true", 9, "`run.euler_unwrapped` does not apply to an ensemble", "`rovib run`"),
+        ("euler_unwrapped = false", 9, "`run.euler_unwrapped` does not apply to an ensemble", "remove it"),
+    ] {
+        let text = format!("molecule = \"h2o\"\n{ensemble}{RUN}{key}\n");
+        let e = parse_ensemble(&parse_scene("bad.toml", &text).unwrap()).unwrap_err();
+        check(&e, line, message, help);
+    }
+}
+
+/// A histogram whose width or bin width overflows or cannot be resolved at the range's
+/// magnitude (NaN or coinciding bin edges) is refused at its range.
+#[test]
+fn histogram_ranges_that_are_not_representable() {
+    for (range, bins) in [("[-1e308, 1e308]", 10), ("[1e10, 1.000000000001e10]", 1000000), ("[0, 1e-310]", 1)] {
+        let e = error(&format!(
+            "[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\n\
+             [statistics]\nhistograms = [{{ quantity = \"r1\", bins = {bins}, range = {range} }}]"
+        ));
+        check(&e, 7, "has a width or bin width that is not a finite, resolvable number", "range = [0, 10]");
+    }
+}
+
+/// The names a definition may not give a coordinate are exactly the ensemble's own quantities.
+#[test]
+fn the_reserved_coordinate_names_are_the_quantity_names() {
+    use rovib::ensemble::quantity::Quantity;
+    assert_eq!(Quantity::reserved_names(), rovib_codegen::definition::RESERVED_QUANTITY_NAMES.to_vec());
+}
+
+/// Threads: at most one per block and a few per core, with a note when fewer than asked run.
+#[test]
+fn threads_are_capped_by_the_work_and_the_cores() {
+    use rovib::ensemble::{MAX_THREADS_PER_CORE, worker_threads};
+    assert_eq!(worker_threads(None, 2, 100), (2, None));
+    assert_eq!(worker_threads(Some(2), 2, 100), (2, None));
+    let (t, note) = worker_threads(Some(100_000), 2, 1_000_000);
+    assert_eq!(t, 2 * MAX_THREADS_PER_CORE);
+    assert!(note.unwrap().contains("100000 threads were asked for, 8 run: this machine has 2 core(s)"));
+    let (t, note) = worker_threads(Some(3000), 64, 1);
+    assert_eq!(t, 1);
+    assert!(note.unwrap().contains("the ensemble has 1 block(s) of 64 trajectories"));
+    // Through the runner: the thread count used and the note in the report and summary.json.
+    let text = format!(
+        "molecule = \"h2o\"\n[ensemble]\ntrajectories = 3\nthreads = 100000\nmethod = \"thermal\"\ntemperature = 300\n\
+         region = {{ energy_cap = 0.1 }}\n[run]\nend = 2\noutput_interval = 1\n"
+    );
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-ensemble-threads");
+    let _ = std::fs::remove_dir_all(&out);
+    let begin = std::time::Instant::now();
+    let report = run_ensemble(&parse_scene("t.toml", &text).unwrap(), &EnsembleOptions::new(&out)).unwrap();
+    assert_eq!(report.threads, 1);
+    assert!(begin.elapsed().as_secs() < 20);
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(summary.contains("100000 threads were asked for, 1 run"), "{summary}");
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -139,3 +139,76 @@ fn the_cartesian_potential_runs_with_the_overridden_parameters() {
         }
     }
 }
+
+fn ensemble_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-parameters-{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A thermal water ensemble at 100 K whose potential moves its minimum (`re`, `alpha_e`): the
+/// ensemble means of r1 and α sit at the moved minimum (closed form: the minimum of the
+/// Morse-plus-quadratic potential is at r = re, α = alpha_e, and at 100 K the thermal
+/// displacement of the mean is below 0.003 Å and 0.01 rad), at t = 0 (the sampler) and at every
+/// later output time (the trajectories), not at the compiled-in minimum 0.958 Å, 1.824 rad.
+#[test]
+fn an_ensemble_runs_with_the_scene_parameters() {
+    use rovib::ensemble::{EnsembleOptions, run_ensemble};
+    let dir = ensemble_dir("ensemble");
+    let (re, alpha_e) = (1.05, 1.65);
+    let text = format!(
+        "molecule = \"h2o\"\n[ensemble]\ntrajectories = 192\nseed = 4\nmethod = \"thermal\"\ntemperature = 100\n\
+         region = {{ energy_cap = 0.05 }}\nthreads = 2\n[statistics]\nmeans = [\"r1\", \"alpha\"]\n\
+         [potential.parameters]\nre = {re}\nalpha_e = {alpha_e}\n[run]\nend = 400\noutput_interval = 100\n"
+    );
+    let scene = rovib::scene::parse_scene("p.toml", &text).unwrap();
+    let report = run_ensemble(&scene, &EnsembleOptions::new(dir.join("out"))).unwrap();
+    assert_eq!(report.outcome.completed, 192);
+    for k in 0..report.times.len() {
+        let (r1, se_r) = report.mean("r1", k).unwrap();
+        let (alpha, se_a) = report.mean("alpha", k).unwrap();
+        let r1 = r1 * BOHR_IN_ANGSTROM;
+        let se_r = se_r * BOHR_IN_ANGSTROM;
+        assert!(
+            (r1 - re).abs() < 0.003 + 4.0 * se_r,
+            "t = {}: ⟨r1⟩ = {r1} ± {se_r} Å, minimum at {re}",
+            report.times[k]
+        );
+        assert!((alpha - alpha_e).abs() < 0.01 + 4.0 * se_a, "t = {}: ⟨α⟩ = {alpha} ± {se_a}", report.times[k]);
+        // The test sees the difference: the compiled-in minimum is far outside the tolerance.
+        assert!((0.95785 - re).abs() > 10.0 * (0.003 + 4.0 * se_r));
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// An unknown parameter name in an ensemble scene is an error at its place, before any
+/// trajectory, from the library (what the Python package calls) and from the command line.
+#[test]
+fn an_ensemble_refuses_an_unknown_parameter_at_its_place() {
+    use rovib::cli::CliError;
+    use rovib::ensemble::{EnsembleOptions, run_ensemble};
+    let dir = ensemble_dir("unknown");
+    let text = "molecule = \"h2o\"\n[ensemble]\ntrajectories = 4\nmethod = \"thermal\"\ntemperature = 300\n\
+                region = { energy_cap = 0.1 }\n[potential.parameters]\nbogus = 1\nRE = 1.0\n[run]\nend = 10\n";
+    let scene = rovib::scene::parse_scene("u.toml", text).unwrap();
+    match run_ensemble(&scene, &EnsembleOptions::new(dir.join("lib"))) {
+        Err(CliError::File(e)) => {
+            assert_eq!((e.path.as_str(), e.line), ("u.toml", 9), "{e}");
+            assert!(e.message.contains("h2o has no potential parameter `RE`"), "{e}");
+            assert!(e.help.contains("did you mean `re`?"), "{e}");
+        }
+        other => panic!("expected a located error, got {other:?}"),
+    }
+    assert!(!dir.join("lib/ensemble.csv").exists());
+    let path = dir.join("u.toml");
+    std::fs::write(&path, text.replace("RE = 1.0\n", "")).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["ensemble", path.to_str().unwrap(), "--out", dir.join("cli").to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(!out.status.success());
+    assert!(err.contains("h2o has no potential parameter `bogus`") && err.contains("u.toml:8:"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

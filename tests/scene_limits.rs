@@ -176,3 +176,57 @@ fn lab_velocities_and_positions_that_overflow_are_refused() {
     let start = initial_state(&H2o, &s).unwrap();
     assert!((start.com_velocity[0] - 0.01 / 0.529_177_210_903 * 0.024_188_843_265_857).abs() < 1e-15);
 }
+
+/// An ensemble scene bound to water: `Ok` or the located error of parsing or binding.
+fn bind_ensemble(text: &str) -> Result<(), FileError> {
+    use rovib::ensemble::output_times;
+    use rovib::ensemble::scene::parse_ensemble;
+    let scene = parse_scene("big.toml", text)?;
+    let e = parse_ensemble(&scene)?;
+    e.bind(&H2o, &scene, &output_times(scene.t_end, scene.output_interval)).map(|_| ())
+}
+
+/// Ensembles whose statistics or kept trajectories would exhaust memory or disk are refused
+/// before the first trajectory, with the estimate and the key that raises the cap; raising it
+/// accepts them. (Before, these ran until killed or aborted on allocation.)
+#[test]
+fn ensembles_beyond_the_memory_and_disk_caps_are_refused_with_their_figures() {
+    let head = "molecule = \"h2o\"\n[ensemble]\ntrajectories = 100000\nthreads = 2\nmethod = \"thermal\"\n\
+                temperature = 300\nregion = { energy_cap = 0.1 }\n";
+    let times: Vec<String> = (0..100).map(|k| format!("{}", k * 10)).collect();
+    let big_histogram = format!(
+        "[statistics]\nhistograms = [{{ quantity = \"r1\", bins = 1000000, range = [0, 5], times = [{}] }}]\n",
+        times.join(", ")
+    );
+    let run = "[run]\nend = 1000\noutput_interval = 10\n";
+    // 10^6 bins × 100 times: 0.8 GB per set of accumulators, several sets in flight.
+    let e = bind_ensemble(&format!("{head}{big_histogram}{run}")).unwrap_err();
+    assert_eq!(e.line, 3, "{e}");
+    assert!(e.message.contains("would need about") && e.message.contains("GB of memory"), "{e}");
+    assert!(e.message.contains("100000000 histogram bins") && e.message.contains("max_memory_gb = 4"), "{e}");
+    assert!(e.help.contains("raise ensemble.max_memory_gb"), "{e}");
+    // With the memory allowed, the checkpoint (a 0.3 GB line per block) exceeds the disk cap.
+    let raised = format!("{head}max_memory_gb = 100\n{big_histogram}{run}");
+    let e = bind_ensemble(&raised).unwrap_err();
+    assert!(e.message.contains("would write about") && e.message.contains("max_disk_gb = 20"), "{e}");
+    assert_eq!(e.line, 3, "{e}");
+    bind_ensemble(&raised.replace("max_memory_gb = 100\n", "max_memory_gb = 100\nmax_disk_gb = 1000\n")).unwrap();
+    // 300 histograms of 10^6 bins at one time each.
+    let many: Vec<String> =
+        (0..300).map(|_| "{ quantity = \"r1\", bins = 1000000, range = [0, 5] }".to_owned()).collect();
+    let e = bind_ensemble(&format!("{head}[statistics]\nhistograms = [{}]\n{run}", many.join(", "))).unwrap_err();
+    assert!(e.message.contains("300000000 histogram bins"), "{e}");
+    // Every trajectory kept, 10^5 trajectories × 10^4 output times: hundreds of GB.
+    let kept = format!("{head}keep_trajectories = 1\n[run]\nend = 10000\noutput_interval = 1\n");
+    let e = bind_ensemble(&kept).unwrap_err();
+    assert!(e.message.contains("kept trajectories") && e.message.contains("max_disk_gb"), "{e}");
+    assert!(e.help.contains("keep fewer trajectories"), "{e}");
+    let kept_raised = kept.replace("keep_trajectories = 1\n", "keep_trajectories = 1\nmax_disk_gb = 1e6\n");
+    bind_ensemble(&kept_raised).unwrap();
+    // The caps themselves are checked where written.
+    let e = bind_ensemble(&format!("{head}max_disk_gb = -1\n{run}")).unwrap_err();
+    assert_eq!(e.line, 8, "{e}");
+    assert!(e.message.contains("`ensemble.max_disk_gb` must be a positive finite number of GB, got -1"), "{e}");
+    // An ordinary ensemble is far below both.
+    bind_ensemble(&format!("{head}{run}")).unwrap();
+}

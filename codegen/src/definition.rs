@@ -425,7 +425,29 @@ fn check_label(
     Ok(())
 }
 
+/// The names of the ensemble quantities that are not coordinates (rovib's
+/// `ensemble::quantity`): statistics name coordinates and these in one namespace, so a coordinate
+/// may not take one of them, nor start with `p_` (the momentum of coordinate NAME is `p_NAME`).
+pub const RESERVED_QUANTITY_NAMES: [&str; 13] =
+    ["T", "U", "H", "J", "Jx", "Jy", "Jz", "Lx", "Ly", "Lz", "mu_x", "mu_y", "mu_z"];
+
 impl Validator<'_> {
+    fn not_a_quantity(&self, name: &Spanned<String>) -> Result<(), DefinitionError> {
+        let n = name.get_ref();
+        if RESERVED_QUANTITY_NAMES.contains(&n.as_str()) || n.starts_with("p_") {
+            return Err(self.src.error(
+                name.span(),
+                format!("the coordinate name `{n}` is the name of an ensemble quantity"),
+                format!(
+                    "ensemble statistics name coordinates and the quantities {} and p_NAME (a coordinate's \
+                     momentum) alike; choose another name",
+                    RESERVED_QUANTITY_NAMES.join(", ")
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     fn declare(&mut self, name: &Spanned<String>, what: &'static str) -> Result<(), DefinitionError> {
         let n = name.get_ref();
         if !is_identifier(n) {
@@ -524,7 +546,7 @@ impl Validator<'_> {
         let mut coordinates = Vec::new();
         let mut coordinate_spans = Vec::new();
         for c in &raw.coordinates {
-            let declared = self.declare(&c.name, "coordinate");
+            let declared = self.declare(&c.name, "coordinate").and_then(|()| self.not_a_quantity(&c.name));
             self.check(declared);
             let unit = CoordinateUnit::parse(c.unit.get_ref()).ok_or_else(|| {
                 let mut spellings: Vec<(&str, ())> = LengthUnit::SPELLINGS.iter().map(|(n, _)| (*n, ())).collect();

@@ -281,6 +281,22 @@ fn reserved_and_invalid_names() {
     assert!(all[1..].iter().all(|e| e.message.starts_with("unknown name `alpha`")), "{all:#?}");
 }
 
+/// A coordinate named like an ensemble quantity would shadow it in `[statistics]` (two `H_mean`
+/// columns, `mu_x` correlating the coordinate): refused where it is declared.
+#[test]
+fn coordinate_names_of_ensemble_quantities_are_refused() {
+    for name in ["H", "T", "U", "J", "Jz", "Lx", "mu_x", "p_r1"] {
+        let all = errors(&with("name = \"alpha\"", &format!("name = \"{name}\"")));
+        assert_error(
+            &all[0],
+            13,
+            8,
+            &format!("the coordinate name `{name}` is the name of an ensemble quantity"),
+            "T, U, H, J, Jx, Jy, Jz, Lx, Ly, Lz, mu_x, mu_y, mu_z and p_NAME",
+        );
+    }
+}
+
 #[test]
 fn constants_resolve_in_any_order_but_not_in_cycles() {
     let text = with("length_unit = \"bohr\"", "length_unit = \"bohr\"\n[constants]\nb = \"2 * a\"\na = 0.5");

@@ -2,7 +2,8 @@
 //! 2 threads, the parallel efficiency, and the cost of the statistics against the integration.
 //!
 //! Initial states come from the scene's own sampler when it can be built; otherwise (a scene
-//! whose method cannot be sampled) from a Gaussian spread about the scene's `[initial]` state: q ± 0.02
+//! whose method cannot be sampled) from a Gaussian spread about the molecule's reference geometry at rest (an ensemble
+//! scene has no `[initial]`): q ± 0.02
 //! (bohr, rad), p ± 0.5 (ħ/bohr, ħ), J ± 2 ħ per component, uniform orientation, drawn from
 //! trajectory i's own stream. The report says which was used.
 //!
@@ -84,7 +85,7 @@ impl<const N: usize> Sampler<N> for Spread<N> {
     }
 }
 
-/// Runs the ensemble benchmark of the scene at `path` (which has `[initial]` and `[ensemble]`
+/// Runs the ensemble benchmark of the scene at `path` (which has `[ensemble]`
 /// and no `[statistics]`) with `trajectories` trajectories (default the scene's).
 pub fn bench(path: &Path, out_dir: Option<&Path>, trajectories: Option<u64>) -> Result<EnsembleBenchReport, CliError> {
     let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)
@@ -93,7 +94,7 @@ pub fn bench(path: &Path, out_dir: Option<&Path>, trajectories: Option<u64>) -> 
     let scene = parse_scene(&name, &text)?;
     if !scene.ensemble || text.lines().any(|l| l.trim_start().starts_with("[statistics]")) {
         return Err(CliError::Message(format!(
-            "{name}: `rovib bench --ensemble` needs a scene with [initial] and [ensemble] and without [statistics] \
+            "{name}: `rovib bench --ensemble` needs a scene with [ensemble] and without [statistics] \
              (it sets its own), e.g. scenes/h2o_ensemble_bench.toml"
         )));
     }
@@ -171,7 +172,7 @@ impl MoleculeVisitor for Visit<'_> {
             Err(e) => (
                 &spread,
                 format!(
-                    "Gaussian spread about [initial] (q ± 0.02, p ± 0.5, J ± 2 hbar, uniform orientation), because the scene's sampler is not available: {e}"
+                    "Gaussian spread about the reference geometry (q ± 0.02, p ± 0.5, J ± 2 hbar, uniform orientation), because the scene's sampler is not available: {e}"
                 ),
             ),
         };

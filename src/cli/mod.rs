@@ -106,7 +106,7 @@ pub enum Command {
         #[arg(long)]
         quick: bool,
         /// Ensemble throughput instead (1 and 2 threads, with and without statistics; a scene
-        /// with `[initial]` and `[ensemble]`, e.g. scenes/h2o_ensemble_bench.toml).
+        /// with `[ensemble]`, e.g. scenes/h2o_ensemble_bench.toml).
         #[arg(long)]
         ensemble: bool,
         /// With --ensemble: the number of trajectories [default: the scene's].

@@ -30,6 +30,7 @@ pub mod mpi;
 pub mod output;
 mod plot;
 pub mod quantity;
+pub mod resources;
 pub mod runner;
 pub mod scene;
 pub mod schedule;
@@ -172,6 +173,8 @@ pub struct EnsembleReport {
     pub wall_time: f64,
     /// Worker threads used (by each process).
     pub threads: usize,
+    /// Why fewer threads run than were asked for, if so (also printed, and in summary.json).
+    pub threads_note: Option<String>,
     /// Processes (MPI ranks; 1 without MPI).
     pub ranks: usize,
     /// Blocks each process ran in this run (rank 0 first).
@@ -246,9 +249,23 @@ struct Visit<'a, 'l> {
 impl MoleculeVisitor for Visit<'_, '_> {
     type Output = Result<Option<EnsembleReport>, CliError>;
 
+    /// With the scene's `[potential.parameters]` every trajectory, the sampler and the
+    /// statistics use the potential with them (as `rovib run` does), else the compiled-in one.
     fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
     where
         M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+    {
+        match crate::parameters::scene_parameters(&m, self.scene)? {
+            Some(values) => self.go(crate::parameters::WithParameters { molecule: m, values }),
+            None => self.go(m),
+        }
+    }
+}
+
+impl Visit<'_, '_> {
+    fn go<M, const N: usize, const NA: usize>(self, m: M) -> Result<Option<EnsembleReport>, CliError>
+    where
+        M: Molecule<N, NA> + Sync,
     {
         let times = output_times(self.scene.t_end, self.scene.output_interval);
         let bound = self.ensemble.bind(&m, self.scene, &times)?;
@@ -266,8 +283,26 @@ impl MoleculeVisitor for Visit<'_, '_> {
 
 /// Runs the ensemble of `scene` for molecule `m` with initial states from `sampler` instead of
 /// the scene's method (the method's parameters are still checked); `description` says how the
-/// states are drawn, for summary.json.
+/// states are drawn, for summary.json. The scene's `[potential.parameters]` apply to the
+/// trajectories and statistics (the sampler is the caller's).
 pub fn run_with_sampler<M, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+    sampler: &dyn Sampler<N>,
+    description: &str,
+    options: &EnsembleOptions,
+) -> Result<EnsembleReport, CliError>
+where
+    M: Molecule<N, NA> + Sync + Clone,
+{
+    if let Some(values) = crate::parameters::scene_parameters(m, scene)? {
+        let m = crate::parameters::WithParameters { molecule: m.clone(), values };
+        return run_with_sampler_as_given(&m, scene, sampler, description, options);
+    }
+    run_with_sampler_as_given(m, scene, sampler, description, options)
+}
+
+fn run_with_sampler_as_given<M, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
     sampler: &dyn Sampler<N>,
@@ -349,11 +384,14 @@ where
         lanes: options.lanes,
         stops: crate::cli::run::stop_conditions(m, scene)?,
     };
-    let threads = options
-        .threads
-        .or(ensemble.threads)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-        .max(1);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let asked = options.threads.or(ensemble.threads);
+    let (threads, threads_note) = worker_threads(asked, cores, ensemble.trajectories.div_ceil(BLOCK));
+    if let Some(note) = &threads_note
+        && !worker
+    {
+        eprintln!("note: {note}");
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -433,6 +471,7 @@ where
         units: plan.quantities[..plan.n_means].iter().map(|q| q.unit(m)).collect(),
         wall_time,
         threads,
+        threads_note,
         ranks,
         blocks_by_rank,
         resumed,
@@ -464,6 +503,27 @@ fn run_header(scene: &Scene, ensemble: &EnsembleScene, options: &EnsembleOptions
         bytes.extend_from_slice(&b);
     }
     Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK).with_lanes(options.lanes)
+/// The most worker threads per core an ensemble starts: the trajectories are compute-bound, so
+/// more than a few per core only add switching (and thousands take minutes to start).
+pub const MAX_THREADS_PER_CORE: usize = 4;
+
+/// The worker threads to start when `asked` were asked for (`None`: one per core) on `cores`
+/// cores for `blocks` blocks: at most one per block and [`MAX_THREADS_PER_CORE`] per core, at
+/// least one; with a note saying why, when that is fewer than asked.
+pub fn worker_threads(asked: Option<usize>, cores: usize, blocks: u64) -> (usize, Option<String>) {
+    let wanted = asked.unwrap_or(cores).max(1);
+    let per_cores = MAX_THREADS_PER_CORE.saturating_mul(cores.max(1));
+    let by_blocks = usize::try_from(blocks).unwrap_or(usize::MAX).max(1);
+    let used = wanted.min(per_cores).min(by_blocks);
+    let note = (asked.is_some() && used < wanted).then(|| {
+        let why = if used == by_blocks {
+            format!("the ensemble has {blocks} block(s) of {BLOCK} trajectories, and a thread runs one block at a time")
+        } else {
+            format!("this machine has {cores} core(s) and more than {MAX_THREADS_PER_CORE} threads per core only add switching")
+        };
+        format!("{wanted} threads were asked for, {used} run: {why}")
+    });
+    (used, note)
 }
 
 /// The checkpoint of this run (new, or continued with `options.resume`) and what it held.

@@ -77,6 +77,12 @@ impl Quantity {
         names
     }
 
+    /// The names of the quantities that are not coordinates or momenta (a definition may not
+    /// give a coordinate one of them, see rovib-codegen's `RESERVED_QUANTITY_NAMES`).
+    pub fn reserved_names() -> Vec<&'static str> {
+        FIXED.iter().chain(DIPOLE.iter()).map(|(n, _)| *n).collect()
+    }
+
     /// What an ensemble averages when the scene does not say: every coordinate, T, U, H, |J|.
     pub fn default_set<M: Molecule<N, NA>, const N: usize, const NA: usize>() -> Vec<Self> {
         let mut q: Vec<Quantity> = (0..N).map(Quantity::Coordinate).collect();

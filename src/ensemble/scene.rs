@@ -49,6 +49,10 @@ pub struct EnsembleScene {
     pub keep_trajectories: Option<u64>,
     /// What to reduce the ensemble to.
     pub statistics: StatisticsSpec,
+    /// The cap on the estimated memory, GB (`ensemble.max_memory_gb`), and where it is written.
+    pub max_memory_gb: (f64, Option<Range<usize>>),
+    /// The cap on the estimated disk use, GB (`ensemble.max_disk_gb`), and where it is written.
+    pub max_disk_gb: (f64, Option<Range<usize>>),
     method_span: Range<usize>,
     trajectories_span: Range<usize>,
 }
@@ -142,6 +146,16 @@ pub struct Bound<const N: usize> {
 struct RawFile {
     ensemble: Option<Spanned<RawEnsemble>>,
     statistics: Option<Spanned<RawStatistics>>,
+    initial: Option<Spanned<toml::Value>>,
+    run: Option<RawRunKeys>,
+}
+
+/// The keys of `[run]` that a single run honours and an ensemble refuses (the others are parsed
+/// by `crate::scene`).
+#[derive(Deserialize)]
+struct RawRunKeys {
+    outputs: Option<Spanned<toml::Value>>,
+    euler_unwrapped: Option<Spanned<toml::Value>>,
 }
 
 #[derive(Deserialize)]
@@ -161,6 +175,8 @@ struct RawEnsemble {
     file: Option<Spanned<String>>,
     threads: Option<Spanned<i64>>,
     keep_trajectories: Option<Spanned<i64>>,
+    max_memory_gb: Option<Spanned<f64>>,
+    max_disk_gb: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -218,6 +234,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         ));
     };
 
+    refuse_single_run_keys(&src, &raw.initial, raw.run.as_ref())?;
     let e = ensemble.into_inner();
 
     let trajectories = *e.trajectories.get_ref();
@@ -252,6 +269,20 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         .map(|t| t as usize);
     let keep_trajectories =
         count(&e.keep_trajectories, "keep_trajectories", "write k to keep the trajectory of every k-th trajectory")?;
+
+    let cap = |x: &Option<Spanned<f64>>, what: &str, default: f64| -> Result<(f64, Option<Range<usize>>), FileError> {
+        match x {
+            Some(v) if !(v.get_ref().is_finite() && *v.get_ref() > 0.0) => Err(src.error(
+                v.span(),
+                format!("`ensemble.{what}` must be a positive finite number of GB, got {}", v.get_ref()),
+                format!("leave it out for the default {default} GB, or give the most the ensemble may use"),
+            )),
+            Some(v) => Ok((*v.get_ref(), Some(v.span()))),
+            None => Ok((default, None)),
+        }
+    };
+    let max_memory_gb = cap(&e.max_memory_gb, "max_memory_gb", super::resources::DEFAULT_MAX_MEMORY_GB)?;
+    let max_disk_gb = cap(&e.max_disk_gb, "max_disk_gb", super::resources::DEFAULT_MAX_DISK_GB)?;
 
     let energy_unit = match &e.energy_unit {
         None => EnergyUnit::Hartree,
@@ -496,6 +527,18 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
                         "write range = [low, high] in the quantity's atomic unit (bohr, rad, hartree, hbar)",
                     ));
                 }
+                if !histogram_range_is_representable([r[0], r[1]], bins as usize) {
+                    return Err(src.error(
+                        h.range.span(),
+                        format!(
+                            "the histogram range [{}, {}] in {bins} bins has a width or bin width that is not a \
+                             finite, resolvable number",
+                            r[0], r[1]
+                        ),
+                        "give a range whose width (high − low) is finite and whose bins are wider than the rounding \
+                         of numbers of its size, e.g. range = [0, 10]",
+                    ));
+                }
                 let times = match &h.times {
                     None => vec![0.0],
                     Some(t) => {
@@ -534,9 +577,54 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         threads,
         keep_trajectories,
         statistics,
+        max_memory_gb,
+        max_disk_gb,
         method_span: e.method.span(),
         trajectories_span: e.trajectories.span(),
     })
+}
+
+/// `[initial]`, `run.outputs` and `run.euler_unwrapped` describe one trajectory and its files;
+/// an ensemble draws its own states and writes its own files, so each is an error at its place.
+fn refuse_single_run_keys(
+    src: &Source<'_>,
+    initial: &Option<Spanned<toml::Value>>,
+    run: Option<&RawRunKeys>,
+) -> Result<(), FileError> {
+    if let Some(i) = initial {
+        return Err(src.error(
+            i.span(),
+            "an ensemble does not use [initial]: every trajectory starts from a state drawn by ensemble.method",
+            "remove [initial]; to start the trajectories from given states use method = \"file\" with a states file, \
+             or run this one state with `rovib run` on a scene without [ensemble]",
+        ));
+    }
+    let Some(run) = run else { return Ok(()) };
+    if let Some(o) = &run.outputs {
+        return Err(src.error(
+            o.span(),
+            "`run.outputs` does not apply to an ensemble: it always writes ensemble.csv, histograms.csv, \
+             correlations.csv, summary.json and the plots",
+            "remove run.outputs; to keep the trajectory files of some members use ensemble.keep_trajectories = k",
+        ));
+    }
+    if let Some(u) = &run.euler_unwrapped {
+        return Err(src.error(
+            u.span(),
+            "`run.euler_unwrapped` does not apply to an ensemble (its kept trajectory files have no unwrapped columns)",
+            "remove it; for unwrapped Euler angles run one trajectory with `rovib run`",
+        ));
+    }
+    Ok(())
+}
+
+/// A histogram range whose width, and each bin's width, are finite and resolvable in f64 at the
+/// range's magnitude (else the bin edges are NaN, infinite or coincide).
+fn histogram_range_is_representable(range: [f64; 2], bins: usize) -> bool {
+    let width = range[1] - range[0];
+    let bin = width / bins as f64;
+    let scale = range[0].abs().max(range[1].abs());
+    width.is_finite() && bin.is_normal() && bin > 4.0 * f64::EPSILON * scale
 }
 
 fn quoted(names: &[&str]) -> String {
@@ -668,7 +756,69 @@ impl EnsembleScene {
         for c in &self.statistics.correlations {
             correlations.push(index_of(lookup(c)?));
         }
-        Ok(Bound { spec, description, quantities, n_means, histograms, correlations })
+        let bound = Bound { spec, description, quantities, n_means, histograms, correlations };
+        self.check_resources(&bound, scene, times.len(), 2 * N + 8)?;
+        Ok(bound)
+    }
+
+    /// Refuses an ensemble whose estimated memory or disk use (see [`super::resources`]) is above
+    /// `ensemble.max_memory_gb` or `ensemble.max_disk_gb`, before any trajectory runs.
+    fn check_resources<const N: usize>(
+        &self,
+        bound: &Bound<N>,
+        scene: &Scene,
+        times: usize,
+        row_numbers: usize,
+    ) -> Result<(), FileError> {
+        use super::resources::{Shape, gb};
+        let src = scene.source();
+        let blocks = self.trajectories.div_ceil(super::runner::BLOCK);
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let shape = Shape {
+            trajectories: self.trajectories,
+            blocks,
+            threads: super::worker_threads(self.threads, cores, blocks).0,
+            times,
+            quantities: bound.quantities.len(),
+            means: bound.n_means,
+            correlations: bound.correlations.len(),
+            histogram_bins: bound.histograms.iter().map(|h| h.1 as u64 * h.3.len() as u64).sum(),
+            row_numbers,
+            keep: self.keep_trajectories,
+        };
+        let e = shape.estimate();
+        let at = |given: &Option<Range<usize>>| given.clone().unwrap_or_else(|| self.trajectories_span.clone());
+        if e.memory > self.max_memory_gb.0 * 1e9 {
+            return Err(src.error(
+                at(&self.max_memory_gb.1),
+                format!(
+                    "the ensemble's statistics would need about {} of memory ({} output times, {} histogram bins \
+                     over their times, {} threads), more than ensemble.max_memory_gb = {}",
+                    gb(e.memory),
+                    times,
+                    shape.histogram_bins,
+                    shape.threads,
+                    self.max_memory_gb.0
+                ),
+                "use fewer histogram bins or times, a longer run.output_interval or fewer threads, \
+                 or raise ensemble.max_memory_gb if the machine has the memory",
+            ));
+        }
+        if e.disk > self.max_disk_gb.0 * 1e9 {
+            let kept =
+                if e.kept > 0.0 { format!(", of which {} kept trajectories", gb(e.kept)) } else { String::new() };
+            return Err(src.error(
+                at(&self.max_disk_gb.1),
+                format!(
+                    "the ensemble would write about {} (checkpoint, tables{kept}), more than ensemble.max_disk_gb = {}",
+                    gb(e.disk),
+                    self.max_disk_gb.0
+                ),
+                "keep fewer trajectories (a larger keep_trajectories), use fewer histogram bins or times, \
+                 or raise ensemble.max_disk_gb if the disk has the room",
+            ));
+        }
+        Ok(())
     }
 
     /// Where `method = ...` is written, for errors of the sampler.

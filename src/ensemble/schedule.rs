@@ -8,7 +8,7 @@
 //! so every bit of the statistics, is therefore independent of the number of threads and
 //! processes and of which of them ran which block.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -43,17 +43,17 @@ pub fn caught(block: u64, n: u64, run: impl FnOnce() -> Outcome) -> BlockResult 
     })
 }
 
-/// The blocks still to run, handed out in index order.
-#[derive(Debug)]
+/// The blocks still to run, handed out in index order. They are produced as handed out, never
+/// listed up front: an ensemble of 10¹² trajectories has 1.6·10¹⁰ blocks.
 pub struct Dispatcher {
-    todo: VecDeque<u64>,
+    todo: Box<dyn Iterator<Item = u64> + Send>,
     closed: bool,
 }
 
 impl Dispatcher {
     /// Hands out `todo` in the order given.
-    pub fn new(todo: impl IntoIterator<Item = u64>) -> Self {
-        Self { todo: todo.into_iter().collect(), closed: false }
+    pub fn new(todo: impl IntoIterator<Item = u64, IntoIter: Send + 'static>) -> Self {
+        Self { todo: Box::new(todo.into_iter()), closed: false }
     }
 
     /// Up to `n` blocks; none once closed, once `stop` is set, or when all were handed out.
@@ -61,8 +61,7 @@ impl Dispatcher {
         if self.closed || stop.load(Ordering::Relaxed) {
             return Vec::new();
         }
-        let k = n.min(self.todo.len());
-        self.todo.drain(..k).collect()
+        self.todo.by_ref().take(n).collect()
     }
 
     /// No more blocks are handed out (an error: the blocks running finish and are recorded).
@@ -143,9 +142,10 @@ impl Collector {
         c
     }
 
-    /// The blocks that still have to run, in index order.
-    pub fn todo(&self) -> Vec<u64> {
-        (self.next..self.n_blocks).filter(|b| !self.pending.contains_key(b)).collect()
+    /// The blocks that still have to run, in index order (produced lazily).
+    pub fn todo(&self) -> impl Iterator<Item = u64> + Send + 'static {
+        let done: BTreeSet<u64> = self.pending.keys().copied().collect();
+        (self.next..self.n_blocks).filter(move |b| !done.contains(b))
     }
 
     /// Trajectories (completed or failed) taken from the checkpoint.
@@ -476,7 +476,7 @@ mod tests {
         assert_eq!(c.resumed(), 3 * cut as u64);
         let mut never_recorded = order[cut..].to_vec();
         never_recorded.sort_unstable();
-        assert_eq!(c.todo(), never_recorded);
+        assert_eq!(c.todo().collect::<Vec<_>>(), never_recorded);
         for &b in never_recorded.iter().rev() {
             c.add(0, b, Ok(outcome(b)));
             c.flush().unwrap();
@@ -484,6 +484,18 @@ mod tests {
         let (total, _, _) = c.finish().unwrap();
         assert_eq!(total, in_order);
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// 10¹² trajectories are 1.6·10¹⁰ blocks: the collector and the dispatcher produce them as
+    /// handed out (listing them up front, as once, needs 125 GB and the process is killed).
+    #[test]
+    fn a_huge_ensemble_hands_out_its_blocks_without_listing_them() {
+        let n = 1_000_000_000_000;
+        let c = Collector::new(n, empty(), Resumed::default(), None, 1);
+        let stop = AtomicBool::new(false);
+        let mut d = Dispatcher::new(c.todo());
+        assert_eq!(d.take(3, &stop), vec![0, 1, 2]);
+        assert_eq!(d.take(1, &stop), vec![3]);
     }
 
     #[test]
