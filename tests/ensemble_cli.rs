@@ -48,7 +48,9 @@ fn ensemble_and_run_write_the_outputs_and_report() {
         assert!(out.join(f).exists(), "{f}");
         assert!(stdout.contains(f), "{stdout}");
     }
-    assert_eq!(summary(&out)["threads"], 2);
+    // 20 trajectories are one block: one thread runs it, and summary.json says why.
+    assert_eq!(summary(&out)["threads"], 1);
+    assert!(summary(&out)["threads_note"].as_str().unwrap().contains("2 threads were asked for, 1 run"));
     // `rovib run` on a scene with [ensemble] runs the ensemble; --quiet prints nothing.
     let out2 = d.join("out2");
     let o = Command::new(env!("CARGO_BIN_EXE_rovib"))

@@ -352,14 +352,12 @@ fn threads_are_capped_by_the_work_and_the_cores() {
     assert_eq!(t, 1);
     assert!(note.unwrap().contains("the ensemble has 1 block(s) of 64 trajectories"));
     // Through the runner: the thread count used and the note in the report and summary.json.
-    let text = format!(
-        "molecule = \"h2o\"\n[ensemble]\ntrajectories = 3\nthreads = 100000\nmethod = \"thermal\"\ntemperature = 300\n\
-         region = {{ energy_cap = 0.1 }}\n[run]\nend = 2\noutput_interval = 1\n"
-    );
+    let text = "molecule = \"h2o\"\n[ensemble]\ntrajectories = 3\nthreads = 100000\nmethod = \"thermal\"\n\
+                temperature = 300\nregion = { energy_cap = 0.1 }\n[run]\nend = 2\noutput_interval = 1\n";
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-ensemble-threads");
     let _ = std::fs::remove_dir_all(&out);
     let begin = std::time::Instant::now();
-    let report = run_ensemble(&parse_scene("t.toml", &text).unwrap(), &EnsembleOptions::new(&out)).unwrap();
+    let report = run_ensemble(&parse_scene("t.toml", text).unwrap(), &EnsembleOptions::new(&out)).unwrap();
     assert_eq!(report.threads, 1);
     assert!(begin.elapsed().as_secs() < 20);
     let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
