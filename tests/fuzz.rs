@@ -205,12 +205,13 @@ proptest! {
 
     /// Random strings over the expression alphabet.
     #[test]
-    fn random_expressions_never_panic(text in "[a-z0-9_+*/^().,\\- ]{0,48}|(sin|cos|pow|atan2|sqrt|ln|exp)\\([a-z0-9+*/(),. -]{0,24}\\)?") {
+    fn random_expressions_never_panic(text in "[a-z0-9_+*/^().,\\- ]{0,48}|(sin|cos|pow|atan2|sqrt|ln|exp|if|select|abs|min|max|erf|legendre|assoc_legendre|sum)\\([a-z0-9+*/(),.<>=\\[\\] -]{0,24}\\)?") {
         let mut g = Graph::new();
         let x = g.var("x");
         let y = g.var("y");
         let names = HashMap::from([("x".to_owned(), x), ("y".to_owned(), y)]);
-        let scope = Scope { names: &names, context: "the fuzz test" };
+        let library = rovib_codegen::parse::Library::default();
+        let scope = Scope { names: &names, context: "the fuzz test", library: &library, named: true };
         match parse_expression(&mut g, &text, &scope) {
             Ok(e) => {
                 let _ = g.eval(&[e], &[0.3, -1.2]);

@@ -503,6 +503,8 @@ fn run_header(scene: &Scene, ensemble: &EnsembleScene, options: &EnsembleOptions
         bytes.extend_from_slice(&b);
     }
     Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK).with_lanes(options.lanes)
+}
+
 /// The most worker threads per core an ensemble starts: the trajectories are compute-bound, so
 /// more than a few per core only add switching (and thousands take minutes to start).
 pub const MAX_THREADS_PER_CORE: usize = 4;
