@@ -187,7 +187,9 @@ where
     Ok((q, f.iter().all(|x| x.is_finite()).then_some(f)))
 }
 
-/// The box of the region: given limits, else lengths in (0, ∞) and angles within the interval
+/// The box of the region, always within each coordinate's valid range
+/// ([`crate::molecule::Coordinate::range`]; limits reaching outside it are an error): given
+/// limits, else lengths in (0, ∞) and angles within the interval
 /// about `centre` where the metric stays regular, at most ±π (one period), found by a scan in
 /// steps of 0.01 rad along each angle with the others at `centre`. The scan stops where the
 /// metric is singular or the positions undefined, and at a local minimum of det M below 1 % of
@@ -212,6 +214,16 @@ where
                 if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
                     return Err(SampleError::Invalid(format!(
                         "the limits of {} are empty ([{lo}, {hi}]): give a lower limit below the upper one",
+                        coords[k].name
+                    )));
+                }
+                let (rlo, rhi) = coords[k].range;
+                // A unit conversion's rounding (180° as π) is not "outside": clamped below.
+                let slack = |x: f64| 1e-12 * x.abs().max(1.0);
+                if lo < rlo - slack(rlo) || hi > rhi + slack(rhi) {
+                    return Err(SampleError::Invalid(format!(
+                        "the limits of {} ([{lo}, {hi}], atomic units) reach outside its valid range [{rlo}, {rhi}]: \
+                         give limits within the range",
                         coords[k].name
                     )));
                 }
@@ -251,8 +263,16 @@ where
                 }
             },
         };
-        low[k] = lo;
-        high[k] = hi;
+        // Never beyond the coordinate's valid range (a bond angle stays in [0, π]: beyond it
+        // the same geometry would be drawn twice, once as its mirror image).
+        low[k] = lo.max(coords[k].range.0);
+        high[k] = hi.min(coords[k].range.1);
+        if !(low[k] < high[k]) {
+            return Err(SampleError::Invalid(format!(
+                "{} has no room to vary: the box [{lo}, {hi}] meets its valid range [{}, {}] in at most a point",
+                coords[k].name, coords[k].range.0, coords[k].range.1
+            )));
+        }
     }
     let u_cap = match (region.energy_cap, molecule.reference_geometry()) {
         (Some(cap), Some(r)) => Some(molecule.potential(&r) + cap),
