@@ -277,7 +277,7 @@ where
         // the same geometry would be drawn twice, once as its mirror image).
         low[k] = lo.max(coords[k].range.0);
         high[k] = hi.min(coords[k].range.1);
-        if !(low[k] < high[k]) {
+        if low[k].partial_cmp(&high[k]) != Some(std::cmp::Ordering::Less) {
             return Err(SampleError::Invalid(format!(
                 "{} has no room to vary: the box [{lo}, {hi}] meets its valid range [{}, {}] in at most a point",
                 coords[k].name, coords[k].range.0, coords[k].range.1
