@@ -138,3 +138,51 @@ fn thermal_ensembles_on_one_and_two_threads_are_byte_identical() {
     let c = run_ensemble(&c, &options("seed22", 2)).unwrap();
     assert_ne!(a.outcome.statistics, c.outcome.statistics);
 }
+
+/// Thermal CO2 (linear at equilibrium) through the runner, with lanes and without: no
+/// trajectory fails (nearly linear starts whose first trial step reaches the singular
+/// geometry continue in the Cartesian chart from their own start), the two runs agree to
+/// round-off, and α stays in its declared range [0, π] at every output time, also for
+/// trajectories that come back from the Cartesian chart (2 histogram bins split at π).
+#[test]
+fn thermal_co2_starts_every_trajectory_and_keeps_alpha_in_range() {
+    let n = 4000;
+    let pi = std::f64::consts::PI;
+    let text = format!(
+        "molecule = \"co2\"\n[ensemble]\ntrajectories = {n}\nseed = 3\nmethod = \"thermal\"\ntemperature = 300\n\
+         region = {{ energy_cap = 0.1 }}\n[statistics]\nmeans = [\"alpha\", \"r1\", \"H\"]\n\
+         histograms = [{{ quantity = \"alpha\", bins = 2, range = [{}, {}], times = [0, 100, 200] }}]\n\
+         [integrator]\nmethod = \"dop853\"\nrtol = 1e-9\natol = 1e-9\n[run]\nend = 200\noutput_interval = 100\n",
+        pi - 0.5,
+        pi + 0.5
+    );
+    let s = parse_scene("co2.toml", &text).unwrap();
+    let lanes = options("co2-lanes", 2);
+    let mut scalar = options("co2-scalar", 2);
+    scalar.lanes = false;
+    let a = run_ensemble(&s, &lanes).unwrap();
+    let b = run_ensemble(&s, &scalar).unwrap();
+    for (r, what) in [(&a, "lanes"), (&b, "no lanes")] {
+        assert_eq!(
+            r.outcome.completed,
+            n,
+            "{what}: {} failed: {:?}",
+            r.outcome.failed_count(),
+            r.outcome.first_failures
+        );
+    }
+    for k in 0..3 {
+        for q in ["alpha", "r1", "H"] {
+            let (x, y) = (a.mean(q, k).unwrap().0, b.mean(q, k).unwrap().0);
+            assert!((x - y).abs() <= 1e-12 * x.abs(), "⟨{q}⟩ at output {k}: {x} with lanes, {y} without");
+        }
+    }
+    let (h, rows) = csv(&lanes.out_dir.join("histograms.csv"));
+    let (low, count) = (column(&h, "bin_low"), column(&h, "count"));
+    let above: Vec<&Vec<f64>> = rows.iter().filter(|r| r[low] > pi - 1e-9).collect();
+    assert_eq!(above.len(), 3);
+    assert!(above.iter().all(|r| r[count] == 0.0), "α beyond π: {above:?}");
+    let outside = &common::ensemble::summary(&lanes.out_dir)["histograms_outside_range"];
+    let above = outside.as_array().unwrap().iter().flat_map(|h| h["above"].as_array().unwrap().clone());
+    assert!(above.into_iter().all(|c| c.as_u64() == Some(0)), "{outside}");
+}

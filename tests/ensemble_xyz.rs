@@ -84,3 +84,46 @@ fn bad_files_are_located_errors() {
         assert!(shown.contains("bad.xyz"), "{shown}");
     }
 }
+
+/// A frame at the Euler chart's gimbal lock (θ = 0: positions in the body frame's own
+/// orientation, as `lab.xyz` of a run started at θ = 0 holds) is read as the same state: the
+/// orientation is fitted as a quaternion, J from the velocities.
+#[test]
+fn a_frame_at_gimbal_lock_is_read() {
+    let mut s = states()[1];
+    s.orientation = quaternion_of_euler(&Vector3::new(0.4, 0.0, 0.3));
+    let read = read_xyz(&H2o, "lab.xyz", &xyz(&[s], false)).unwrap();
+    assert_same(&s, &read[0]);
+}
+
+/// States files (CSV): a coordinate outside its valid range is refused at its own field; CRLF
+/// line ends keep the line numbers; a UTF-8 byte-order mark is accepted.
+#[test]
+fn states_csv_ranges_line_ends_and_bom() {
+    use rovib::ensemble::states_file::read_states;
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-states-csv");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = rovib::scene::parse_scene(
+        "t.toml",
+        "molecule = \"h2o\"\n[ensemble]\ntrajectories = 1\nmethod = \"file\"\nfile = \"s.csv\"\n[run]\nend = 1\noutput_interval = 1\n",
+    )
+    .unwrap();
+    let read = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        read_states(&H2o, &path, &scene)
+    };
+    for (text, line, column, what) in [
+        ("q_r1,q_r2,q_alpha\n1.8,1.8,1.82\n-1.81,1.8,1.82\n", 3, 1, "r1 = -1.81"),
+        ("q_r1,q_r2,q_alpha\n1.8,1.8,1.82\n1.8,1.8,4.0\n", 3, 9, "alpha = 4"),
+        ("q_r1,q_r2,q_alpha\r\n1.8,1.8,1.82\r\n1.8,1.8,1.82\r\n1.8,x,1.82\r\n", 4, 5, "not a finite number"),
+    ] {
+        let e = read("s.csv", text).unwrap_err().unwrap();
+        assert_eq!((e.line, e.column), (line, column), "{e}");
+        assert!(e.to_string().contains(what), "expected {what:?} in {e}");
+    }
+    let states = read("bom.csv", "\u{feff}q_r1,q_r2,q_alpha\r\n1.8,1.7,1.82\r\n").unwrap();
+    assert_eq!(states.len(), 1);
+    assert_eq!(states[0].q, SVector::<f64, 3>::new(1.8, 1.7, 1.82));
+}

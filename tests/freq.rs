@@ -322,3 +322,26 @@ fn normal_mode_sampling_of_a_linear_molecule_says_what_to_use() {
         }
     }
 }
+
+/// A rigid molecule (no internal coordinates) has no vibrational modes: `rovib freq` gives its
+/// rotational constants and no wavenumbers, and normal-mode sampling draws rotation only.
+#[test]
+fn rigid_water_has_rotational_constants_and_no_modes() {
+    let f = frequencies("h2o_rigid").unwrap();
+    assert!(f.wavenumbers.is_empty() && f.vectors.is_empty() && f.not_minimum.is_none(), "{f:?}");
+    let water = frequencies("h2o").unwrap();
+    for k in 0..3 {
+        assert!((f.rotational_cm[k] / water.rotational_cm[k] - 1.0).abs() < 1e-3, "{f:?}");
+    }
+    assert!(freq("h2o_rigid", true).is_ok());
+    use rovib::runtime::sample::{ModeEnergies, NormalModeSampler, RotationSampling, Sampler};
+    let s = NormalModeSampler::new(
+        &rovib::molecules::H2oRigid,
+        &ModeEnergies::Quantum(vec![]),
+        &RotationSampling::Thermal { temperature: 300.0 },
+        1,
+    )
+    .unwrap();
+    let state = s.draw(0).unwrap();
+    assert!(state.j.norm() > 0.0 && state.j.iter().all(|x| x.is_finite()));
+}

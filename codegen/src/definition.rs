@@ -772,6 +772,29 @@ impl Validator<'_> {
                         },
                     )));
                 }
+                if matches!(kind, crate::zmatrix::Kind::Angle(_)) {
+                    // A bond angle lies in [0, π]; beyond π it would name the mirror image of a
+                    // geometry with a smaller angle. With no declared range it gets that one.
+                    let per_unit = coordinates[k].unit.in_atomic_units();
+                    let pi = std::f64::consts::PI;
+                    let (low, high) = coordinates[k].range;
+                    let slack = 1e-12;
+                    if c.range.is_some() && (low * per_unit < -slack || high * per_unit > pi + slack) {
+                        let span = c.range.as_ref().map_or(kind_value.span(), |r| r.span());
+                        return Err(self.fail(src.error(
+                            span,
+                            format!(
+                                "the range [{low:?}, {high:?}] of bond angle `{}` reaches outside [0, π]",
+                                coordinates[k].name
+                            ),
+                            "a bond angle lies in [0, π] (0 to 180°): write range = [0, \"pi\"] (rad) or [0, 180] \
+                             (deg), or a narrower interval",
+                        )));
+                    }
+                    if c.range.is_none() {
+                        coordinates[k].range = (0.0, pi / per_unit);
+                    }
+                }
                 let c_def = &coordinates[k];
                 declared.push(crate::zmatrix::Declared {
                     kind,

@@ -369,3 +369,20 @@ expression = "pow(rch - 2, 2) + pow(rcn - 2.2, 2) + 0.1 * pow(alpha - pi, 2)"
         assert!(m.notes[0].contains(promise), "the note does not say `{promise}`: {}", m.notes[0]);
     }
 }
+
+/// A bond angle lies in [0, π]: a declared range reaching beyond is refused at the range, and
+/// an angle kind without a range gets [0, π] (in its unit).
+#[test]
+fn bond_angle_ranges_stay_within_zero_and_pi() {
+    let e = error(&with(
+        "reference = 1.8\nkind = \"angle(O1, O2, H2)\"",
+        "reference = 1.8\nrange = [0, \"2 * pi\"]\nkind = \"angle(O1, O2, H2)\"",
+    ));
+    assert!(e.message.contains("reaches outside [0, π]"), "{e}");
+    assert_eq!(e.line, 31, "{e}");
+    let def = parse_definition("molecules/xy4.toml", ZMAT).expect("valid");
+    let t1 = def.coordinates.iter().find(|c| c.name == "t1").unwrap();
+    assert_eq!(t1.range, (0.0, 180.0), "degrees");
+    let t2 = def.coordinates.iter().find(|c| c.name == "t2").unwrap();
+    assert_eq!(t2.range, (0.0, std::f64::consts::PI));
+}

@@ -360,6 +360,8 @@ where
                     Err(SolveError::Rhs { source, .. }) if is_switch(&source) => {
                         let (t, y, h, stats) = dop_i.last_accepted();
                         add(&mut report.stats, &stats);
+                        // A failure before the internal segment chose a step (at its start).
+                        let h = if h.is_finite() && h > 0.0 { h } else { interval.min(t_end - t) * 1e-3 };
                         let fail = |reason: String| SolveError::Rhs {
                             t,
                             y: y.to_vec(),

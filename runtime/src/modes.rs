@@ -111,6 +111,11 @@ impl<const N: usize> NormalModes<N> {
                 q0.as_slice()
             )));
         }
+        if N == 0 {
+            // A rigid molecule has no vibration: no modes (and no metric block to factor).
+            let zero = SMatrix::<f64, N, N>::zeros();
+            return Ok(Self { q0: *q0, u0, hessian, g: zero, omega: SVector::zeros(), vectors: zero });
+        }
         let step = newton_step(&hessian, &grad)?;
         if let Some(k) = (0..N).max_by(|&a, &b| step[a].abs().total_cmp(&step[b].abs()))
             && step[k].abs() > STATIONARY_TOLERANCE
@@ -198,6 +203,10 @@ where
 }
 
 fn newton_step<const N: usize>(f: &SMatrix<f64, N, N>, grad: &SVector<f64, N>) -> Result<SVector<f64, N>, ModesError> {
+    if N == 0 {
+        // A rigid molecule: no coordinate to move, every point is stationary.
+        return Ok(SVector::zeros());
+    }
     let fd = DMatrix::from_fn(N, N, |i, j| f[(i, j)]);
     let gd = DVector::from_fn(N, |i, _| grad[i]);
     fd.lu().solve(&gd).filter(|s| s.iter().all(|x| x.is_finite())).map(|s| SVector::from_fn(|i, _| s[i])).ok_or_else(
@@ -216,6 +225,9 @@ where
     M: Molecule<N, NA> + ?Sized,
 {
     let mut q = *start;
+    if N == 0 {
+        return Ok(q);
+    }
     for _ in 0..50 {
         let mut grad = SVector::zeros();
         let u = molecule.potential_gradient(&q, &mut grad);

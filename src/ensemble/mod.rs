@@ -35,7 +35,7 @@ pub mod runner;
 pub mod scene;
 pub mod schedule;
 pub mod spectrum;
-mod states_file;
+pub mod states_file;
 pub mod states_xyz;
 
 use std::path::{Path, PathBuf};

@@ -659,6 +659,20 @@ impl EnsembleScene {
                     unknown_name(&src, name, &format!("{} has no coordinate", m.name()), coords.iter().map(|c| c.name))
                 })?;
                 let s = scene.units.coordinate_to_au(coords[k].unit, 1.0);
+                let (rlo, rhi) = coords[k].range;
+                let slack = |x: f64| 1e-12 * x.abs().max(1.0);
+                if lo * s < rlo - slack(rlo) || hi * s > rhi + slack(rhi) {
+                    return Err(src.error(
+                        name.span(),
+                        format!(
+                            "the limits [{lo}, {hi}] of `{}` reach outside its valid range [{}, {}] (scene units)",
+                            name.get_ref(),
+                            rlo / s,
+                            rhi / s
+                        ),
+                        "give limits within the coordinate's range (a bond angle within [0, π], a length above 0)",
+                    ));
+                }
                 limits[k] = Some((lo * s, hi * s));
             }
             Ok(Region { energy_cap: r.energy_cap.as_ref().map(|c| c.0), limits })

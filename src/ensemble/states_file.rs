@@ -32,15 +32,22 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 ) -> Result<Vec<BodyState<N>>, Result<FileError, String>> {
     let text = crate::runtime::diagnostic::read_text_capped(path, MAX_STATES_FILE_BYTES)
         .map_err(|e| Err(e.replacen("cannot read ", "cannot read the states file ", 1)))?;
+    // A UTF-8 byte-order mark is read as three spaces: the same bytes, so every error keeps
+    // its line and column.
+    let text = match text.strip_prefix('\u{feff}') {
+        Some(rest) => format!("   {rest}"),
+        None => text,
+    };
     let name = path.display().to_string();
     if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xyz") || e.eq_ignore_ascii_case("extxyz")) {
         return super::states_xyz::read_xyz(m, &name, &text).map_err(Ok);
     }
     let src = Source { path: &name, text: &text };
-    let mut lines = text.lines().scan(0usize, |offset, line| {
+    // Lines with their byte offsets, ending in LF or CRLF (the terminator is not part of a line).
+    let mut lines = text.split_inclusive('\n').scan(0usize, |offset, line| {
         let start = *offset;
-        *offset += line.len() + 1;
-        Some((start, line))
+        *offset += line.len();
+        Some((start, line.trim_end_matches(['\n', '\r'])))
     });
     let Some((_, header)) = lines.next() else {
         return Err(Ok(
@@ -92,13 +99,16 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 
     let mut states = Vec::new();
     let mut values = Vec::with_capacity(columns.len());
+    let mut spans = Vec::with_capacity(columns.len());
     for (start, line) in lines {
         if line.trim().is_empty() {
             continue;
         }
         values.clear();
+        spans.clear();
         let mut offset = start;
         for field in line.split(',') {
+            spans.push(offset..offset + field.len());
             let v: f64 = field.trim().parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
                 Ok(src.error(
                     offset..offset + field.len(),
@@ -120,6 +130,21 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         let mut p = SVector::<f64, N>::zeros();
         for k in 0..N {
             q[k] = values[q_col[k]];
+            let c = &coords[k];
+            if !c.contains(q[k]) {
+                return Err(Ok(src.error(
+                    spans[q_col[k]].clone(),
+                    format!(
+                        "{} = {} is outside its valid range [{}, {}] (bohr or rad): no geometry of {} has it",
+                        c.name,
+                        q[k],
+                        c.range.0,
+                        c.range.1,
+                        m.name()
+                    ),
+                    "give a value within the coordinate's range (a bond angle in [0, π], a length above 0)",
+                )));
+            }
             if let Some(c) = p_col[k] {
                 p[k] = values[c];
             }
@@ -130,8 +155,12 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             (Some(c), _) => BodyState::from_phase(&PhaseState { q, p, euler, pe: pick(c) }).map_err(|e| {
                 Ok(src.error(
                     start..start + line.len(),
-                    format!("this state: {e}"),
-                    "give Jx, Jy, Jz instead of the Euler momenta at gimbal lock",
+                    format!(
+                        "this state: {e}; at θ = 0 or π the Euler momenta determine only two of the three \
+                         components of J, so the state is not known"
+                    ),
+                    "give Jx, Jy, Jz instead of the Euler momenta at gimbal lock (or start from the run's lab.xyz, \
+                     whose velocities determine the state)",
                 ))
             })?,
             (None, j) => {

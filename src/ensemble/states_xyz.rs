@@ -16,7 +16,7 @@ use std::ops::Range;
 
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::{FileError, Source};
-use crate::runtime::frames::{FitOptions, LabState, from_lab};
+use crate::runtime::frames::{FitOptions, LabState, from_lab_body};
 use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::nalgebra::SMatrix;
 use crate::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM};
@@ -181,20 +181,25 @@ pub fn read_xyz<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                 }
             }
         }
-        let (state, _, _) = from_lab(m, &lab, &FitOptions::default()).map_err(|e| {
+        // The orientation as a quaternion: defined at every orientation, also where the Euler
+        // angles are at gimbal lock (θ = 0, a frame in the molecule's own body frame).
+        let (body, _, _) = from_lab_body(m, &lab, &FitOptions::default()).map_err(|e| {
             src.error(
                 last.clone(),
                 format!("frame {frame} cannot start a trajectory of {}: {e}", m.name()),
                 "check the positions (Å), their order and units",
             )
         })?;
-        let body = BodyState::from_phase(&state).map_err(|e| {
-            src.error(
+        if let Some((c, x)) = m.coordinates().iter().zip(body.q.iter()).find(|(c, x)| !c.contains(**x)) {
+            return Err(src.error(
                 last.clone(),
-                format!("frame {frame}: {e}"),
-                "rotate the frame away from the Euler chart's gimbal lock",
-            )
-        })?;
+                format!(
+                    "frame {frame}: the fitted {} = {x} is outside its valid range [{}, {}] (bohr or rad)",
+                    c.name, c.range.0, c.range.1
+                ),
+                "check the positions (Å), their order and units",
+            ));
+        }
         if !body.j.iter().chain(body.p.iter()).all(|x| x.is_finite()) {
             return Err(src.error(
                 last,

@@ -439,7 +439,8 @@ impl Dop853 {
     /// controller proposed from there. After a [`SolveError::Rhs`] this is the point to continue
     /// from in another system (the error's own `t` is that of the failing stage, later than
     /// `t`): how the chart switch of `rovib run` (`crate::charts`) restarts at a singular
-    /// geometry. Before any run, `t` and `h` are NaN.
+    /// geometry. Before the first step of a run is accepted, `t` is the run's start and `h` the
+    /// step tried there (NaN if the run failed before choosing one); before any run both are NaN.
     /// The work counters up to that step are the fourth element.
     pub fn last_accepted(&self) -> (f64, &[f64], f64, Stats) {
         (self.x_accepted, &self.y, self.h_proposed, self.stats_accepted)
@@ -568,6 +569,10 @@ impl Dop853 {
         }
 
         let mut x = from.map_or(t0, |r| r.t);
+        // The start is the last accepted state until the first step is accepted, so that a
+        // failure before it (at the start or in the initial step's trial evaluation) reports
+        // this run's start, never a previous run's point.
+        (self.x_accepted, self.h_proposed, self.stats_accepted) = (x, from.map_or(f64::NAN, |r| r.h), stats);
         eval_into(system, x, &self.y, &mut self.k[..n], &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?;
         if !self.k[..n].iter().all(|v| v.is_finite()) {
             return Err(self.non_finite(x));
@@ -724,6 +729,8 @@ impl Dop853 {
         }
         let mut h: f64 = if dnf <= 1e-10 || dny <= 1e-10 { 1e-6 } else { (dny / dnf).sqrt() * 0.01 };
         h = h.min(h_max);
+        // A failure at the trial point below is continued from the start with this step.
+        self.h_proposed = h;
         for i in 0..n {
             self.y_stage[i] = self.y[i] + h * self.k[i];
         }

@@ -53,6 +53,9 @@ const SEARCH_POINTS: usize = 2000;
 /// evaluations, which usually means the region does not bound the density.
 const MIN_ACCEPTANCE: f64 = 1e-3;
 
+/// The weight of the uniform part of a Gaussian proposal mixed with the box (finite boxes).
+const BOX_WEIGHT: f64 = 0.1;
+
 /// Starting points (the best of the random points) of the pattern search for the envelope.
 const SEARCH_STARTS: usize = 8;
 
@@ -137,7 +140,14 @@ enum Proposal<const N: usize> {
     /// `q = centre + l z`, z standard normal, except that the coordinates marked `uniform`
     /// (angles free to turn through a whole period, such as a torsion, whose Boltzmann factor
     /// may have several wells) are uniform in their box; `ln φ = −½ Σ z_k²` over the others.
-    Gaussian { centre: SVector<f64, N>, l: SMatrix<f64, N, N>, uniform: [bool; N] },
+    ///
+    /// In a finite box the Gaussian may be mixed with the uniform distribution on the box: a
+    /// proposal is uniform with probability `box_weight`, and `ln φ` is that of the mixture,
+    /// `ln((1 − w) e^{−½ Σ z_k²} + e^{log_box})` with `log_box = ln(w |det l| (2π)^{d/2} / V)`
+    /// (V the box volume in the Gaussian coordinates, d their number). The uniform part keeps
+    /// `target / φ` bounded in the tails, where a potential that levels off (a Morse bond)
+    /// falls more slowly than any Gaussian.
+    Gaussian { centre: SVector<f64, N>, l: SMatrix<f64, N, N>, uniform: [bool; N], box_weight: f64, log_box: f64 },
     /// Uniform in the (finite) box; `ln φ = 0`.
     Uniform,
 }
@@ -187,7 +197,9 @@ where
     Ok((q, f.iter().all(|x| x.is_finite()).then_some(f)))
 }
 
-/// The box of the region: given limits, else lengths in (0, ∞) and angles within the interval
+/// The box of the region, always within each coordinate's valid range
+/// ([`crate::molecule::Coordinate::range`]; limits reaching outside it are an error): given
+/// limits, else lengths in (0, ∞) and angles within the interval
 /// about `centre` where the metric stays regular, at most ±π (one period), found by a scan in
 /// steps of 0.01 rad along each angle with the others at `centre`. The scan stops where the
 /// metric is singular or the positions undefined, and at a local minimum of det M below 1 % of
@@ -212,6 +224,16 @@ where
                 if lo.partial_cmp(&hi) != Some(std::cmp::Ordering::Less) {
                     return Err(SampleError::Invalid(format!(
                         "the limits of {} are empty ([{lo}, {hi}]): give a lower limit below the upper one",
+                        coords[k].name
+                    )));
+                }
+                let (rlo, rhi) = coords[k].range;
+                // A unit conversion's rounding (180° as π) is not "outside": clamped below.
+                let slack = |x: f64| 1e-12 * x.abs().max(1.0);
+                if lo < rlo - slack(rlo) || hi > rhi + slack(rhi) {
+                    return Err(SampleError::Invalid(format!(
+                        "the limits of {} ([{lo}, {hi}], atomic units) reach outside its valid range [{rlo}, {rhi}]: \
+                         give limits within the range",
                         coords[k].name
                     )));
                 }
@@ -251,8 +273,16 @@ where
                 }
             },
         };
-        low[k] = lo;
-        high[k] = hi;
+        // Never beyond the coordinate's valid range (a bond angle stays in [0, π]: beyond it
+        // the same geometry would be drawn twice, once as its mirror image).
+        low[k] = lo.max(coords[k].range.0);
+        high[k] = hi.min(coords[k].range.1);
+        if low[k].partial_cmp(&high[k]) != Some(std::cmp::Ordering::Less) {
+            return Err(SampleError::Invalid(format!(
+                "{} has no room to vary: the box [{lo}, {hi}] meets its valid range [{}, {}] in at most a point",
+                coords[k].name, coords[k].range.0, coords[k].range.1
+            )));
+        }
     }
     let u_cap = match (region.energy_cap, molecule.reference_geometry()) {
         (Some(cap), Some(r)) => Some(molecule.potential(&r) + cap),
@@ -314,7 +344,20 @@ where
                         }
                     }
                     if let Some(c) = cov.cholesky() {
-                        candidates.push(Proposal::Gaussian { centre, l: c.l(), uniform });
+                        let l = c.l();
+                        candidates.push(Proposal::Gaussian { centre, l, uniform, box_weight: 0.0, log_box: 0.0 });
+                        if finite_box {
+                            let w = BOX_WEIGHT;
+                            let log_box = w.ln()
+                                + gaussian
+                                    .iter()
+                                    .map(|&k| {
+                                        l[(k, k)].abs().ln() + 0.5 * std::f64::consts::TAU.ln()
+                                            - (this.high[k] - this.low[k]).ln()
+                                    })
+                                    .sum::<f64>();
+                            candidates.push(Proposal::Gaussian { centre, l, uniform, box_weight: w, log_box });
+                        }
                     }
                 }
             }
@@ -398,9 +441,12 @@ where
         };
         if acceptance < MIN_ACCEPTANCE {
             return Err(SampleError::Invalid(format!(
-                "the density is far from bounded in the region (estimated acceptance of rejection sampling \
-                 {acceptance:.1e}): the potential may fall without bound along some direction or the region is too large; \
-                 give every length coordinate limits (or a lower energy cap)"
+                "rejection sampling of the region would accept about {acceptance:.1e} of its proposals (estimated from \
+                 {SEARCH_POINTS} points per proposal tried, with the largest density-to-proposal ratio found), and at \
+                 least {MIN_ACCEPTANCE:.0e} is needed (else a draw takes more than {:.0} evaluations): the density is \
+                 spread over a region much larger than where it is concentrated, or the potential falls without bound \
+                 along some direction; give every length coordinate limits or narrow them, or give a lower energy cap",
+                1.0 / MIN_ACCEPTANCE
             )));
         }
         this.proposal = proposal;
@@ -413,7 +459,12 @@ where
     /// A proposal: the proposal coordinates x (z for a Gaussian, q for uniform) and q.
     fn propose(&self, rng: &mut TrajectoryRng) -> (SVector<f64, N>, SVector<f64, N>) {
         match &self.proposal {
-            Proposal::Gaussian { centre, l, uniform } => {
+            Proposal::Gaussian { box_weight, .. } if *box_weight > 0.0 && rng.random::<f64>() < *box_weight => {
+                let q =
+                    SVector::<f64, N>::from_fn(|k, _| self.low[k] + (self.high[k] - self.low[k]) * rng.random::<f64>());
+                (self.x_of(&q).unwrap_or_else(|| SVector::from_element(f64::NAN)), q)
+            }
+            Proposal::Gaussian { centre, l, uniform, .. } => {
                 let mut z = SVector::<f64, N>::from_fn(|_, _| rng.sample(StandardNormal));
                 for k in 0..N {
                     if uniform[k] {
@@ -453,7 +504,7 @@ where
     /// The proposal coordinates of q (the inverse of [`Self::q_of`]).
     fn x_of(&self, q: &SVector<f64, N>) -> Option<SVector<f64, N>> {
         match &self.proposal {
-            Proposal::Gaussian { centre, l, uniform } => {
+            Proposal::Gaussian { centre, l, uniform, .. } => {
                 let d = SVector::<f64, N>::from_fn(|k, _| if uniform[k] { 0.0 } else { q[k] - centre[k] });
                 let mut z = l.solve_lower_triangular(&d)?;
                 for k in 0..N {
@@ -469,15 +520,22 @@ where
 
     fn q_of(&self, x: &SVector<f64, N>) -> SVector<f64, N> {
         match &self.proposal {
-            Proposal::Gaussian { centre, l, uniform } => self.gaussian_q(centre, l, uniform, x),
+            Proposal::Gaussian { centre, l, uniform, .. } => self.gaussian_q(centre, l, uniform, x),
             Proposal::Uniform => *x,
         }
     }
 
     fn log_proposal(&self, x: &SVector<f64, N>) -> f64 {
         match &self.proposal {
-            Proposal::Gaussian { uniform, .. } => {
-                -0.5 * (0..N).filter(|&k| !uniform[k]).map(|k| x[k] * x[k]).sum::<f64>()
+            Proposal::Gaussian { uniform, box_weight, log_box, .. } => {
+                let gauss = -0.5 * (0..N).filter(|&k| !uniform[k]).map(|k| x[k] * x[k]).sum::<f64>();
+                if *box_weight > 0.0 {
+                    let (a, b) = ((1.0 - box_weight).ln() + gauss, *log_box);
+                    let top = a.max(b);
+                    top + ((a - top).exp() + (b - top).exp()).ln()
+                } else {
+                    gauss
+                }
             }
             Proposal::Uniform => 0.0,
         }

@@ -25,6 +25,14 @@
 //! (`J = √(kT) L1 z`, `I = L1 L1ᵀ`), which is the canonical distribution of J at fixed q and
 //! q̇; **Fixed**: the given body-frame J. The orientation is uniform (Haar) in both.
 //!
+//! # Limits
+//!
+//! The harmonic vibrational energy `Σ E_k` may be at most [`MAX_MODE_ENERGY`] (1 hartree,
+//! 27.2 eV: above the dissociation energy of every chemical bond, far beyond where harmonic
+//! modes mean anything); more is refused when the sampler is built. A drawn geometry with a
+//! coordinate outside its valid range (a bond angle beyond π) is a failed draw that names the
+//! coordinate, never a state to integrate.
+//!
 //! # Harmonic limit
 //!
 //! With J = 0 the kinetic energy is exactly `½ q̇ᵀ G22⁻¹(q) q̇`, so mode k carries exactly E_k
@@ -41,6 +49,9 @@ use super::{BOLTZMANN, ModeEnergies, RotationSampling, SampleError, Sampler, haa
 use crate::hamiltonian::fast::BodyState;
 use crate::modes::{self, NormalModes};
 use crate::molecule::{KineticMatrices, Molecule};
+
+/// The largest harmonic vibrational energy `Σ E_k` (hartree) the sampler accepts.
+pub const MAX_MODE_ENERGY: f64 = 1.0;
 
 /// The normal-mode sampler.
 pub struct NormalModeSampler<'m, M: ?Sized, const N: usize, const NA: usize> {
@@ -118,6 +129,22 @@ where
             }
             _ => {}
         }
+        let (total, what) = match energies {
+            ModeEnergies::Random { total } => (*total, "the vibrational energy"),
+            ModeEnergies::Fixed(e) => (e.iter().sum(), "the sum of the mode energies"),
+            ModeEnergies::Quantum(v) => (
+                v.iter().zip(modes.omega.iter()).map(|(&v, &w)| (f64::from(v) + 0.5) * w).sum(),
+                "the harmonic energy Σ (v_k + ½) ħω_k of the quanta",
+            ),
+        };
+        if total > MAX_MODE_ENERGY {
+            return Err(SampleError::Invalid(format!(
+                "{what} is {total:.4e} hartree ({:.4e} cm⁻¹), above the {MAX_MODE_ENERGY} hartree (27.2 eV) that \
+                 normal-mode sampling accepts (harmonic modes mean nothing there, far above every bond's dissociation \
+                 energy): give fewer quanta or less energy",
+                total * crate::units::HARTREE_IN_WAVENUMBERS
+            )));
+        }
         match rotation {
             RotationSampling::Thermal { temperature } if !(*temperature > 0.0 && temperature.is_finite()) => {
                 return Err(SampleError::Invalid(format!(
@@ -163,6 +190,13 @@ where
             big_p[k] = -a * phi.sin();
         }
         let q = self.modes.q0 + self.modes.vectors * big_q;
+        if let Some((c, x)) = self.molecule.coordinates().iter().zip(q.iter()).find(|(c, x)| !c.contains(**x)) {
+            return Err(SampleError::Invalid(format!(
+                "the displaced geometry puts {} = {x} outside its valid range [{}, {}] (atomic units): the harmonic \
+                 amplitude of the modes is too large there; lower the mode energies or quanta",
+                c.name, c.range.0, c.range.1
+            )));
+        }
         let qdot = self.modes.vectors * big_p;
         let mut k = KineticMatrices::default();
         self.molecule.kinetic(&q, &mut k);
