@@ -126,7 +126,9 @@ impl OutputFile {
 /// coordinate column has a `q_` or `p_` prefix, and the fixed names have none of them):
 /// `t` (the scene's time unit), `q_NAME` per coordinate (bohr or rad), `p_NAME` per coordinate
 /// (ħ/bohr or ħ), `euler_phi`, `euler_theta`, `euler_psi` (rad, z-x-z), `pe_phi`, `pe_theta`,
-/// `pe_psi` (the momenta conjugate to the Euler angles, ħ), `H` (hartree), and with
+/// `pe_psi` (the momenta conjugate to the Euler angles, ħ), `Jx`, `Jy`, `Jz` (the body-frame
+/// angular momentum, ħ: the Euler momenta do not determine it at θ = 0 or π, so a row is a
+/// complete state everywhere), `H` (hartree), and with
 /// `run.euler_unwrapped = true` also `euler_phi_unwrapped`, `euler_psi_unwrapped` (rad,
 /// continuous: each output adds the change since the last one, taken in (−π, π]).
 pub struct TrajectoryCsv {
@@ -162,7 +164,7 @@ pub fn trajectory_columns(
     for name in ["euler_phi", "euler_theta", "euler_psi"] {
         columns.push((name.to_owned(), "rad"));
     }
-    for name in ["pe_phi", "pe_theta", "pe_psi"] {
+    for name in ["pe_phi", "pe_theta", "pe_psi", "Jx", "Jy", "Jz"] {
         columns.push((name.to_owned(), "hbar"));
     }
     columns.push(("H".to_owned(), "hartree"));
@@ -249,8 +251,9 @@ impl TrajectoryCsv {
         })
     }
 
-    /// Writes one row: time (scene unit), q, p, the Euler angles, their momenta and H, then the
-    /// unwrapped φ and ψ if asked for. Numbers are written with full round-trip precision.
+    /// Writes one row: time (scene unit), q, p, the Euler angles, their momenta, the body-frame J
+    /// and H, then the unwrapped φ and ψ if asked for. Numbers are written with full round-trip
+    /// precision.
     pub fn state_row(
         &mut self,
         t: f64,
@@ -258,12 +261,13 @@ impl TrajectoryCsv {
         p: &[f64],
         euler: [f64; 3],
         pe: [f64; 3],
+        j: [f64; 3],
         energy: f64,
     ) -> Result<(), String> {
         use std::fmt::Write as _;
         self.row.clear();
         let _ = write!(self.row, "{t:?}");
-        for v in q.iter().chain(p).chain(&euler).chain(&pe).chain([&energy]) {
+        for v in q.iter().chain(p).chain(&euler).chain(&pe).chain(&j).chain([&energy]) {
             let _ = write!(self.row, ",{v:?}");
         }
         if let Some(u) = &mut self.unwrap {

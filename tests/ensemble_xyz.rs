@@ -127,3 +127,50 @@ fn states_csv_ranges_line_ends_and_bom() {
     assert_eq!(states.len(), 1);
     assert_eq!(states[0].q, SVector::<f64, 3>::new(1.8, 1.7, 1.82));
 }
+
+/// `rovib run`'s own `trajectory.csv` from a start at gimbal lock (θ = 0) is a states file:
+/// its `Jx, Jy, Jz` columns give the state, which the Euler momenta alone cannot there
+/// (J = (3, 8, 2) has p_e = (2, 3, 2): Jy is lost). A row whose Euler momenta contradict its J
+/// is refused at its line.
+#[test]
+fn a_trajectory_csv_from_gimbal_lock_is_a_states_file() {
+    use rovib::ensemble::states_file::read_states;
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-states-gimbal");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = dir.join("run.toml");
+    std::fs::write(
+        &run,
+        "molecule = \"h2o\"\n[units]\nlength = \"bohr\"\nangle = \"rad\"\ntime = \"au\"\n[initial]\nq = { r1 = 1.8, r2 = 1.75, alpha = 1.82 }\neuler = [0.4, 0.0, 0.3]\n\
+         j = [3.0, 8.0, 2.0]\n[integrator]\nmethod = \"dop853\"\n[run]\nend = 2.0\noutput_interval = 1.0\n\
+         outputs = [\"trajectory\"]\n",
+    )
+    .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rovib"))
+        .args(["run", run.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap(), "--quiet"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = dir.join("out/trajectory.csv");
+    let scene = rovib::scene::parse_scene(
+        "t.toml",
+        "molecule = \"h2o\"\n[ensemble]\ntrajectories = 1\nmethod = \"file\"\nfile = \"s.csv\"\n[run]\nend = 1\noutput_interval = 1\n",
+    )
+    .unwrap();
+    let states = read_states(&H2o, &csv, &scene).unwrap();
+    assert_eq!(states.len(), 3);
+    assert!((states[0].j - Vector3::new(3.0, 8.0, 2.0)).amax() < 1e-12, "J = {}", states[0].j);
+    assert!((states[0].q - SVector::<f64, 3>::new(1.8, 1.75, 1.82)).amax() < 1e-15);
+    // pe_theta of the first data row changed: the row contradicts itself.
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let pe_theta = lines[0].split(',').position(|c| c == "pe_theta").unwrap();
+    let mut fields: Vec<String> = lines[1].split(',').map(str::to_owned).collect();
+    fields[pe_theta] = "7.5".to_owned();
+    lines[1] = fields.join(",");
+    let edited = dir.join("edited.csv");
+    std::fs::write(&edited, lines.join("\n")).unwrap();
+    let e = read_states(&H2o, &edited, &scene).unwrap_err().unwrap();
+    assert_eq!(e.line, 2, "{e}");
+    assert!(e.to_string().contains("contradicts itself"), "{e}");
+}

@@ -131,13 +131,13 @@ fn run_writes_the_three_outputs_consistently() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "t,q_r1,q_r2,q_alpha,p_r1,p_r2,p_alpha,euler_phi,euler_theta,euler_psi,pe_phi,pe_theta,pe_psi,H"
+        "t,q_r1,q_r2,q_alpha,p_r1,p_r2,p_alpha,euler_phi,euler_theta,euler_psi,pe_phi,pe_theta,pe_psi,Jx,Jy,Jz,H"
     );
     let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect();
     assert_eq!(rows.len(), 21, "t = 0, 1, ..., 20 fs");
     assert_eq!(rows[20][0], 20.0);
-    let h0 = rows[0][13];
-    assert!(rows.iter().all(|r| (r[13] - h0).abs() < 1e-8 * h0.abs()), "H conserved");
+    let h0 = rows[0][16];
+    assert!(rows.iter().all(|r| (r[16] - h0).abs() < 1e-8 * h0.abs()), "H conserved");
 
     let xyz = std::fs::read_to_string(dir.join("out/lab.xyz")).unwrap();
     let frames: Vec<&str> = xyz.lines().collect();

@@ -44,7 +44,7 @@ fn coordinates_named_like_output_columns_give_distinct_columns_with_units() {
     for (name, _) in &columns {
         assert!(seen.insert(name.clone()), "column `{name}` appears twice in {columns:?}");
     }
-    assert_eq!(columns.len(), 1 + 2 * names.len() + 7 + 2);
+    assert_eq!(columns.len(), 1 + 2 * names.len() + 10 + 2);
     let unit = |n: &str| columns.iter().find(|(c, _)| c == n).unwrap().1;
     assert_eq!(unit("t"), "fs");
     assert_eq!(unit("q_t"), "bohr");
@@ -53,6 +53,7 @@ fn coordinates_named_like_output_columns_give_distinct_columns_with_units() {
     assert_eq!(unit("p_theta"), "hbar");
     assert_eq!(unit("euler_theta"), "rad");
     assert_eq!(unit("pe_theta"), "hbar");
+    assert_eq!(unit("Jy"), "hbar");
     assert_eq!(unit("H"), "hartree");
     assert_eq!(unit("q_H"), "bohr");
     assert_eq!(unit("euler_psi_unwrapped"), "rad");
@@ -108,6 +109,9 @@ euler_unwrapped = true
             "pe_phi",
             "pe_theta",
             "pe_psi",
+            "Jx",
+            "Jy",
+            "Jz",
             "H",
             "euler_phi_unwrapped",
             "euler_psi_unwrapped"
@@ -118,7 +122,7 @@ euler_unwrapped = true
     let mut worst: f64 = 0.0;
     for row in &rows {
         let t_au = row[0] / AU_TIME_IN_FS;
-        let (phi, phi_u, psi_u) = (row[1], row[8], row[9]);
+        let (phi, phi_u, psi_u) = (row[1], row[11], row[12]);
         worst = worst.max((phi_u - (phi0 + omega * t_au)).abs());
         assert!(phi > -std::f64::consts::PI && phi <= std::f64::consts::PI, "raw φ = {phi}");
         let turns = (phi_u - phi) / std::f64::consts::TAU;
@@ -126,7 +130,7 @@ euler_unwrapped = true
         assert!(psi_u.abs() < 1e-9, "ψ stays 0: {psi_u}");
     }
     assert!(worst < 1e-7, "unwrapped φ is φ(0) + ω t to {worst:e} rad");
-    let last = rows.last().unwrap()[8];
+    let last = rows.last().unwrap()[11];
     assert!(last > phi0 + 5.0 * std::f64::consts::TAU, "more than 5 turns: {last}");
 
     let units: serde_json::Value =

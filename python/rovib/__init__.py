@@ -86,7 +86,7 @@ class Trajectory:
 
     ``columns`` maps each CSV header name to its array: ``t`` (the scene's time unit), ``q_NAME``
     (bohr or rad), ``p_NAME`` (ħ/bohr or ħ), ``euler_phi``, ``euler_theta``, ``euler_psi`` (rad),
-    ``pe_phi``, ``pe_theta``, ``pe_psi`` (ħ), ``H`` (hartree), and with ``run.euler_unwrapped``
+    ``pe_phi``, ``pe_theta``, ``pe_psi`` (ħ), ``Jx``, ``Jy``, ``Jz`` (body frame, ħ), ``H`` (hartree), and with ``run.euler_unwrapped``
     ``euler_phi_unwrapped``, ``euler_psi_unwrapped``. ``units`` maps every column to its unit, in
     file order (from ``trajectory.units.json``). ``out_dir`` holds every file written (lab.xyz,
     restart.json ...).

@@ -770,7 +770,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         energy_guard(h0, energy, self.max_energy_error).map_err(|e| at(&e, y, layout))?;
         if let Some(csv) = &mut self.trajectory {
             let (euler, pe) = (phase.euler.into(), phase.pe.into());
-            csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, energy)?;
+            csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, body.j.into(), energy)?;
         }
         if let Some(xyz) = &mut self.lab {
             let com = CentreOfMass { position: self.com.0 + self.com.1 * t, velocity: self.com.1 };

@@ -646,9 +646,15 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
         if let Some(csv) = &mut self.csv {
             let phase = body.to_phase();
             let (euler, pe) = (phase.euler.into(), phase.pe.into());
-            if let Err(e) =
-                csv.state_row(t / self.plan.time_scale, phase.q.as_slice(), phase.p.as_slice(), euler, pe, h)
-            {
+            if let Err(e) = csv.state_row(
+                t / self.plan.time_scale,
+                phase.q.as_slice(),
+                phase.p.as_slice(),
+                euler,
+                pe,
+                body.j.into(),
+                h,
+            ) {
                 self.failure = Some(("output", t, e));
                 return ControlFlow::Break(());
             }

@@ -3,9 +3,10 @@
 //!
 //! Header: every internal coordinate as `q_NAME` (or plain `NAME`; bohr, rad), optionally
 //! `p_NAME` (ħ/bohr, ħ; missing ones are 0), optionally the Euler angles `euler_phi,
-//! euler_theta, euler_psi` (or `phi, theta, psi`; rad, z-x-z; default `0, π/2, 0`) and either
-//! their momenta `pe_phi, pe_theta, pe_psi` (or `p_phi, p_theta, p_psi`) or the body-frame `Jx,
-//! Jy, Jz` (ħ; default 0). The prefixed names are the ones `trajectory.csv` uses (they cannot
+//! euler_theta, euler_psi` (or `phi, theta, psi`; rad, z-x-z; default `0, π/2, 0`) and their
+//! momenta `pe_phi, pe_theta, pe_psi` (or `p_phi, p_theta, p_psi`) or the body-frame `Jx, Jy,
+//! Jz` (ħ; default 0), or both (as `trajectory.csv` has them): then J is the state, and the
+//! Euler momenta must agree with it (at θ = 0 or π they determine only two components of J). The prefixed names are the ones `trajectory.csv` uses (they cannot
 //! collide with a coordinate's name) and win when both are present. Other columns (`t`, `H`,
 //! the unwrapped angles) are ignored, so a `trajectory.csv` written by `rovib run` is a valid
 //! states file. Errors name the CSV file, line and column.
@@ -15,6 +16,7 @@ use std::path::Path;
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::{FileError, Source};
 use crate::runtime::hamiltonian::PhaseState;
+use crate::runtime::hamiltonian::euler::euler_momenta_from_angular_momentum;
 use crate::runtime::hamiltonian::fast::{BodyState, quaternion_of_euler};
 use crate::runtime::nalgebra::{SVector, Vector3};
 use crate::scene::Scene;
@@ -89,13 +91,6 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let pe_col = triple(["pe_phi", "pe_theta", "pe_psi"])?
         .map_or_else(|| triple(["p_phi", "p_theta", "p_psi"]), |c| Ok(Some(c)))?;
     let j_col = triple(["Jx", "Jy", "Jz"])?;
-    if pe_col.is_some() && j_col.is_some() {
-        return Err(Ok(src.error(
-            0..header.len(),
-            "the states file gives both the Euler momenta (pe_phi, pe_theta, pe_psi) and Jx, Jy, Jz",
-            "keep one of them",
-        )));
-    }
 
     let mut states = Vec::new();
     let mut values = Vec::with_capacity(columns.len());
@@ -152,7 +147,26 @@ pub fn read_states<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         let pick = |c: [usize; 3]| Vector3::new(values[c[0]], values[c[1]], values[c[2]]);
         let euler = euler_col.map_or(Vector3::new(0.0, std::f64::consts::FRAC_PI_2, 0.0), pick);
         let state = match (pe_col, j_col) {
-            (Some(c), _) => BodyState::from_phase(&PhaseState { q, p, euler, pe: pick(c) }).map_err(|e| {
+            // Both (a `trajectory.csv` of `rovib run`): J is the state (the Euler momenta do not
+            // determine it at θ = 0 or π); the Euler momenta must be those of that J.
+            (Some(c), Some(jc)) => {
+                let (pe, j) = (pick(c), pick(jc));
+                let expected = euler_momenta_from_angular_momentum(&euler, &j);
+                let tolerance = 1e-9 * (1.0 + j.norm() + pe.norm());
+                if (pe - expected).amax() > tolerance {
+                    return Err(Ok(src.error(
+                        start..start + line.len(),
+                        format!(
+                            "the Euler momenta ({}, {}, {}) are not those of Jx, Jy, Jz at these Euler angles \
+                             (which give ({}, {}, {})): the row contradicts itself",
+                            pe[0], pe[1], pe[2], expected[0], expected[1], expected[2]
+                        ),
+                        "correct the row, or give only one of the two (Jx, Jy, Jz or pe_phi, pe_theta, pe_psi)",
+                    )));
+                }
+                BodyState { q, p, orientation: quaternion_of_euler(&euler), j }
+            }
+            (Some(c), None) => BodyState::from_phase(&PhaseState { q, p, euler, pe: pick(c) }).map_err(|e| {
                 Ok(src.error(
                     start..start + line.len(),
                     format!(
