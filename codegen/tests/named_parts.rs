@@ -4,25 +4,12 @@
 
 mod common;
 
+use common::method;
+
 use rovib_codegen::generate_molecule;
 
 const NAMED: &str = include_str!("fixtures/co2ar/co2ar.toml");
 const FLAT: &str = include_str!("fixtures/co2ar/co2ar_flat.toml");
-
-/// The body of the generated method `name`.
-fn method(source: &str, name: &str) -> syn::Block {
-    let file = syn::parse_file(source).expect("generated source parses");
-    file.items
-        .iter()
-        .find_map(|item| match item {
-            syn::Item::Impl(i) => i.items.iter().find_map(|it| match it {
-                syn::ImplItem::Fn(f) if f.sig.ident == name => Some(f.block.clone()),
-                _ => None,
-            }),
-            _ => None,
-        })
-        .unwrap_or_else(|| panic!("no method `{name}`"))
-}
 
 /// A deterministic generator (SplitMix64), uniform in [0, 1).
 struct SplitMix(u64);

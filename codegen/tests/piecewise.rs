@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::method;
+
 use rovib_codegen::generate_molecule;
 
 /// A CO2–Ar-like surface in Jacobi coordinates: a short-range exponential inside R < 6, a
@@ -49,20 +51,6 @@ expression = """
 + 1e-4 * (min(R, 6.5) + max(R * c, 0) + abs(r - 2.3)) + 1e-4 * erf(R - 7)
 """
 "#;
-
-fn method(source: &str, name: &str) -> syn::Block {
-    let file = syn::parse_file(source).expect("generated source parses");
-    file.items
-        .iter()
-        .find_map(|item| match item {
-            syn::Item::Impl(i) => i.items.iter().find_map(|it| match it {
-                syn::ImplItem::Fn(f) if f.sig.ident == name => Some(f.block.clone()),
-                _ => None,
-            }),
-            _ => None,
-        })
-        .unwrap_or_else(|| panic!("no method `{name}`"))
-}
 
 #[test]
 fn piecewise_potential_gradient_matches_central_differences() {

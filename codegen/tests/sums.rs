@@ -4,24 +4,12 @@
 
 mod common;
 
+use common::method;
+
 use rovib_codegen::{DefinitionError, generate_molecule};
 
 const FIT: &str = include_str!("fixtures/sums/fit.toml");
 const FIT_PATH: &str = "tests/fixtures/sums/fit.toml";
-
-fn method(source: &str, name: &str) -> syn::Block {
-    let file = syn::parse_file(source).expect("generated source parses");
-    file.items
-        .iter()
-        .find_map(|item| match item {
-            syn::Item::Impl(i) => i.items.iter().find_map(|it| match it {
-                syn::ImplItem::Fn(f) if f.sig.ident == name => Some(f.block.clone()),
-                _ => None,
-            }),
-            _ => None,
-        })
-        .unwrap_or_else(|| panic!("no method `{name}`"))
-}
 
 fn errors(path: &str, text: &str) -> Vec<DefinitionError> {
     match generate_molecule(path, text) {

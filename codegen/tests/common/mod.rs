@@ -151,3 +151,19 @@ fn eval(e: &syn::Expr, env: &mut HashMap<String, Value>, q: &[f64], out: &mut [f
         other => panic!("unexpected expression {}", quote!(#other)),
     })
 }
+
+/// The body of the generated method `name` in a generated molecule's source.
+#[allow(dead_code)] // used by the test crates that read generated molecules, not by every one
+pub fn method(source: &str, name: &str) -> syn::Block {
+    let file = syn::parse_file(source).expect("generated source parses");
+    file.items
+        .iter()
+        .find_map(|item| match item {
+            syn::Item::Impl(i) => i.items.iter().find_map(|it| match it {
+                syn::ImplItem::Fn(f) if f.sig.ident == name => Some(f.block.clone()),
+                _ => None,
+            }),
+            _ => None,
+        })
+        .unwrap_or_else(|| panic!("no method `{name}`"))
+}
