@@ -2,7 +2,7 @@
 //! boundaries of `if`/`select` (and `abs`, `min`, `max`), reported as build notes.
 //!
 //! Each distinct condition `x < y` of the potential is looked for along random segments in the
-//! coordinates' box (the declared range around the reference geometry, see [`sample_box`]): where
+//! coordinates' box (the declared range around the reference geometry, see `sample_box`): where
 //! `x − y` changes sign along a segment, bisection finds the boundary, and the potential and its
 //! gradient are compared just before and just after it. A value jump larger than
 //! [`VALUE_TOLERANCE`] or a gradient jump larger than [`GRADIENT_TOLERANCE`] (relative to the
