@@ -288,6 +288,22 @@ fn spell_if(text: &str) -> String {
 /// Takes syn expressions apart with an explicit stack. Dropping a deep syn tree recurses once per
 /// level (a 10⁴-term sum is 10⁴ levels deep); this moves every child out first so each node is
 /// dropped alone. [`check_shape`] limits the trees to the variants handled here.
+/// The error of a call of `name` with `args` where `expected` arguments are taken, in
+/// `context`, with `help` saying how to write it (the arguments are dismantled first).
+fn wrong_arity(name: &str, expected: usize, args: Vec<Expr>, span: Span, context: &str, help: String) -> ExprError {
+    let given = args.len();
+    dismantle(args);
+    ExprError::at(
+        span,
+        format!(
+            "`{name}` takes {expected} argument{} but {given} {} given in {context}",
+            if expected == 1 { "" } else { "s" },
+            if given == 1 { "was" } else { "were" },
+        ),
+        help,
+    )
+}
+
 fn dismantle(exprs: impl IntoIterator<Item = Expr>) {
     let mut stack: Vec<Expr> = exprs.into_iter().collect();
     while let Some(e) = stack.pop() {
@@ -588,18 +604,8 @@ impl Builder<'_, '_> {
         let args: Vec<Expr> = call.args.into_iter().collect();
         if let Some(f) = self.scope.library.functions.get(&name) {
             if args.len() != f.params.len() {
-                let (expected, given) = (f.params.len(), args.len());
-                dismantle(args);
-                return Err(ExprError::at(
-                    span,
-                    format!(
-                        "`{name}` takes {expected} argument{} but {given} {} given in {}",
-                        if expected == 1 { "" } else { "s" },
-                        if given == 1 { "was" } else { "were" },
-                        self.scope.context
-                    ),
-                    format!("write `{name}({})`", f.params.join(", ")),
-                ));
+                let help = format!("write `{name}({})`", f.params.join(", "));
+                return Err(wrong_arity(&name, f.params.len(), args, span, self.scope.context, help));
             }
             self.tasks.push(Task::Inline(name, span));
             // The first argument is built first.
@@ -623,22 +629,12 @@ impl Builder<'_, '_> {
             return Err(ExprError::at(span, format!("unknown function `{name}` in {}", self.scope.context), help));
         };
         if args.len() != expected {
-            let given = args.len();
-            dismantle(args);
-            return Err(ExprError::at(
-                span,
-                format!(
-                    "`{name}` takes {expected} argument{} but {given} {} given in {}",
-                    if expected == 1 { "" } else { "s" },
-                    if given == 1 { "was" } else { "were" },
-                    self.scope.context
-                ),
-                match name.as_str() {
-                    "pow" => "write `pow(base, exponent)`".to_owned(),
-                    "atan2" => "write `atan2(y, x)`".to_owned(),
-                    _ => format!("write `{name}(x)`"),
-                },
-            ));
+            let help = match name.as_str() {
+                "pow" => "write `pow(base, exponent)`".to_owned(),
+                "atan2" => "write `atan2(y, x)`".to_owned(),
+                _ => format!("write `{name}(x)`"),
+            };
+            return Err(wrong_arity(&name, expected, args, span, self.scope.context, help));
         }
         let mut args = args.into_iter();
         let first = args.next().expect("counted above");
@@ -682,18 +678,8 @@ impl Builder<'_, '_> {
     /// Schedules a call of one of [`SPECIAL_FUNCTIONS`].
     fn special(&mut self, name: String, arity: usize, span: Span, args: Vec<Expr>) -> Result<(), ExprError> {
         if args.len() != arity {
-            let given = args.len();
-            dismantle(args);
-            return Err(ExprError::at(
-                span,
-                format!(
-                    "`{name}` takes {arity} argument{} but {given} {} given in {}",
-                    if arity == 1 { "" } else { "s" },
-                    if given == 1 { "was" } else { "were" },
-                    self.scope.context
-                ),
-                format!("write `{}`", SPECIAL_USAGE.iter().find(|(n, _)| *n == name).map_or("", |(_, u)| u)),
-            ));
+            let help = format!("write `{}`", SPECIAL_USAGE.iter().find(|(n, _)| *n == name).map_or("", |(_, u)| u));
+            return Err(wrong_arity(&name, arity, args, span, self.scope.context, help));
         }
         let mut args = args;
         if name == "sum" {
