@@ -13,6 +13,8 @@
 
 use crate::definition::Definition;
 use crate::expr::{ExprId, Graph, Node};
+use rand::{RngExt as _, SeedableRng as _};
+use rand_chacha::ChaCha8Rng;
 
 /// Segments sampled in the box.
 const SEGMENTS: usize = 96;
@@ -48,19 +50,6 @@ fn sample_box(def: &Definition) -> Option<Vec<(f64, f64)>> {
         .collect()
 }
 
-/// A deterministic generator (SplitMix64), uniform in [0, 1).
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Notes for the build: one per condition of the potential at whose boundary the potential or
 /// its gradient jumps. `gradient` is ∂U/∂q (hartree per atomic unit).
 pub fn jump_notes(def: &Definition, potential: ExprId, gradient: &[ExprId]) -> Vec<String> {
@@ -88,12 +77,12 @@ pub fn jump_notes(def: &Definition, potential: ExprId, gradient: &[ExprId]) -> V
     };
     let mut roots = vec![potential];
     roots.extend_from_slice(gradient);
-    let mut rng = SplitMix(0x5eed);
+    let mut rng = ChaCha8Rng::seed_from_u64(0x5eed);
     let mut reported = vec![false; conditions.len()];
     let mut notes = Vec::new();
     for _ in 0..SEGMENTS {
-        let a: Vec<f64> = bounds.iter().map(|&(lo, hi)| lo + (hi - lo) * rng.next()).collect();
-        let b: Vec<f64> = bounds.iter().map(|&(lo, hi)| lo + (hi - lo) * rng.next()).collect();
+        let a: Vec<f64> = bounds.iter().map(|&(lo, hi)| lo + (hi - lo) * rng.random::<f64>()).collect();
+        let b: Vec<f64> = bounds.iter().map(|&(lo, hi)| lo + (hi - lo) * rng.random::<f64>()).collect();
         let at = |t: f64| -> Vec<f64> { a.iter().zip(&b).map(|(x, y)| x + t * (y - x)).collect() };
         let (da, db) = (differences(&a), differences(&b));
         for c in 0..conditions.len() {

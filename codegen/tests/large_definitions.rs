@@ -7,6 +7,8 @@
 
 mod common;
 
+use rand::{RngExt as _, SeedableRng as _};
+use rand_chacha::ChaCha8Rng;
 use rovib_codegen::{GeneratedMolecule, generate_molecule};
 
 /// The stack of a build script's main thread.
@@ -67,22 +69,6 @@ parameters = {{ {parameters} }}
     )
 }
 
-/// A deterministic generator (SplitMix64) for coefficients and points.
-struct SplitMix(u64);
-impl SplitMix {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform in [-1, 1).
-    fn symmetric(&mut self) -> f64 {
-        2.0 * self.next() - 1.0
-    }
-}
-
 /// Interprets the generated `potential` function at `q` (bohr, bohr, rad).
 fn generated_potential(source: &str, q: &[f64; 3]) -> f64 {
     let file = syn::parse_file(source).expect("generated source parses");
@@ -110,9 +96,10 @@ fn ten_thousand_term_polynomial_generates_and_evaluates_correctly() {
         (0..22).flat_map(|i| (0..22).flat_map(move |j| (0..22).map(move |k| (i, j, k)))).collect();
     exponents.sort_by_key(|&(i, j, k)| (i + j + k, i, j, k));
     exponents.truncate(TERMS);
-    let mut rng = SplitMix(42);
+    let mut rng = ChaCha8Rng::seed_from_u64(42);
     // Coefficients fall off with the degree, as fitted surfaces' do.
-    let coefficients: Vec<f64> = exponents.iter().map(|&(i, j, k)| rng.symmetric() * 0.5f64.powi(i + j + k)).collect();
+    let coefficients: Vec<f64> =
+        exponents.iter().map(|&(i, j, k)| rng.random_range(-1.0f64..1.0) * 0.5f64.powi(i + j + k)).collect();
     let terms: Vec<String> = exponents
         .iter()
         .zip(&coefficients)
@@ -122,7 +109,11 @@ fn ten_thousand_term_polynomial_generates_and_evaluates_correctly() {
     let m = generate_on_small_stack("molecules/big.toml", text).expect("a valid definition");
     assert_short_scope_chains(&m);
     for _ in 0..20 {
-        let q = [1.81 + 0.4 * rng.symmetric(), 1.81 + 0.4 * rng.symmetric(), 1.82 + 0.4 * rng.symmetric()];
+        let q = [
+            1.81 + 0.4 * rng.random_range(-1.0f64..1.0),
+            1.81 + 0.4 * rng.random_range(-1.0f64..1.0),
+            1.82 + 0.4 * rng.random_range(-1.0f64..1.0),
+        ];
         let d = [q[0] - 1.81, q[1] - 1.81, q[2] - 1.82];
         let (mut direct, mut scale) = (0.0, 0.0);
         for (&(i, j, k), c) in exponents.iter().zip(&coefficients) {

@@ -6,22 +6,12 @@ mod common;
 
 use common::method;
 
+use rand::{RngExt as _, SeedableRng as _};
+use rand_chacha::ChaCha8Rng;
 use rovib_codegen::generate_molecule;
 
 const NAMED: &str = include_str!("fixtures/co2ar/co2ar.toml");
 const FLAT: &str = include_str!("fixtures/co2ar/co2ar_flat.toml");
-
-/// A deterministic generator (SplitMix64), uniform in [0, 1).
-struct SplitMix(u64);
-impl SplitMix {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-13 * a.abs().max(b.abs()).max(1e-300)
@@ -34,13 +24,13 @@ fn co2_ar_with_named_parts_equals_the_written_out_model() {
     let named = generate_molecule("tests/fixtures/co2ar/co2ar.toml", NAMED).expect("valid");
     let flat = generate_molecule("tests/fixtures/co2ar/co2ar_flat.toml", FLAT).expect("valid");
     let angstrom = 1.0 / 0.529_177_210_903;
-    let mut rng = SplitMix(7);
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
     for _ in 0..50 {
         let q = [
-            (1.0 + 0.4 * rng.next()) * angstrom,
-            (1.0 + 0.4 * rng.next()) * angstrom,
-            (3.0 + 2.0 * rng.next()) * angstrom,
-            std::f64::consts::PI * (0.05 + 0.9 * rng.next()),
+            (1.0 + 0.4 * rng.random::<f64>()) * angstrom,
+            (1.0 + 0.4 * rng.random::<f64>()) * angstrom,
+            (3.0 + 2.0 * rng.random::<f64>()) * angstrom,
+            std::f64::consts::PI * (0.05 + 0.9 * rng.random::<f64>()),
         ];
         for (name, outputs) in [("potential", 0), ("potential_gradient", 4)] {
             let (out_n, ret_n) = common::interpret(&method(&named.source, name), &q, outputs);

@@ -101,8 +101,18 @@ fn jumps_at_branch_boundaries_are_reported() {
     let notes = m.notes.join("\n");
     assert_eq!(m.notes.len(), 4, "{notes}");
     let note = |condition: &str| m.notes.iter().find(|n| n.contains(condition)).unwrap_or_else(|| panic!("{notes}"));
-    // The value jumps at R = 6 (by the difference of the two branches there, some 1e-3).
-    assert!(note("`R < 6.0`").contains("value jumps by 2.866e-3 hartree"), "{notes}");
+    // The value jumps at R = 6 by the difference of the two branches there, 1e-3 (short − long)
+    // = 1e-3 (3 + 0.8 P2(c) + 0.05 P3^1(c)), closed forms at the θ the note reports.
+    let at_r6 = note("`R < 6.0`");
+    let reported = |key: &str| -> f64 {
+        let tail = &at_r6[at_r6.find(key).unwrap_or_else(|| panic!("{key} in {at_r6}")) + key.len()..];
+        tail.split(|ch: char| ch == ' ' || ch == ',').next().unwrap().parse().unwrap()
+    };
+    let c = reported("theta = ").cos();
+    let p2 = 1.5 * c * c - 0.5;
+    let p31 = 1.5 * (5.0 * c * c - 1.0) * (1.0 - c * c).sqrt();
+    let jump = 1e-3 * (3.0 + 0.8 * p2 + 0.05 * p31);
+    assert!(at_r6.contains(&format!("value jumps by {jump:.3e} hartree")), "expected {jump:.3e}: {notes}");
     // min, max and abs have kinks: the gradient jumps by twice the slope of |x| (1e-4 · 2), the
     // slope of min(R, 6.5) (1e-4) and of max(R cos θ, 0) (1e-4 · |∇(R cos θ)|).
     assert!(note("`(r - 2.3) < 0.0`").contains("gradient by 2.000e-4"), "{notes}");
