@@ -259,6 +259,7 @@ where
         }
         eprint!("round {} of {rounds} done\r", round + 1);
     }
+    eprintln!();
     println!(
         "| contender | rtol = atol | median error (bohr) | CPU µs per trajectory (median of {rounds}) | trajectories per CPU-second |"
     );
