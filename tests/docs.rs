@@ -105,6 +105,16 @@ fn toml_marker(block: &Block) -> Option<&str> {
     }
 }
 
+/// `molecules/NAME.toml` for a definition whose `name = "NAME"` line is its first of that key.
+fn molecule_path(text: &str) -> String {
+    let name = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("name").map(str::trim).and_then(|r| r.strip_prefix('=')))
+        .map(|r| r.trim().trim_matches('"').to_owned())
+        .unwrap_or_default();
+    format!("molecules/{name}.toml")
+}
+
 /// Checks one marked block; the error names the document and the block's line.
 fn check_block(block: &Block, marker: &str) -> Result<(), String> {
     let name = format!("{} (block at line {})", block.file, block.line);
@@ -116,7 +126,9 @@ fn check_block(block: &Block, marker: &str) -> Result<(), String> {
             }
             Ok(())
         }
-        "molecule" => rovib_codegen::generate_molecule(&name, &block.text)
+        // The generator requires the name to be the file's stem: the block stands for
+        // molecules/NAME.toml.
+        "molecule" => rovib_codegen::generate_molecule(&molecule_path(&block.text), &block.text)
             .map(|_| ())
             .map_err(|errors| errors.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("\n")),
         _ => unreachable!("markers are checked by toml_marker"),
@@ -216,6 +228,7 @@ fn commands() -> Vec<String> {
     let text = help(&[]);
     let list = text.split("Commands:").nth(1).expect("rovib --help lists its commands");
     list.lines()
+        .skip(1)
         .take_while(|l| !l.trim().is_empty())
         .filter_map(|l| l.split_whitespace().next())
         .filter(|c| *c != "help")
