@@ -891,7 +891,7 @@ fn integrator(
     // Everything the solver checks has been checked above with its place; this is the backstop
     // that keeps the two in step (a failure here is a bug of this function).
     method.validate().map_err(|e| {
-        src.error(raw.span(), format!("invalid integrator settings: {e}"), "see [integrator] in docs/src/reference/scene.md")
+        src.error(raw.span(), format!("invalid integrator settings: {e}"), "see docs/src/reference/scene.md")
     })?;
     Ok(method)
 }

@@ -71,7 +71,12 @@ fn blocks(file: &str, text: &str) -> Vec<Block> {
         match open.as_mut() {
             None => {
                 if let Some(info) = trimmed.strip_prefix("```") {
-                    open = Some(Block { file: file.to_owned(), line: i + 1, info: info.trim().to_owned(), text: String::new() });
+                    open = Some(Block {
+                        file: file.to_owned(),
+                        line: i + 1,
+                        info: info.trim().to_owned(),
+                        text: String::new(),
+                    });
                 }
             }
             Some(block) => {
@@ -195,8 +200,7 @@ fn help(args: &[&str]) -> String {
 fn long_flags(text: &str) -> BTreeSet<String> {
     let mut flags = BTreeSet::new();
     for (i, _) in text.match_indices("--") {
-        let name: String =
-            text[i + 2..].chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '-').collect();
+        let name: String = text[i + 2..].chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '-').collect();
         let before = text[..i].chars().next_back();
         if !name.is_empty() && before.is_none_or(|c| c.is_whitespace() || c == '[' || c == '`' || c == '(') {
             flags.insert(name);
@@ -337,7 +341,10 @@ fn a_broken_link_is_caught() {
     let text = "See [the scene reference](reference/scene.md) and [nothing](reference/nothing.md).\n\
                 ```\n[not a link](in/code.md)\n```\n{{#include ../../no_such_file.md}}\n";
     let broken = broken_links("docs/src/page.md", text);
-    assert_eq!(broken, ["docs/src/page.md:1: reference/nothing.md", "docs/src/page.md:5: {{#include ../../no_such_file.md}}"]);
+    assert_eq!(
+        broken,
+        ["docs/src/page.md:1: reference/nothing.md", "docs/src/page.md:5: {{#include ../../no_such_file.md}}"]
+    );
 }
 
 #[test]
