@@ -2,7 +2,7 @@
 //! rank 0 (bytes, and the CPU time to write and read it), the merge of a block into the running
 //! total, the checkpoint line (bytes, CPU and wall time of the write and `fsync`) and a
 //! compaction of the checkpoint. Everything rank 0 does per block alone, while the other ranks
-//! compute: the serial part of an MPI run (BENCHMARKS.md, "Ensembles over MPI").
+//! compute: the serial part of an MPI run (docs/src/history/benchmarks.md, "Ensembles over MPI").
 //!
 //! Each scene is run once for 64 trajectories on one thread (the block whose outcome is then
 //! shipped, merged and recorded; its process CPU time is the compute cost of a block), then the

@@ -2,7 +2,7 @@
 //! `rovib run` integrates) per compiled-in molecule: thread CPU time per evaluation over 8
 //! varied states, the median of several rounds. Meant for comparing two builds (before/after a
 //! generator change) by running their binaries alternately, and for large molecules built with
-//! `ROVIB_MOLECULES_DIR` (BENCHMARKS.md, "Large molecules").
+//! `ROVIB_MOLECULES_DIR` (docs/src/history/benchmarks.md, "Large molecules").
 //!
 //! ```sh
 //! cargo run --release --example rhs_cost -- [ROUNDS [EVALS]] [NAME...]

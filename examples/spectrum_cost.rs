@@ -1,4 +1,4 @@
-//! What the classical IR spectrum costs against the ensemble's integration (BENCHMARKS.md,
+//! What the classical IR spectrum costs against the ensemble's integration (docs/src/history/benchmarks.md,
 //! "Dipoles and spectra").
 //!
 //! 1. The same thermal water ensemble as `scenes/h2o_ir.toml` (300 K, 2 ps, output every 20

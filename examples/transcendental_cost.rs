@@ -2,7 +2,7 @@
 //! path calls) against `runtime::transcendental` (the polynomial written once over `Real`) at
 //! `f64` and per lane of `F64x2`, `F64x4`, `F64x8` (what the lanes call). Thread CPU time per evaluation, the contenders interleaved round by round in one
 //! process; chained (each argument depends on the previous result), over arguments in
-//! `[−3, 3]` (angles, Morse exponents). BENCHMARKS.md, "Many trajectories per core".
+//! `[−3, 3]` (angles, Morse exponents). docs/src/history/benchmarks.md, "Many trajectories per core".
 //!
 //! ```sh
 //! cargo run --release --example transcendental_cost -- 7

@@ -1,7 +1,7 @@
 //! The CPU features a binary was built for against the CPU it runs on.
 //!
 //! A build with `RUSTFLAGS="-C target-cpu=native"` (or another `target-cpu`) may use AVX2 or
-//! AVX-512 anywhere (the SIMD lanes of ensembles are built for them, README "SIMD lanes"). Run on
+//! AVX-512 anywhere (the SIMD lanes of ensembles are built for them, docs/src/howto/ensembles.md, "SIMD lanes"). Run on
 //! a CPU without them, such a binary would die of an illegal instruction at some later point;
 //! [`missing_features`] lets `main` stop first with a message that says what to do. The
 //! detection is the standard library's (`is_x86_feature_detected!`, safe); only the features

@@ -24,3 +24,8 @@ pub use rovib_runtime as runtime;
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 pub struct ReadmeDoctests;
+
+/// The user guide's Rust examples (docs/src), compiled and run as doctests likewise.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/src/reference/library.md")]
+pub struct GuideLibraryDoctests;

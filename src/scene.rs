@@ -1,7 +1,7 @@
 //! Scene files: what `rovib run` integrates and what it writes.
 //!
 //! A scene names a molecule, an initial condition, an integrator, the end time, the output
-//! interval and the outputs. Every key is documented in the README ("Scenes and `rovib run`"); a short
+//! interval and the outputs. Every key is documented in the guide (docs/src/reference/scene.md); a short
 //! example:
 //!
 //! ```toml
@@ -308,7 +308,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     let raw: RawScene = toml::from_str(text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
         let help = if message.starts_with("unknown field") || message.starts_with("missing field") {
-            "the README's section \"Scenes and `rovib run`\" lists every key"
+            "docs/src/reference/scene.md (the guide's scene reference) lists every key"
         } else {
             "see the TOML syntax at https://toml.io and the shipped scenes/ for examples"
         };
@@ -364,14 +364,14 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         (None, None) => {
             return Err(src.whole_file(
                 "missing field `initial`",
-                "add an [initial] table (one trajectory) or an [ensemble] table (many), see the README",
+                "add an [initial] table (one trajectory) or an [ensemble] table (many), see docs/src/reference/scene.md",
             ));
         }
     };
     if raw.statistics.is_some() && raw.ensemble.is_none() {
         return Err(src.whole_file(
             "a [statistics] table without an [ensemble] table",
-            "add [ensemble] (see the README's \"Ensembles\") or remove [statistics]",
+            "add [ensemble] (see docs/src/reference/ensemble.md) or remove [statistics]",
         ));
     }
 
@@ -891,7 +891,7 @@ fn integrator(
     // Everything the solver checks has been checked above with its place; this is the backstop
     // that keeps the two in step (a failure here is a bug of this function).
     method.validate().map_err(|e| {
-        src.error(raw.span(), format!("invalid integrator settings: {e}"), "see the README's \"Scene files\"")
+        src.error(raw.span(), format!("invalid integrator settings: {e}"), "see docs/src/reference/scene.md")
     })?;
     Ok(method)
 }

@@ -109,7 +109,7 @@ fn one_and_two_threads_write_byte_identical_statistics() {
     let a = run_with_sampler(&H2o, &s, &Gaussian::new(11), "gaussian", &options("threads1", 1)).unwrap();
     // On two threads block 0 is held until the last trajectory (149) is drawn, so the blocks
     // arrive as 1, 2, 0: merging in arrival order instead of block order fails this test
-    // (shown: BENCHMARKS.md, "Ensembles over MPI"; without the hold it passed that bug).
+    // (shown: docs/src/history/benchmarks.md, "Ensembles over MPI"; without the hold it passed that bug).
     let mut held = Gaussian::new(11);
     held.hold_first_until = Some((149, Arc::new(AtomicBool::new(false))));
     let b = run_with_sampler(&H2o, &s, &held, "gaussian", &options("threads2", 2)).unwrap();

@@ -2,7 +2,7 @@
 //! a time, no file of an earlier run left, a summary that says how the run ended), in one process: a run killed with SIGKILL part way,
 //! or stopped by a panicking trajectory, continues with `--resume` to outputs byte-identical to
 //! an uninterrupted run's. (The same under MPI: tests/mpi.rs, with `--features mpi`.)
-//! Shown able to fail (BENCHMARKS.md, "Ensembles over MPI"): a resume that skips a block, and
+//! Shown able to fail (docs/src/history/benchmarks.md, "Ensembles over MPI"): a resume that skips a block, and
 //! blocks merged in arrival order, both fail the byte comparison here.
 
 mod common;

@@ -6,7 +6,7 @@
 //! checkpoint intact, and the resumed run again gives the same bytes. Needs Open MPI's `mpirun`
 //! on PATH (Debian: `apt-get install openmpi-bin libopenmpi-dev`).
 //!
-//! Shown able to fail (BENCHMARKS.md, "Ensembles over MPI"): rank 0 dropping the results of
+//! Shown able to fail (docs/src/history/benchmarks.md, "Ensembles over MPI"): rank 0 dropping the results of
 //! rank 2, or merging blocks in arrival order, fails the byte comparison; a resume that skips a
 //! block fails the resume tests.
 

@@ -5,7 +5,7 @@
 //!   independent GF calculation, itself checked against a Cartesian Hessian in tests/freq.rs),
 //!   within half the stated resolution 1/(cT);
 //! - the integrated band intensities follow the double-harmonic formula
-//!   (2π²/3c)|∂μ/∂Q_k|² (docs/equations.md, section 11), with ∂μ/∂Q_k computed here from the
+//!   (2π²/3c)|∂μ/∂Q_k|² (docs/src/reference/equations.md, section 11), with ∂μ/∂Q_k computed here from the
 //!   definition's point charges and the atoms' displacements along the mode (not from the
 //!   generated dipole code);
 //! - the pure rotational band of a rigid symmetric top follows the classical rigid-rotor
@@ -441,7 +441,7 @@ fn hcn_rotational_constant() -> f64 {
     HARTREE_IN_WAVENUMBERS / (2.0 * inertia)
 }
 
-/// The classical P–R separation of a parallel band, `√(8 kT B)` in cm⁻¹ (docs/equations.md,
+/// The classical P–R separation of a parallel band, `√(8 kT B)` in cm⁻¹ (docs/src/reference/equations.md,
 /// section 11): `2.3583·√(B·T)` with B in cm⁻¹ and T in K.
 fn classical_pr_separation(b: f64, kelvin: f64) -> f64 {
     2.3583 * (b * kelvin).sqrt()

@@ -1,6 +1,6 @@
 // The two triangular solves of runtime/src/hamiltonian/factor_large.rs's `ldl_solve` for 54 rows
 // (hexane), with `L` in the lower triangle and a transposed copy in the upper one, in four
-// orders (BENCHMARKS.md, "Large molecules, fourth step"): thread CPU time per solve, and each
+// orders (docs/src/history/benchmarks.md, "Large molecules, fourth step"): thread CPU time per solve, and each
 // result's largest difference from the first. Self-contained:
 //
 //   rustc --edition 2024 -C opt-level=3 benches/size/ldl_solve_variants.rs -o /tmp/ldl_solve_variants

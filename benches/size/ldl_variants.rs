@@ -1,5 +1,5 @@
 // The `L D Lᵀ` of a 54 × 54 symmetric positive definite matrix (hexane's Schur complement) in
-// the variants measured for runtime/src/hamiltonian/factor_large.rs (BENCHMARKS.md, "Large
+// the variants measured for runtime/src/hamiltonian/factor_large.rs (docs/src/history/benchmarks.md, "Large
 // molecules, fourth step"): thread CPU time per factorization (a 23 kB copy of the matrix
 // included, timed alone as `copy`), interleaved rounds, and the residual of a solve with each
 // factor as a check that every variant computes the factorization. Self-contained:

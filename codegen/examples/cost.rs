@@ -40,7 +40,7 @@ fn main() -> ExitCode {
         options.run_time_centre_of_mass_from = usize::MAX;
     }
     // `--write DIR`: also write each generated source to DIR/NAME.rs (for compiling one molecule
-    // alone, BENCHMARKS.md "Generated code: rustc per molecule").
+    // alone, docs/src/history/benchmarks.md "Generated code: rustc per molecule").
     let write_dir = paths.iter().position(|p| p == "--write").map(|i| {
         let dir = paths.get(i + 1).cloned().unwrap_or_default();
         paths.drain(i..(i + 2).min(paths.len()));

@@ -2,7 +2,7 @@
 //!
 //! A definition names the atoms, the internal coordinates, each atom's body-frame position as
 //! expressions of the coordinates, and the potential. The full format, with an example, is in
-//! the README ("Molecule definitions"); in short:
+//! the guide (docs/src/reference/definition.md); in short:
 //!
 //! ```toml
 //! name = "h2o"                     # must match the file name: molecules/h2o.toml
@@ -298,16 +298,16 @@ pub fn parse_definition_in(
     let raw = toml::from_str::<RawDefinition>(text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
         let help = if message.starts_with("unknown field") {
-            "check the spelling; the README lists every key of a molecule definition".to_owned()
+            "check the spelling; docs/src/reference/definition.md lists every key of a molecule definition".to_owned()
         } else if message.starts_with("missing field") {
-            "add it; the README lists every key of a molecule definition".to_owned()
+            "add it; docs/src/reference/definition.md lists every key of a molecule definition".to_owned()
         } else if message.contains("did not match any variant of untagged enum RawArray") {
             "an array is a list of numbers, c = [1.0, 0.5], or a CSV file, c = { file = \"c.csv\", column = 2 }"
                 .to_owned()
         } else if message.contains("did not match any variant of untagged enum RawValue") {
             "a position component or constant is a number or a string holding an expression".to_owned()
         } else {
-            "see the TOML syntax at https://toml.io and the README's example definition".to_owned()
+            "see the TOML syntax at https://toml.io and the shipped molecules/h2o.toml".to_owned()
         };
         let message = message.replace("data did not match any variant of untagged enum RawValue", "invalid value");
         let message = message.replace("data did not match any variant of untagged enum RawArray", "invalid array");

@@ -11,7 +11,7 @@
 //!   body frame's origin; `∂c/∂q_k = Σ m_i ∂r_i/∂q_k / M`; and `∂R_i/∂q_k = ∂r_i/∂q_k − ∂c/∂q_k`
 //!   (dense, for `positions_jacobian` only);
 //! * `a`, `A`, `I` from the sparse raw derivatives, with the centre of mass applied once per
-//!   entry instead of inside every atom's term (`docs/equations.md`, section 2, "Sparse
+//!   entry instead of inside every atom's term (`docs/src/reference/equations.md`, section 2, "Sparse
 //!   assembly"):
 //!
 //!   ```text

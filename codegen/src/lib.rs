@@ -244,8 +244,8 @@ pub fn singular_reference_note(def: &Definition, exprs: &kinetic::KineticExprs) 
         };
         format!(
             "note: the reference geometry of molecule `{}` ({}) is linear: internal coordinates plus Euler angles are \
-             singular there (the rotation about the molecular axis moves no atom); {what_rovib_does} (README, \
-             \"Linear molecules\")",
+             singular there (the rotation about the molecular axis moves no atom); {what_rovib_does} (the guide's \
+             docs/src/howto/linear-molecules.md)",
             def.name, def.path
         )
     })

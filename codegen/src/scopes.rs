@@ -7,7 +7,7 @@
 //! `-C debuginfo=2 -C opt-level=1` on straight-line `f64` code, a function of 2 500 `let`s
 //! compiles and one of 3 000 crashes rustc with a stack overflow (SIGSEGV); `debuginfo=1`
 //! crashes too, only `line-tables-only` or `RUST_MIN_STACK=16777216` get through
-//! (BENCHMARKS.md, "Large molecules, third step"). Release builds carry no debug information
+//! (docs/src/history/benchmarks.md, "Large molecules, third step"). Release builds carry no debug information
 //! and never hit it.
 //! This is how the test profile overflowed for the dense forms of ethane (issue 17).
 //!

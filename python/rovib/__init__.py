@@ -203,7 +203,7 @@ def resume(out_dir: PathLike, scene: Union[None, PathLike, Dict[str, Any]] = Non
     Without ``scene`` the run continues to its own scene's end (after an interrupt); a scene (a
     path, or a dict written to ``OUT_DIR/scene.resume.toml``) may change only ``run.end`` (and
     ``max_energy_error``, ``max_outputs``). With DOP853 every row after the first run's last one
-    is bit for bit the row of one uninterrupted run (README, "Restarts").
+    is bit for bit the row of one uninterrupted run (docs/src/howto/restarts.md).
     """
     out = os.fspath(out_dir)
     path = None

@@ -1,6 +1,6 @@
 //! Parts of the kinetic matrices that generated code for large molecules leaves to the runtime.
 //!
-//! With the centre of mass `c = Σ_i m_i r_i / M` applied numerically (`docs/equations.md`,
+//! With the centre of mass `c = Σ_i m_i r_i / M` applied numerically (`docs/src/reference/equations.md`,
 //! "Sparse assembly"), the vibrational matrix is
 //!
 //! ```text

@@ -12,7 +12,7 @@
 //! converted back (closed-form `q(x)`, Kabsch orientation, `J = Σ m R × u`,
 //! `p = Σ m ∂R/∂q · u`) and the run continues in the internal chart. The conversions are exact
 //! up to rounding in both directions, so the trajectory is that of one Hamiltonian; only the
-//! integrator's step history restarts at a switch (docs/equations.md, "Chart switch").
+//! integrator's step history restarts at a switch (docs/src/reference/equations.md, "Chart switch").
 //!
 //! Only DOP853 switches (an adaptive method can restart at any time); frozen coordinates have
 //! no Cartesian counterpart, so a reduction with frozen coordinates does not switch (the run

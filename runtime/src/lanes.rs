@@ -19,7 +19,7 @@
 //! - a lane's trajectory is the one-trajectory (`f64`) trajectory to round-off.
 //!
 //! `tests/lanes.rs` checks both. libm lane by lane would make the lanes equal `f64` bit for
-//! bit, but it costs a third of the lanes' gain on AVX-512 (BENCHMARKS.md, "Many trajectories
+//! bit, but it costs a third of the lanes' gain on AVX-512 (docs/src/history/benchmarks.md, "Many trajectories
 //! per core").
 //!
 //! # Target features

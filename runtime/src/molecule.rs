@@ -11,7 +11,7 @@
 //!   energies in hartree.
 //! * Positions are body-frame Cartesian positions `R_i(q)` with the centre of mass at the origin:
 //!   `Σ m_i R_i = 0` for every q. Column `i` of a `3 × NA` matrix is atom `i`.
-//! * The kinetic matrices follow `docs/equations.md`, section 2:
+//! * The kinetic matrices follow `docs/src/reference/equations.md`, section 2:
 //!   `a_jk = Σ m_i ∂R_i/∂q_j · ∂R_i/∂q_k`, `A_jk = Σ m_i [R_i × ∂R_i/∂q_k]_j`,
 //!   `I = Σ m_i (|R_i|² 1 − R_i R_iᵀ)`, so that the kinetic energy is
 //!   `T = ½ (ω, q̇)ᵀ [[I, A], [Aᵀ, a]] (ω, q̇)` with ω the body-frame angular velocity.

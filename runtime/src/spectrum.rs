@@ -1,5 +1,5 @@
 //! The classical infrared absorption spectrum from a dipole autocorrelation function
-//! (docs/equations.md, section 11).
+//! (docs/src/reference/equations.md, section 11).
 //!
 //! Given the tapered autocorrelation `C_h(τ)` of the lab-frame dipole at `τ = kΔt`,
 //! `k = 0 … n−1` (e²·bohr², a.u. of time; [`crate::ensemble::CorrelationWorkspace::tapered_autocorrelation`]
@@ -40,7 +40,7 @@ pub const AVOGADRO: f64 = 6.022_140_76e23;
 /// of 1/T: the root of `(sinc x / (1 − x²))² = ½` (sinc x = sin πx / πx) is x = 0.72057.
 pub const HANN_FWHM: f64 = 1.441_14;
 
-/// How the classical line shape stands in for the quantum one (docs/equations.md, section 11).
+/// How the classical line shape stands in for the quantum one (docs/src/reference/equations.md, section 11).
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum QuantumCorrection {
     /// Q = 1: the classical function used as it is (detailed balance is not obeyed).

@@ -225,8 +225,8 @@ impl EulerChart {
         format!(
             "{what}; `cartesian` holds the state in lab-frame Cartesian coordinates where the molecule's coordinates \
              are declared by kind (energy, forces, Newton's equations). `rovib run` (method dop853) integrates such \
-             states in that Cartesian chart and switches back once the molecule is bent (README, \"Linear \
-             molecules\"); for the internal-chart quantities give a bent geometry in --state (e.g. the angle a few \
+             states in that Cartesian chart and switches back once the molecule is bent (the guide's \
+             docs/src/howto/linear-molecules.md); for the internal-chart quantities give a bent geometry in --state (e.g. the angle a few \
              degrees from 180)"
         )
     }

@@ -56,7 +56,7 @@ pub enum Command {
     /// Integrate a scene: write trajectory.csv (with trajectory.units.json), lab.xyz,
     /// summary.json and restart.json.
     Run {
-        /// The scene file (see scenes/ and the README). With --resume: optional, a scene that
+        /// The scene file (see scenes/ and docs/src/reference/scene.md). With --resume: optional, a scene that
         /// differs from the stored one only in run.end (to continue further).
         #[arg(required_unless_present = "resume")]
         scene: Option<PathBuf>,
@@ -73,7 +73,7 @@ pub enum Command {
     /// Run an ensemble: sample initial states, integrate every trajectory on every core, write
     /// ensemble.csv, histograms.csv, correlations.csv, summary.json and SVG plots.
     Ensemble {
-        /// A scene with an `[ensemble]` table (see the README's "Ensembles").
+        /// A scene with an `[ensemble]` table (see docs/src/reference/ensemble.md).
         scene: PathBuf,
         /// Output directory [default: out/SCENE_NAME].
         #[arg(long)]

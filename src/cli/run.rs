@@ -176,7 +176,7 @@ impl Run<'_> {
                 scene.molecule.span(),
                 format!("the scene asks for the \"dipole\" output, but molecule `{}` has no dipole surface", m.name()),
                 format!(
-                    "add a [dipole] table to {} (see the README), or remove \"dipole\" from run.outputs",
+                    "add a [dipole] table to {} (see docs/src/reference/definition.md), or remove \"dipole\" from run.outputs",
                     m.source()
                 ),
             )));

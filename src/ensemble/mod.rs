@@ -2,7 +2,7 @@
 //! statistics (means with standard errors, histograms, time-correlation functions).
 //!
 //! A scene with an `[ensemble]` table (and optionally `[statistics]`) describes the ensemble;
-//! the README's "Ensembles" section documents every key. [`run_ensemble`] is the library entry
+//! the guide's ensemble reference (docs/src/reference/ensemble.md) documents every key. [`run_ensemble`] is the library entry
 //! point (the `rovib ensemble` command calls it); [`run_with_sampler`] runs the same ensemble
 //! from any [`Sampler`], for tests and for callers with their own distribution.
 //!
@@ -273,7 +273,7 @@ impl Visit<'_, '_> {
             self.scene.source().error(
                 self.ensemble.method_span(),
                 format!("cannot sample this ensemble: {e}"),
-                "change the method or its parameters in [ensemble] (see the README's \"Ensembles\")",
+                "change the method or its parameters in [ensemble] (see docs/src/reference/ensemble.md)",
             )
         })?;
         let description = bound.description.clone();

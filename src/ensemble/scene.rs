@@ -221,7 +221,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
     let src = scene.source();
     let raw: RawFile = toml::from_str(&scene.text).map_err(|e| {
         let message = e.message().trim_end().trim_end_matches('.').to_owned();
-        let help = "the README's \"Ensembles\" section lists every key of [ensemble] and [statistics]";
+        let help = "docs/src/reference/ensemble.md (the guide's ensemble reference) lists every key of [ensemble] and [statistics]";
         match e.span() {
             Some(span) => src.error(span, message, help),
             None => src.whole_file(message, help),
@@ -230,7 +230,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
     let Some(ensemble) = raw.ensemble else {
         return Err(src.whole_file(
             "the scene has no [ensemble] table",
-            "add [ensemble] with trajectories, seed and method (see the README's \"Ensembles\"), or use `rovib run`",
+            "add [ensemble] with trajectories, seed and method (see docs/src/reference/ensemble.md), or use `rovib run`",
         ));
     };
 
@@ -722,7 +722,7 @@ impl EnsembleScene {
                     Err(message) => src.error(
                         span.clone(),
                         message,
-                        "give a readable CSV or extended XYZ file of states (see the README's \"Ensembles\")",
+                        "give a readable CSV or extended XYZ file of states (see docs/src/reference/ensemble.md)",
                     ),
                 })?;
                 if (states.len() as u64) < self.trajectories {

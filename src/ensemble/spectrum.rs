@@ -6,7 +6,7 @@
 //! the Hann-tapered fluctuation about its trajectory's time mean
 //! ([`crate::runtime::ensemble::CorrelationWorkspace::tapered_autocorrelation`]), averaged over
 //! trajectories; the transform and quantum corrections are [`crate::runtime::spectrum`]'s
-//! (docs/equations.md, section 11).
+//! (docs/src/reference/equations.md, section 11).
 
 use std::path::{Path, PathBuf};
 

@@ -87,7 +87,7 @@ impl CorrelationWorkspace {
     /// zero at `τ = n`: a spectrum from it needs no further window, and a slow drift or a
     /// large low-frequency part (a molecule's rotation) does not leak into high frequencies as
     /// it does through the kink at τ = 0 that the unbiased estimate of a drifting series has
-    /// (docs/equations.md, section 11).
+    /// (docs/src/reference/equations.md, section 11).
     pub fn tapered_autocorrelation(&mut self, x: &[f64], out: &mut [f64]) {
         let mean = x.iter().sum::<f64>() / x.len().max(1) as f64;
         self.correlate_with(x, mean, true, out);

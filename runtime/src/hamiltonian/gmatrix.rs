@@ -1,6 +1,6 @@
 //! The G-matrix path: W, the G matrices, H and Hamilton's equations, formula by formula.
 //!
-//! This is the reference implementation of the Hamiltonian (`docs/equations.md`): it
+//! This is the reference implementation of the Hamiltonian (`docs/src/reference/equations.md`): it
 //! forms the inverse metric `G = M⁻¹` and its q-derivatives and follows the derivation's
 //! formulas one by one, for readability; the faster paths ([`super::fast`]) are tested against
 //! it.

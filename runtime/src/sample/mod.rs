@@ -18,8 +18,8 @@
 //! * [`microcanonical`]: uniform on `H = E`, optionally at fixed |J|.
 //! * [`normal_modes`]: harmonic normal modes about the minimum ([`crate::modes`]), random
 //!   phases, energies per mode random, fixed or `(v + ½)ħω`, rotation thermal or fixed.
-//! * [`Spec::States`]: states given explicitly (readers for extended XYZ and internal CSV files
-//!   are not written yet).
+//! * [`Spec::States`]: states given explicitly; the `rovib` crate reads them from a CSV file of
+//!   internal coordinates or an extended XYZ file (`method = "file"` in an ensemble scene).
 //!
 //! The configuration of the first two is drawn by exact rejection sampling
 //! ([`configuration`]), so every state is an independent draw from its trajectory's own stream.

@@ -3,7 +3,7 @@
 //!
 //! The components are taken four at a time with the four sums kept in registers over the whole
 //! row, instead of one pass over all components per stage that loads and stores the partial
-//! sums each time (what the first version did; BENCHMARKS.md, "Many trajectories per core",
+//! sums each time (what the first version did; docs/src/history/benchmarks.md, "Many trajectories per core",
 //! measures both). Each component's sum is still `((0 + a₀k₀) + a₁k₁) + …` in the row's order,
 //! so the numbers are the same bits as before.
 
