@@ -23,7 +23,7 @@
 use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::runner::{Accumulators, Failure, Outcome, Plan, Progress, Stop, Watch, fold, run_block_scalar};
+use super::runner::{Accumulators, Failure, Outcome, Plan, Stop, Tally, Watch, fold, run_block_scalar};
 use crate::runtime::Molecule;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
@@ -212,7 +212,7 @@ pub fn run_block_lanes<M, const N: usize, const NA: usize>(
     sampler: &dyn Sampler<N>,
     indices: Range<u64>,
     stop: &AtomicBool,
-    progress: &Progress,
+    progress: &Tally,
 ) -> Outcome
 where
     M: Molecule<N, NA> + Sync,

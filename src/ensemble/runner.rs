@@ -13,7 +13,6 @@ use std::ops::{ControlFlow, Range};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-use indicatif::ProgressBar;
 use serde::{Deserialize, Serialize};
 
 use super::quantity::Quantity;
@@ -429,7 +428,7 @@ impl Outcome {
         self.failed.values().sum()
     }
 
-    pub(super) fn fail(&mut self, f: Failure, progress: &Progress) {
+    pub(super) fn fail(&mut self, f: Failure, progress: &Tally) {
         *self.failed.entry(f.reason.clone()).or_default() += 1;
         if self.first_failures.len() < LISTED_FAILURES {
             self.first_failures.push(f);
@@ -438,35 +437,38 @@ impl Outcome {
     }
 }
 
-/// The progress bar (if any) and the live count of failures it shows.
-pub struct Progress {
-    /// The bar, on a terminal.
-    pub bar: Option<ProgressBar>,
+/// The live counts of finished and failed trajectories, shared by the worker threads; the
+/// coordinating thread reads them for the progress callback.
+#[derive(Debug, Default)]
+pub struct Tally {
+    /// Trajectories finished (completed, failed or cut short) so far.
+    pub done: AtomicU64,
     /// Failures so far.
     pub failures: AtomicU64,
 }
 
-impl Progress {
+impl Tally {
     pub(super) fn done(&self) {
-        if let Some(b) = &self.bar {
-            b.inc(1);
-        }
+        self.done.fetch_add(1, Ordering::Relaxed);
     }
 
     fn failed(&self) {
-        let n = self.failures.fetch_add(1, Ordering::Relaxed) + 1;
-        if let Some(b) = &self.bar {
-            b.set_message(format!("{n} failed"));
-        }
+        self.failures.fetch_add(1, Ordering::Relaxed);
     }
 
     /// A block another process ran: its trajectories and failures.
     pub fn remote_block(&self, o: &Outcome) {
         let failed = o.failed_count();
-        let n = self.failures.fetch_add(failed, Ordering::Relaxed) + failed;
-        if let Some(b) = &self.bar {
-            b.inc(o.completed + failed + o.interrupted);
-            b.set_message(format!("{n} failed"));
+        self.failures.fetch_add(failed, Ordering::Relaxed);
+        self.done.fetch_add(o.completed + failed + o.interrupted, Ordering::Relaxed);
+    }
+
+    /// The counts as a [`crate::Progress`] out of `total` trajectories.
+    pub fn progress(&self, total: u64) -> crate::Progress {
+        crate::Progress {
+            done: self.done.load(Ordering::Relaxed),
+            total,
+            failed: self.failures.load(Ordering::Relaxed),
         }
     }
 }
@@ -681,7 +683,7 @@ pub fn run_block<M, const N: usize, const NA: usize>(
     sampler: &dyn Sampler<N>,
     indices: Range<u64>,
     stop: &AtomicBool,
-    progress: &Progress,
+    progress: &Tally,
 ) -> Outcome
 where
     M: Molecule<N, NA> + Sync,
@@ -698,7 +700,7 @@ pub(super) fn run_block_scalar<M, const N: usize, const NA: usize>(
     sampler: &dyn Sampler<N>,
     indices: Range<u64>,
     stop: &AtomicBool,
-    progress: &Progress,
+    progress: &Tally,
 ) -> Outcome
 where
     M: Molecule<N, NA> + Sync,

@@ -1,0 +1,964 @@
+//! One trajectory of a scene, integrated into an output folder (`rovib run SCENE.toml`): the
+//! start or a continuation from `restart.json`, the folder's lock, the output writers, the energy
+//! guard, the stop conditions and summary.json. [`Simulation`] is the entry point; it takes a
+//! stop flag and a progress callback and installs no signal handler.
+
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::Progress;
+use crate::dir_lock::DirLock;
+use crate::error::Error;
+use crate::molecules;
+use crate::output::{
+    Conservation, DipoleCsv, LabXyz, RunSummary, TRAJECTORY_UNITS_FILE, TrajectoryCsv, energy_guard,
+    remove_stale_outputs, write_summary,
+};
+use crate::parameters::{WithParameters, scene_parameters};
+use crate::restart::{Dop853Point, FinalState, Restart};
+use crate::runtime::cartesian_system::CartesianSystem;
+use crate::runtime::charts::{self, ChartError, ChartObserver, ChartReport, ChartStart, ChartState};
+use crate::runtime::frames::body_of_lab_exact;
+use crate::runtime::frames::{CentreOfMass, LabState, to_lab_body};
+use crate::runtime::hamiltonian::fast::BodyState;
+use crate::runtime::hamiltonian::{ReducedSystem, Reduction, RotationPart};
+use crate::runtime::integrate::{Dop853, Dop853Resume, Method, Observer, OdeSystem, SolveError, Stats, solve};
+use crate::runtime::nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
+use crate::runtime::{Molecule, MoleculeVisitor};
+use crate::scene::{Scene, parse_scene};
+use crate::start::frozen_reduction;
+use std::sync::atomic::{AtomicBool, Ordering};
+// The initial state and the production system live in `crate::start`; re-exported here for
+// callers that used these paths.
+use crate::start::production_system_unchecked;
+pub use crate::start::{Start, initial_state, load_scene, production_system};
+
+/// What a finished run reports on the terminal.
+pub struct RunReport {
+    /// The output directory.
+    pub out_dir: PathBuf,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+    /// Work counters.
+    pub stats: Stats,
+    /// Diagnostics.
+    pub conservation: Conservation,
+    /// Wall time of the integration, s.
+    pub wall_time: f64,
+    /// Warnings about the scene (also in summary.json), e.g. a start far above the reference
+    /// energy.
+    pub warnings: Vec<String>,
+    /// The stop condition that ended the run (`run.stop_outside`), as in summary.json.
+    pub stopped: Option<serde_json::Value>,
+}
+
+/// One trajectory of a scene, ready to run into its output folder.
+///
+/// ```no_run
+/// use std::sync::atomic::AtomicBool;
+/// use rovib::Simulation;
+///
+/// let stop = AtomicBool::new(false);
+/// let sim = Simulation::load("scenes/h2o.toml".as_ref(), Some("out/h2o".as_ref()))?;
+/// let report = sim.run(&stop, &mut |p| eprintln!("{}/{} outputs", p.done, p.total))?;
+/// // Later, with a later `run.end` in the scene: continue from restart.json.
+/// let more = Simulation::resume("out/h2o".as_ref(), Some("scenes/h2o_longer.toml".as_ref()))?;
+/// more.run(&stop, &mut |_| {})?;
+/// # Ok::<(), rovib::Error>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Simulation {
+    scene: Scene,
+    out_dir: PathBuf,
+    restart: Option<Restart>,
+}
+
+impl Simulation {
+    /// The scene at `path`, to run into `out_dir` (default `out/SCENE_NAME`, created).
+    pub fn load(path: &Path, out_dir: Option<&Path>) -> Result<Self, Error> {
+        let (scene, out_dir) = load_scene(path, out_dir, "")?;
+        Ok(Self { scene, out_dir, restart: None })
+    }
+
+    /// A parsed scene (see [`crate::scene::parse_scene`]), to run into `out_dir` (created when
+    /// the run starts).
+    pub fn from_scene(scene: Scene, out_dir: impl Into<PathBuf>) -> Self {
+        Self { scene, out_dir: out_dir.into(), restart: None }
+    }
+
+    /// The continuation of the run in `dir` from its `restart.json` (`rovib run --resume DIR
+    /// [SCENE]`): with the scene stored there, or with `scene`, which may change `run.end` (to
+    /// continue further) but nothing that would make the continuation a different run. The run
+    /// appends to trajectory.csv and lab.xyz and rewrites summary.json (this part's work,
+    /// `resumed_from`) and restart.json.
+    pub fn resume(dir: &Path, scene: Option<&Path>) -> Result<Self, Error> {
+        let restart = Restart::read(dir)?;
+        let stored = parse_scene(&restart.scene_path, &restart.scene_text)?;
+        let scene = match scene {
+            Some(path) => load_scene(path, Some(dir), "")?.0,
+            None => stored.clone(),
+        };
+        compatible(&scene, &stored, &restart)?;
+        Ok(Self { scene, out_dir: dir.to_owned(), restart: Some(restart) })
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The output folder.
+    pub fn out_dir(&self) -> &Path {
+        &self.out_dir
+    }
+
+    /// Runs to the scene's end (or its stop condition) on this thread, writing the outputs the
+    /// scene asks for. `progress` is called after each output record; when `stop` is set (by the
+    /// callback or another thread) the run ends after the current record, the files ending on a
+    /// whole row and frame, summary.json and restart.json written, and returns
+    /// [`Error::Interrupted`]. A run that fails keeps what it wrote and says where.
+    pub fn run(&self, stop: &AtomicBool, progress: &mut dyn FnMut(Progress)) -> Result<RunReport, Error> {
+        std::fs::create_dir_all(&self.out_dir).map_err(|e| Error::io("cannot create", &self.out_dir, e))?;
+        let name = self.scene.molecule.get_ref().clone();
+        let visitor = Run { scene: &self.scene, out_dir: &self.out_dir, stop, progress, resume: self.restart.as_ref() };
+        molecules::visit(&name, visitor).ok_or_else(|| {
+            let e = Error::unknown_molecule(&name);
+            Error::File(self.scene.source().error(
+                self.scene.molecule.span(),
+                e.to_string(),
+                "use a name from `rovib list`",
+            ))
+        })?
+    }
+}
+
+/// Runs the scene at `path` into `out_dir` (default `out/SCENE_NAME`) to its end, without a
+/// stop flag or progress: [`Simulation::load`] then [`Simulation::run`].
+pub fn run(path: &Path, out_dir: Option<&Path>) -> Result<RunReport, Error> {
+    Simulation::load(path, out_dir)?.run(&AtomicBool::new(false), &mut |_| {})
+}
+
+/// Continues the run in `dir` (see [`Simulation::resume`]) to its end.
+pub fn resume(dir: &Path, scene: Option<&Path>) -> Result<RunReport, Error> {
+    Simulation::resume(dir, scene)?.run(&AtomicBool::new(false), &mut |_| {})
+}
+
+/// Whether `scene` continues the run that wrote `restart` (with scene `stored`): the same
+/// molecule, integrator, output times, units, outputs and frozen coordinates, and a later end.
+fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), Error> {
+    let frozen = |s: &Scene| s.frozen.iter().map(|f| f.get_ref().clone()).collect::<Vec<_>>();
+    let parameters =
+        |s: &Scene| s.parameters.iter().map(|(n, v)| (n.get_ref().clone(), v.to_bits())).collect::<Vec<_>>();
+    let differences: Vec<&str> = [
+        (scene.molecule.get_ref() != stored.molecule.get_ref(), "molecule"),
+        (scene.method != stored.method, "[integrator]"),
+        (scene.output_interval.to_bits() != stored.output_interval.to_bits(), "run.output_interval"),
+        (scene.time_unit != stored.time_unit, "units.time"),
+        (scene.outputs != stored.outputs, "run.outputs"),
+        (frozen(scene) != frozen(stored), "run.frozen"),
+        (scene.euler_unwrapped != stored.euler_unwrapped, "run.euler_unwrapped"),
+        (scene.cartesian_fallback != stored.cartesian_fallback, "run.cartesian_fallback"),
+        (scene.min_metric_pivot != stored.min_metric_pivot, "run.min_metric_pivot"),
+        (parameters(scene) != parameters(stored), "potential.parameters"),
+    ]
+    .into_iter()
+    .filter_map(|(differs, what)| differs.then_some(what))
+    .collect();
+    if !differences.is_empty() {
+        return Err(Error::Message(format!(
+            "{} differs from the run being continued ({}) in {}: a continuation may change only run.end (and \
+             run.max_energy_error, run.max_outputs)",
+            scene.path,
+            restart.scene_path,
+            differences.join(", ")
+        )));
+    }
+    if scene.t_end <= restart.t_au {
+        return Err(Error::Message(format!(
+            "the run already reached t = {} {}, and the scene ends at {} {}: give a later run.end to continue",
+            restart.t,
+            restart.time_unit,
+            scene.t_end / scene.time_unit.in_au(),
+            scene.time_unit.name()
+        )));
+    }
+    Ok(())
+}
+
+struct Run<'a> {
+    scene: &'a Scene,
+    out_dir: &'a Path,
+    stop: &'a AtomicBool,
+    progress: &'a mut dyn FnMut(Progress),
+    resume: Option<&'a Restart>,
+}
+
+/// H(0) − U(reference) above which a run warns that it starts far above the reference energy,
+/// hartree (0.1 hartree = 2.7 eV, about half the dissociation energy of a single bond and 100
+/// times kT at 300 K; a length given in the wrong unit typically lands at or above it: water's
+/// r1 = 1.81 meant in bohr but read in Å starts 0.14 hartree up).
+pub const HIGH_START_ENERGY: f64 = 0.1;
+
+/// The warning for a start at `h0` when the potential at the reference geometry is `u_ref`
+/// (hartree), if it is far above.
+pub fn start_energy_warning(name: &str, h0: f64, u_ref: f64) -> Option<String> {
+    use crate::runtime::units::{HARTREE_IN_EV, HARTREE_IN_WAVENUMBERS};
+    let above = h0 - u_ref;
+    (above > HIGH_START_ENERGY).then(|| {
+        format!(
+            "the start is {:.3} eV ({:.0} cm-1) above the potential at {name}'s reference geometry, more than {:.1} eV: \
+             the molecule may dissociate or leave the potential's valid region (check the scene's units: q values \
+             are in each coordinate's declared unit unless [units] says otherwise)",
+            above * HARTREE_IN_EV,
+            above * HARTREE_IN_WAVENUMBERS,
+            HIGH_START_ENERGY * HARTREE_IN_EV
+        )
+    })
+}
+
+impl MoleculeVisitor for Run<'_> {
+    type Output = Result<RunReport, Error>;
+
+    /// With the scene's `[potential.parameters]` the molecule runs with them (the run-time
+    /// path), else with its compiled-in constants.
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        match scene_parameters(&m, self.scene)? {
+            Some(values) => self.go(WithParameters { molecule: m, values }),
+            None => self.go(m),
+        }
+    }
+}
+
+impl Run<'_> {
+    fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, Error> {
+        let scene = self.scene;
+        if scene.outputs.dipole && !m.has_dipole() {
+            return Err(Error::File(scene.source().error(
+                scene.molecule.span(),
+                format!("the scene asks for the \"dipole\" output, but molecule `{}` has no dipole surface", m.name()),
+                format!(
+                    "add a [dipole] table to {} (see the README), or remove \"dipole\" from run.outputs",
+                    m.source()
+                ),
+            )));
+        }
+        let mut warnings = Vec::new();
+        // Where the run starts: the scene's initial state, or the restart file's state.
+        // A lab-form start at a linear geometry: started in the Cartesian chart as given.
+        let mut lab_start: Option<Vec<f64>> = None;
+        let (system, y0, com, t0, start_body) = match self.resume {
+            None => {
+                let start = initial_state(&m, scene)?;
+                // Fails before anything is written if the initial state is not valid, unless the
+                // run can start in the Cartesian chart (a linear start, `crate::runtime::charts`).
+                lab_start = start.lab_start.clone();
+                let (system, y0) = match production_system(&m, scene, &start.body) {
+                    Ok(s) => s,
+                    Err(e) => match production_system_unchecked(&m, scene, &start.body) {
+                        Ok(s) if uses_charts(scene, &s.0) => s,
+                        _ => return Err(e.into()),
+                    },
+                };
+                if let Some(q_ref) = m.reference_geometry() {
+                    let h0 = match system.energy(&y0) {
+                        Ok(h) => h,
+                        Err(_) if uses_charts(scene, &system) => lab_start
+                            .clone()
+                            .or_else(|| charts::to_cartesian(&m, &start.body).ok())
+                            .and_then(|y| CartesianSystem::new(&m).ok()?.energy(&y).ok())
+                            .ok_or_else(|| Error::Message("the initial state: no finite energy".into()))?,
+                        Err(e) => return Err(Error::context("the initial state", e)),
+                    };
+                    warnings.extend(start_energy_warning(m.name(), h0, m.potential(&q_ref)));
+                }
+                (system, y0, (start.com_position, start.com_velocity), 0.0, start.body)
+            }
+            Some(r) => {
+                let (system, y0) = resumed_system(&m, scene, r)?;
+                let body = restart_body(r)?;
+                (
+                    system,
+                    y0,
+                    (Vector3::from(r.com_position_bohr), Vector3::from(r.com_velocity_bohr_per_au)),
+                    r.t_au,
+                    body,
+                )
+            }
+        };
+        let layout = layout(system.reduction(), &m);
+        let stops = stop_conditions(&m, scene)?;
+
+        // One run per directory, then no file of an earlier run may remain looking like this one's.
+        let _lock = DirLock::acquire(self.out_dir)?;
+        crate::ensemble::output::clear_for_run(self.out_dir)?;
+        let mut keep = Vec::new();
+        if scene.outputs.trajectory {
+            keep.extend(["trajectory.csv", TRAJECTORY_UNITS_FILE]);
+        }
+        if scene.outputs.lab {
+            keep.push("lab.xyz");
+        }
+        if scene.outputs.dipole {
+            keep.push("dipole.csv");
+        }
+        remove_stale_outputs(self.out_dir, &keep)?;
+
+        let coordinates = m.coordinates();
+        let elements: Vec<&'static str> = m.atoms().iter().map(|a| a.element).collect();
+        let masses: Vec<f64> = m.atoms().iter().map(|a| a.mass_da).collect();
+        let unit = scene.time_unit.name();
+        let records = self.resume.map_or(0, |r| r.outputs_done + 1);
+        let (trajectory, lab) = match self.resume {
+            None => (
+                scene
+                    .outputs
+                    .trajectory
+                    .then(|| TrajectoryCsv::create(self.out_dir, &coordinates, unit, scene.euler_unwrapped))
+                    .transpose()?,
+                scene.outputs.lab.then(|| LabXyz::create(self.out_dir, elements, masses, unit)).transpose()?,
+            ),
+            Some(r) => (
+                scene
+                    .outputs
+                    .trajectory
+                    .then(|| {
+                        TrajectoryCsv::append(self.out_dir, &coordinates, unit, r.euler_unwrapped, records as usize)
+                    })
+                    .transpose()?,
+                scene
+                    .outputs
+                    .lab
+                    .then(|| LabXyz::append(self.out_dir, elements, masses, unit, records as usize))
+                    .transpose()?,
+            ),
+        };
+        let mut recorder = Recorder::<M, N, NA> {
+            system,
+            trajectory,
+            lab,
+            diagnostics: scene.outputs.summary || scene.outputs.restart,
+            conservation: self.resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
+            initial_energy: self.resume.and_then(|r| r.conservation.initial_energy),
+            dipole: match (scene.outputs.dipole, self.resume) {
+                (false, _) => None,
+                (true, None) => Some(DipoleCsv::create(self.out_dir)?),
+                (true, Some(_)) => Some(DipoleCsv::append(self.out_dir, records as usize)?),
+            },
+            max_energy_error: scene.max_energy_error,
+            layout: layout.clone(),
+            time_scale: scene.time_unit.in_au(),
+            time_unit: scene.time_unit.name(),
+            com,
+            progress: self.progress,
+            total: (scene.t_end / scene.output_interval).ceil() as u64 + 1,
+            stop: self.stop,
+            interrupted: false,
+            t_reached: None,
+            error: None,
+            // A fixed-step continuation starts the solver at the last output time, which the
+            // first run already wrote.
+            skip_first: self.resume.is_some() && !dop853_continues(scene, self.resume),
+            records,
+            last_y: y0.clone(),
+            last_y_valid: true,
+            last_q: start_body.q,
+            cartesian: CartesianSystem::new(&m).ok(),
+            stops,
+            stopped: None,
+        };
+        let mut counted = Counted { inner: system, evaluations: 0 };
+        let begin = Instant::now();
+        let switching = uses_charts(scene, &system);
+        let mut chart_report = None;
+        let result = if switching {
+            let mut report = ChartReport::default();
+            let r = integrate_charts(
+                &system,
+                scene,
+                t0,
+                &start_body,
+                lab_start.as_deref(),
+                self.resume,
+                &mut recorder,
+                &mut report,
+            );
+            counted.evaluations = report.stats.rhs_evals;
+            let out = r.map(|()| (report.stats, report.resume.clone()));
+            chart_report = Some(report);
+            out
+        } else {
+            integrate(&mut counted, scene, t0, &y0, self.resume, &mut recorder)
+                .map_err(|e| charts::map_error(e, ChartError::Internal))
+        };
+        let wall_time = begin.elapsed().as_secs_f64();
+        // Keep everything written so far, whatever happened.
+        let flushed = recorder.flush();
+
+        // The first error is the one reported: a failed record (which stops the solver) comes
+        // before the solver's own error, and both before a failure to flush at the end.
+        let (stats, point, failure) = match result {
+            Ok((stats, point)) => (Some(stats), point, recorder.error.take().map(|e| format!("the run stopped: {e}"))),
+            Err(e) => (None, None, Some(format!("the run stopped: {}", describe_failure(&e, scene, &layout)))),
+        };
+        let failure = failure.or_else(|| flushed.err().map(|e| format!("the run stopped: {e}")));
+        let interrupted = recorder.interrupted && failure.is_none();
+        let stopped = recorder.stopped.take().filter(|_| failure.is_none());
+        let t_reached = recorder.t_reached.map(|t| t / scene.time_unit.in_au());
+        let mut files: Vec<PathBuf> = Vec::new();
+        if scene.outputs.trajectory {
+            files.push(self.out_dir.join("trajectory.csv"));
+            files.push(self.out_dir.join(TRAJECTORY_UNITS_FILE));
+        }
+        if scene.outputs.lab {
+            files.push(self.out_dir.join("lab.xyz"));
+        }
+        if scene.outputs.dipole {
+            files.push(self.out_dir.join("dipole.csv"));
+        }
+        let mut summary_error = None;
+        if scene.outputs.restart
+            && failure.is_none()
+            && let Some(t) = recorder.t_reached
+        {
+            let restart = recorder.restart(scene, t, point.as_ref(), &layout);
+            match restart.and_then(|r| r.write(self.out_dir)) {
+                Ok(path) => files.push(path),
+                Err(e) => summary_error = Some(e),
+            }
+        }
+        if scene.outputs.summary {
+            let summary = RunSummary {
+                scene,
+                molecule: m.name(),
+                failure: failure.as_deref(),
+                interrupted,
+                stopped: stopped.as_ref(),
+                t_reached,
+                state_layout: &layout,
+                zero_angular_momentum: system.reduction().rotation != RotationPart::Free,
+                stats,
+                rhs_evaluations: counted.evaluations,
+                wall_time,
+                conservation: &recorder.conservation,
+                com_position: com.0,
+                com_velocity: com.1,
+                resumed_from: self.resume.map(|r| r.t),
+                warnings: &warnings,
+                charts: switching.then(|| charts_json(chart_report.as_ref(), scene)),
+            };
+            match write_summary(self.out_dir, &summary.to_json()) {
+                Ok(path) => files.push(path),
+                Err(e) => summary_error = summary_error.or(Some(e)),
+            }
+        }
+        let where_ = format!("output so far is in {}", self.out_dir.display());
+        // The warnings about the scene, which a failed run has no report to carry.
+        let notes: String = warnings.iter().map(|w| format!("; warning: {w}")).collect();
+        let message = match (failure, interrupted, summary_error) {
+            (Some(f), _, Some(s)) => Some(format!("{f}; also {s} (no summary.json); {where_}{notes}")),
+            (Some(f), _, None) => Some(format!("{f}; {where_}{notes}")),
+            (None, true, s) => {
+                return Err(Error::Interrupted {
+                    message: format!(
+                        "interrupted at t = {} {}{}; {where_}{}",
+                        t_reached.unwrap_or(0.0),
+                        scene.time_unit.name(),
+                        s.map(|s| format!("; {s} (no summary.json)")).unwrap_or_default(),
+                        if scene.outputs.restart {
+                            format!(
+                                "; continue it with `rovib run --resume {}` or `Simulation::resume`",
+                                self.out_dir.display()
+                            )
+                        } else {
+                            String::new()
+                        }
+                    ),
+                    out_dir: self.out_dir.to_owned(),
+                });
+            }
+            (None, false, Some(s)) => Some(s),
+            (None, false, None) => None,
+        };
+        if let Some(message) = message {
+            return Err(Error::Message(message));
+        }
+        let stats = stats.unwrap_or_default();
+        Ok(RunReport {
+            out_dir: self.out_dir.to_owned(),
+            files,
+            stats,
+            conservation: recorder.conservation,
+            wall_time,
+            warnings,
+            stopped,
+        })
+    }
+}
+
+/// Whether the run switches to the Cartesian chart at singular geometries: DOP853, a molecule
+/// with a Cartesian potential (coordinates by kind, compiled parameters) and no frozen
+/// coordinates (`crate::runtime::charts`).
+fn uses_charts<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    scene: &Scene,
+    system: &ReducedSystem<'_, M, N, NA>,
+) -> bool {
+    scene.cartesian_fallback && matches!(scene.method, Method::Dop853(_)) && charts::can_switch(system)
+}
+
+/// The chart switches of a run, for summary.json.
+fn charts_json(report: Option<&ChartReport>, scene: &Scene) -> serde_json::Value {
+    let per_unit = 1.0 / scene.time_unit.in_au();
+    match report {
+        Some(r) => serde_json::json!({
+            "switch_pivot": charts::SWITCH_PIVOT,
+            "return_pivot": charts::RETURN_PIVOT,
+            "switches": r.switches,
+            "cartesian_time": r.cartesian_time * per_unit,
+            "last_chart": r.last_chart.map(|c| match c {
+                charts::Chart::Internal => "internal",
+                charts::Chart::Cartesian => "cartesian",
+            }),
+        }),
+        None => serde_json::json!({
+            "switch_pivot": charts::SWITCH_PIVOT,
+            "return_pivot": charts::RETURN_PIVOT,
+        }),
+    }
+}
+
+/// The body state stored in a restart file.
+fn restart_body<const N: usize>(r: &Restart) -> Result<BodyState<N>, Error> {
+    let [w, x, y, z] = r.state.orientation;
+    let orientation = UnitQuaternion::try_new(Quaternion::new(w, x, y, z), 0.0)
+        .ok_or_else(|| Error::Message("the restart file's orientation quaternion is zero".into()))?;
+    if r.state.q.len() != N || r.state.p.len() != N {
+        return Err(Error::Message(format!("the restart file has {} coordinates, expected {N}", r.state.q.len())));
+    }
+    Ok(BodyState {
+        q: SVector::from_column_slice(&r.state.q),
+        p: SVector::from_column_slice(&r.state.p),
+        orientation,
+        j: Vector3::from(r.state.j),
+    })
+}
+
+/// [`integrate`] with the chart switch of `crate::runtime::charts` (DOP853 only): fresh from
+/// `start`, or continuing `resume` (from its DOP853 point in the internal chart, else from its
+/// last output state with the output grid restarted there, as [`integrate`] does).
+#[allow(clippy::too_many_arguments)]
+fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const NA: usize>(
+    system: &ReducedSystem<'_, M, N, NA>,
+    scene: &Scene,
+    t0: f64,
+    start: &BodyState<N>,
+    lab_start: Option<&[f64]>,
+    resume: Option<&Restart>,
+    observer: &mut O,
+    report: &mut ChartReport,
+) -> Result<(), SolveError<ChartError>> {
+    let Method::Dop853(options) = scene.method else {
+        return Err(SolveError::InvalidInput("the chart switch runs with dop853 only".into()));
+    };
+    let (t_end, interval) = (scene.t_end, scene.output_interval);
+    match resume {
+        Some(r) if dop853_continues(scene, resume) => {
+            let point = r.dop853.as_ref().expect("checked by dop853_continues").to_resume(r.outputs_done);
+            charts::integrate(system, options, 0.0, ChartStart::Resume(&point), t_end, interval, observer, report)
+        }
+        None if lab_start.is_some() => {
+            let y = lab_start.expect("checked");
+            charts::integrate(system, options, t0, ChartStart::FreshCartesian(y), t_end, interval, observer, report)
+        }
+        _ => charts::integrate(system, options, t0, ChartStart::Fresh(start), t_end, interval, observer, report),
+    }
+}
+
+/// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
+type StopCondition = (usize, &'static str, [f64; 2]);
+
+/// `run.stop_outside` bound to the molecule; an unknown name is an error at its place (also
+/// used by ensembles, per trajectory).
+pub(crate) fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+) -> Result<Vec<StopCondition>, Error> {
+    let coords = m.coordinates();
+    let names: Vec<&str> = coords.iter().map(|c| c.name).collect();
+    scene
+        .stop_outside
+        .iter()
+        .map(|(name, [low, high])| {
+            let k = crate::start::find_name(
+                &scene.source(),
+                &names,
+                name,
+                || format!("{} has no coordinate `{}` (in run.stop_outside)", m.name(), name.get_ref()),
+                |known| format!("the coordinates of {} are {}", m.name(), known.join(", ")),
+            )?;
+            let to_au = |x: f64| scene.units.coordinate_to_au(coords[k].unit, x);
+            Ok((k, coords[k].name, [to_au(*low), to_au(*high)]))
+        })
+        .collect()
+}
+
+/// Whether a resumed run continues DOP853 from its own continuation point (else it restarts the
+/// solver at the last output time).
+fn dop853_continues(scene: &Scene, resume: Option<&Restart>) -> bool {
+    matches!(scene.method, Method::Dop853(_)) && resume.is_some_and(|r| r.dop853.is_some())
+}
+
+/// Runs the solver: fresh from `(t0, y0)`, or continuing `resume`. Returns the work and, for
+/// DOP853, where it stood at the end.
+fn integrate<S: OdeSystem, O: Observer>(
+    system: &mut S,
+    scene: &Scene,
+    t0: f64,
+    y0: &[f64],
+    resume: Option<&Restart>,
+    observer: &mut O,
+) -> Result<(Stats, Option<Dop853Resume>), SolveError<S::Error>> {
+    let (t_end, interval) = (scene.t_end, scene.output_interval);
+    match (&scene.method, resume) {
+        (Method::Dop853(o), None) => {
+            Dop853::new(system.dim(), *o)?.integrate_resumable(system, 0.0, y0, t_end, interval, observer)
+        }
+        (Method::Dop853(o), Some(r)) if dop853_continues(scene, resume) => {
+            let point = r.dop853.as_ref().expect("checked by dop853_continues").to_resume(r.outputs_done);
+            if point.y.len() != system.dim() {
+                return Err(SolveError::InvalidInput(format!(
+                    "the restart file's DOP853 state has {} components, the system {}",
+                    point.y.len(),
+                    system.dim()
+                )));
+            }
+            Dop853::new(system.dim(), *o)?.resume(system, 0.0, &point, t_end, interval, observer)
+        }
+        (method, _) => Ok((solve(system, method, t0, y0, t_end, interval, observer)?, None)),
+    }
+}
+
+/// The system and flat state a resumed run continues from: the scene's frozen coordinates, the
+/// `J = 0` reduction if the first run had it, the restart file's state as the template.
+fn resumed_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &'m M,
+    scene: &Scene,
+    r: &Restart,
+) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), Error> {
+    let bad = |what: String| Error::Message(format!("the restart file does not fit {}: {what}", m.name()));
+    if r.molecule != m.name() {
+        return Err(bad(format!("it is of {}", r.molecule)));
+    }
+    if r.state.q.len() != N || r.state.p.len() != N {
+        return Err(bad(format!("{} coordinates and {} momenta, expected {N}", r.state.q.len(), r.state.p.len())));
+    }
+    let [w, x, y, z] = r.state.orientation;
+    let orientation = UnitQuaternion::try_new(Quaternion::new(w, x, y, z), 0.0)
+        .ok_or_else(|| bad("the orientation quaternion is zero".into()))?;
+    let body = BodyState {
+        q: SVector::from_column_slice(&r.state.q),
+        p: SVector::from_column_slice(&r.state.p),
+        orientation,
+        j: Vector3::from(r.state.j),
+    };
+    let mut reduction = frozen_reduction(m, scene)?;
+    if r.zero_angular_momentum {
+        reduction.rotation = RotationPart::ZeroAngularMomentum {
+            orientation: scene.outputs.lab || scene.outputs.trajectory || reduction.active_count() == 0,
+        };
+    }
+    let system = ReducedSystem::from_body(m, reduction, &body).with_min_pivot(scene.min_metric_pivot);
+    if system.dim() != r.y.len() {
+        return Err(bad(format!("its state has {} components, the run's system {}", r.y.len(), system.dim())));
+    }
+    Ok((system, r.y.clone()))
+}
+
+/// An [`OdeSystem`] that counts its right-hand-side evaluations, so that a run the solver stops
+/// still reports its work.
+struct Counted<S> {
+    inner: S,
+    evaluations: u64,
+}
+
+impl<S: OdeSystem> OdeSystem for Counted<S> {
+    type Error = S::Error;
+
+    fn dim(&self) -> usize {
+        self.inner.dim()
+    }
+
+    fn rhs(&mut self, t: f64, y: &[f64], dydt: &mut [f64]) -> Result<(), Self::Error> {
+        self.evaluations += 1;
+        self.inner.rhs(t, y, dydt)
+    }
+}
+
+/// Why a run stopped, in the scene's units: what happened, when, and the last accepted state.
+fn describe_failure<E: std::error::Error>(e: &SolveError<E>, scene: &Scene, layout: &str) -> String {
+    let unit = scene.time_unit.name();
+    let at = |t: f64| format!("t = {} {unit}", t / scene.time_unit.in_au());
+    let what = match e {
+        SolveError::Rhs { t, source, .. } => format!("{} at {}", source, at(*t)),
+        SolveError::NonFinite { t, .. } => {
+            format!(
+                "the right-hand side became infinite or NaN at {} (the step may be too large for this motion)",
+                at(*t)
+            )
+        }
+        SolveError::StepSizeTooSmall { t, h, .. } => format!(
+            "the step size fell to {} {unit}, below integrator.min_step, at {} (the motion has become too fast to resolve)",
+            h / scene.time_unit.in_au(),
+            at(*t)
+        ),
+        SolveError::TooManySteps { t, max_steps, .. } => {
+            format!("integrator.max_steps = {max_steps} steps were taken by {}", at(*t))
+        }
+        SolveError::NotConverged { t, .. } => {
+            format!("the implicit Gauss-Legendre stages did not converge at {} (reduce integrator.step)", at(*t))
+        }
+        SolveError::InvalidInput(reason) => format!("invalid integrator settings: {reason}"),
+    };
+    match e.state() {
+        Some(y) => format!("{what}; last accepted state {layout} = {y:?}"),
+        None => what,
+    }
+}
+
+/// The flat layout of a system's state, for messages: `[q_a, p_a, quaternion, J]`.
+fn layout<M: Molecule<N, NA>, const N: usize, const NA: usize>(r: &Reduction<N>, m: &M) -> String {
+    let coords = m.coordinates();
+    let active: Vec<&str> = (0..N).filter(|&k| r.active[k]).map(|k| coords[k].name).collect();
+    let mut parts: Vec<String> = active.iter().map(|c| (*c).to_owned()).collect();
+    parts.extend(active.iter().map(|c| format!("p_{c}")));
+    if r.orientation() {
+        parts.extend(["quaternion w", "x", "y", "z"].map(str::to_owned));
+    }
+    if r.rotation == RotationPart::Free {
+        parts.extend(["J_x", "J_y", "J_z"].map(str::to_owned));
+    }
+    format!("[{}]", parts.join(", "))
+}
+
+/// Writes each output time and accumulates the diagnostics (only what the scene asks for);
+/// remembers the first error and stops the run there.
+struct Recorder<'m, M, const N: usize, const NA: usize> {
+    /// A copy of the integrated system, to expand states and evaluate H at output times.
+    system: ReducedSystem<'m, M, N, NA>,
+    trajectory: Option<TrajectoryCsv>,
+    lab: Option<LabXyz>,
+    dipole: Option<DipoleCsv>,
+    diagnostics: bool,
+    conservation: Conservation,
+    /// H at the first output time, for the energy guard.
+    initial_energy: Option<f64>,
+    /// The relative energy error at which the run stops.
+    max_energy_error: f64,
+    /// The flat layout, for messages.
+    layout: String,
+    time_scale: f64,
+    time_unit: &'static str,
+    com: (Vector3<f64>, Vector3<f64>),
+    /// Called after each output record.
+    progress: &'m mut dyn FnMut(Progress),
+    /// Output records of the whole run (the progress total).
+    total: u64,
+    /// The caller's stop flag, polled after each output record, so the run stops between records.
+    stop: &'m AtomicBool,
+    /// Whether the run stopped on `stop`.
+    interrupted: bool,
+    /// The last output time recorded, a.u.
+    t_reached: Option<f64>,
+    error: Option<String>,
+    /// Whether to pass over the first call (a continuation's start, already written).
+    skip_first: bool,
+    /// Output records in the files so far (the next one is number `records` of the grid).
+    records: u64,
+    /// The flat state (internal chart) at the last output recorded.
+    last_y: Vec<f64>,
+    /// Whether `last_y` is the last output's state (not so after an output at an exactly
+    /// linear geometry, which the internal chart cannot hold).
+    last_y_valid: bool,
+    /// q at the last output recorded (the branch for closed-form angles).
+    last_q: SVector<f64, N>,
+    /// The Cartesian chart, if the molecule has one (states the chart switch hands over).
+    cartesian: Option<CartesianSystem<'m, M, N, NA>>,
+    /// `run.stop_outside`: coordinate index, name, bounds in atomic units.
+    stops: Vec<StopCondition>,
+    /// The stop condition met, for summary.json.
+    stopped: Option<serde_json::Value>,
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
+    fn record(&mut self, t: f64, state: ChartState<'_>) -> Result<(), String> {
+        let t_out = t / self.time_scale;
+        let at = |e: &dyn std::fmt::Display, y: &[f64], layout: &str| {
+            format!("{e} at t = {t_out} {}; state {layout} = {y:?}", self.time_unit)
+        };
+        // H at every output time: for the outputs, and for the guard against a run that has
+        // gone unstable (a too large fixed step) and would otherwise "complete" with garbage.
+        // A Cartesian-chart state (near a linear geometry) gives the same quantities through
+        // the closed-form q(x) and projections, and the Cartesian H.
+        let (y, cartesian) = match state {
+            ChartState::Internal(y) => (y, None),
+            ChartState::Cartesian(y) => (y, Some(y)),
+        };
+        let cartesian_layout = "[positions about the centre of mass (bohr), velocities (bohr/au)], atom by atom";
+        let (body, energy, internal_y) = match cartesian {
+            None => {
+                let (body, energy) = self.system.expand_body_and_energy(y).map_err(|e| at(&e, y, &self.layout))?;
+                (body, energy, None)
+            }
+            Some(y) => {
+                let chart = self.cartesian.as_ref().ok_or("a Cartesian state without a Cartesian chart")?;
+                let lab = CartesianSystem::<M, N, NA>::lab(y);
+                let (body, _) = body_of_lab_exact(self.system.molecule(), &lab, &self.last_q)
+                    .map_err(|e| at(&e, y, cartesian_layout))?;
+                let energy = chart.energy(y).map_err(|e| at(&e, y, cartesian_layout))?;
+                let internal = charts::to_internal(&self.system, y, &self.last_q).ok().map(|(_, yi)| yi);
+                (body, energy, Some(internal))
+            }
+        };
+        let layout = if cartesian.is_some() { cartesian_layout } else { self.layout.as_str() };
+        let h0 = *self.initial_energy.get_or_insert(energy);
+        let rotation = body.rotation();
+        let phase = body.to_phase();
+        // Recorded before the guard, so that the summary includes the output that tripped it.
+        if self.diagnostics {
+            self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
+        }
+        energy_guard(h0, energy, self.max_energy_error).map_err(|e| at(&e, y, layout))?;
+        if let Some(csv) = &mut self.trajectory {
+            let (euler, pe) = (phase.euler.into(), phase.pe.into());
+            csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, body.j.into(), energy)?;
+        }
+        if let Some(xyz) = &mut self.lab {
+            let com = CentreOfMass { position: self.com.0 + self.com.1 * t, velocity: self.com.1 };
+            let lab: LabState<NA> = match cartesian {
+                None => to_lab_body(self.system.molecule(), &body, &com).map_err(|e| at(&e, y, layout))?,
+                Some(y) => {
+                    let mut lab = CartesianSystem::<M, N, NA>::lab(y);
+                    for i in 0..NA {
+                        lab.positions.set_column(i, &(lab.positions.column(i) + com.position));
+                        lab.velocities.set_column(i, &(lab.velocities.column(i) + com.velocity));
+                    }
+                    lab
+                }
+            };
+            let potential = self.system.molecule().potential(&body.q);
+            let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
+            xyz.frame(t_out, energy, potential, atoms)?;
+        }
+        if let Some(csv) = &mut self.dipole {
+            let mut mu = Vector3::zeros();
+            self.system.molecule().dipole(&body.q, &mut mu);
+            csv.row(t_out, &(rotation * mu))?;
+        }
+        // A state the internal chart cannot hold (exactly linear) leaves no restart point.
+        self.last_y_valid = true;
+        match &internal_y {
+            None => self.last_y.copy_from_slice(y),
+            Some(Some(yi)) => self.last_y.copy_from_slice(yi),
+            Some(None) => self.last_y_valid = false,
+        }
+        self.last_q = body.q;
+        self.records += 1;
+        if let Some(&(k, name, [low, high])) =
+            self.stops.iter().find(|(k, _, [lo, hi])| !(*lo..=*hi).contains(&body.q[*k]))
+        {
+            self.stopped = Some(serde_json::json!({
+                "coordinate": name,
+                "value_au": body.q[k],
+                "bounds_au": [low, high],
+                "t": t_out,
+                "checked": "at output times",
+            }));
+        }
+        (self.progress)(Progress { done: self.records, total: self.total, failed: 0 });
+        Ok(())
+    }
+
+    /// The restart file for a run that reached output time `t` (a.u.), with DOP853's
+    /// continuation point if it has one.
+    fn restart(&self, scene: &Scene, t: f64, point: Option<&Dop853Resume>, layout: &str) -> Result<Restart, String> {
+        if !self.last_y_valid {
+            return Err("cannot write the restart file: the last output is at a linear geometry, which internal                         coordinates cannot hold (continue from an earlier time or run longer)"
+                .into());
+        }
+        let body = self.system.expand_body(&self.last_y).map_err(|e| format!("cannot write the restart file: {e}"))?;
+        let phase = body.to_phase();
+        let q = body.orientation.quaternion();
+        let m = self.system.molecule();
+        Ok(Restart {
+            format: crate::restart::FORMAT.to_owned(),
+            scene_path: scene.path.clone(),
+            scene_text: scene.text.clone(),
+            molecule: m.name().to_owned(),
+            t_au: t,
+            t: t / self.time_scale,
+            time_unit: self.time_unit.to_owned(),
+            outputs_done: self.records.saturating_sub(1),
+            state: FinalState {
+                q: body.q.as_slice().to_vec(),
+                p: body.p.as_slice().to_vec(),
+                orientation: [q.w, q.i, q.j, q.k],
+                j: body.j.into(),
+                euler: phase.euler.into(),
+                pe: phase.pe.into(),
+            },
+            y: self.last_y.clone(),
+            state_layout: layout.to_owned(),
+            zero_angular_momentum: self.system.reduction().rotation != RotationPart::Free,
+            dop853: point.map(Dop853Point::from_resume),
+            com_position_bohr: self.com.0.into(),
+            com_velocity_bohr_per_au: self.com.1.into(),
+            conservation: self.conservation.clone(),
+            euler_unwrapped: self.trajectory.as_ref().and_then(TrajectoryCsv::last_unwrapped),
+        })
+    }
+
+    fn flush(&mut self) -> Result<(), String> {
+        if let Some(csv) = &mut self.trajectory {
+            csv.flush()?;
+        }
+        if let Some(xyz) = &mut self.lab {
+            xyz.flush()?;
+        }
+        if let Some(csv) = &mut self.dipole {
+            csv.flush()?;
+        }
+        Ok(())
+    }
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Recorder<'_, M, N, NA> {
+    fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
+        ChartObserver::observe(self, t, ChartState::Internal(y))
+    }
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> ChartObserver for Recorder<'_, M, N, NA> {
+    fn observe(&mut self, t: f64, y: ChartState<'_>) -> ControlFlow<()> {
+        if std::mem::take(&mut self.skip_first) {
+            return ControlFlow::Continue(());
+        }
+        match self.record(t, y) {
+            Ok(()) => {
+                self.t_reached = Some(t);
+                if self.stopped.is_some() {
+                    return ControlFlow::Break(());
+                }
+                // After a complete record: the files end on a whole row and a whole frame.
+                if self.stop.load(Ordering::SeqCst) {
+                    self.interrupted = true;
+                    return ControlFlow::Break(());
+                }
+                ControlFlow::Continue(())
+            }
+            Err(e) => {
+                self.error = Some(e);
+                ControlFlow::Break(())
+            }
+        }
+    }
+}
