@@ -27,7 +27,7 @@ use crate::runtime::integrate::{Dop853, Dop853Resume, Method, Observer, OdeSyste
 use crate::runtime::nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::{Scene, parse_scene};
-use crate::start::frozen_reduction;
+use crate::start::{StopCondition, frozen_reduction, stop_conditions};
 use std::sync::atomic::{AtomicBool, Ordering};
 // The initial state and the production system live in `crate::start`; re-exported here for
 // callers that used these paths.
@@ -572,34 +572,6 @@ fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const 
         }
         _ => charts::integrate(system, options, t0, ChartStart::Fresh(start), t_end, interval, observer, report),
     }
-}
-
-/// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
-type StopCondition = (usize, &'static str, [f64; 2]);
-
-/// `run.stop_outside` bound to the molecule; an unknown name is an error at its place (also
-/// used by ensembles, per trajectory).
-pub(crate) fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
-    m: &M,
-    scene: &Scene,
-) -> Result<Vec<StopCondition>, Error> {
-    let coords = m.coordinates();
-    let names: Vec<&str> = coords.iter().map(|c| c.name).collect();
-    scene
-        .stop_outside
-        .iter()
-        .map(|(name, [low, high])| {
-            let k = crate::start::find_name(
-                &scene.source(),
-                &names,
-                name,
-                || format!("{} has no coordinate `{}` (in run.stop_outside)", m.name(), name.get_ref()),
-                |known| format!("the coordinates of {} are {}", m.name(), known.join(", ")),
-            )?;
-            let to_au = |x: f64| scene.units.coordinate_to_au(coords[k].unit, x);
-            Ok((k, coords[k].name, [to_au(*low), to_au(*high)]))
-        })
-        .collect()
 }
 
 /// Whether a resumed run continues DOP853 from its own continuation point (else it restarts the

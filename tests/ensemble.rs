@@ -408,7 +408,8 @@ fn a_states_file_starts_trajectory_i_from_row_i_and_kept_trajectories_are_writte
 #[test]
 fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
     use rovib::ensemble::output_times;
-    use rovib::ensemble::runner::{Plan, Tally, run_block};
+    use rovib::ensemble::run_block;
+    use rovib::ensemble::runner::{Plan, Tally};
     use rovib::ensemble::scene::parse_ensemble;
 
     let s = scene(120, STATISTICS, DOP853, 1000.0);
@@ -474,7 +475,8 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
 #[test]
 fn a_block_on_lanes_has_the_scalar_outcome_to_round_off() {
     use rovib::ensemble::output_times;
-    use rovib::ensemble::runner::{Plan, Tally, run_block};
+    use rovib::ensemble::run_block;
+    use rovib::ensemble::runner::{Plan, Tally};
     use rovib::ensemble::scene::parse_ensemble;
 
     let s = scene(70, STATISTICS, DOP853, 1000.0);

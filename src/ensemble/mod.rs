@@ -38,13 +38,14 @@ pub mod spectrum;
 pub mod states_file;
 pub mod states_xyz;
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use self::checkpoint::{Checkpoint, Header, Identity, Layout, Resumed};
-use self::runner::{Accumulators, BLOCK, Outcome, Plan, Tally, run_block};
+use self::runner::{Accumulators, BLOCK, Outcome, Plan, Tally, run_block_scalar};
 use self::scene::{Bound, EnsembleScene, MethodSpec, parse_ensemble};
 use self::schedule::{BlockResult, Collector, Remote, Work, block_range, caught, coordinate};
 use crate::Progress;
@@ -341,6 +342,28 @@ where
         .map(|r| r.expect("a process alone writes a report"))
 }
 
+/// Runs trajectories `indices` (a block) and returns their outcome. Never panics on a bad
+/// trajectory: each failure is recorded and the block goes on. Stops starting trajectories
+/// (and cuts running ones short at their next output time) once `stop` is set.
+///
+/// On SIMD lanes ([`lanes`]) when `plan.lanes` is set and the plan allows it, else one
+/// trajectory at a time; the outcome is the same.
+pub fn run_block<M, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    sampler: &dyn Sampler<N>,
+    indices: Range<u64>,
+    stop: &AtomicBool,
+    progress: &Tally,
+) -> Outcome
+where
+    M: Molecule<N, NA> + Sync,
+{
+    if lanes::applies(plan) {
+        return lanes::run_block_lanes(plan, sampler, indices, stop, progress);
+    }
+    run_block_scalar(plan, sampler, indices, stop, progress)
+}
+
 /// The output times of a run from 0 to `t_end` every `interval` (a.u.): the grid
 /// `runtime::integrate::solve` observes (0, k·interval while before `t_end`, then `t_end`; a
 /// ratio within 64 ε of an integer counts as that integer). The runner checks every trajectory
@@ -405,7 +428,7 @@ where
         keep: ensemble.keep_trajectories.map(|k| (k, options.out_dir.join("trajectories"))),
         time_scale: scene.time_unit.in_au(),
         lanes: options.lanes,
-        stops: crate::simulation::stop_conditions(m, scene)?,
+        stops: crate::start::stop_conditions(m, scene)?,
     };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let asked = options.threads.or(ensemble.threads);

@@ -1,5 +1,5 @@
 //! The unit of work of an ensemble: a block of consecutive trajectory indices → its
-//! accumulators, failures and counts ([`run_block`]), and how block outcomes merge.
+//! accumulators, failures and counts ([`super::run_block`]), and how block outcomes merge.
 //!
 //! Trajectory `i` draws its initial state from the sampler (its own random stream, a function
 //! of `(seed, i)` only), is integrated with the production system, observed at the output
@@ -672,29 +672,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
     }
 }
 
-/// Runs trajectories `indices` (a block) and returns their outcome. Never panics on a bad
-/// trajectory: each failure is recorded and the block goes on. Stops starting trajectories
-/// (and cuts running ones short at their next output time) once `stop` is set.
-///
-/// On SIMD lanes ([`super::lanes`]) when `plan.lanes` is set and the plan allows it, else one
-/// trajectory at a time; the outcome is the same.
-pub fn run_block<M, const N: usize, const NA: usize>(
-    plan: &Plan<'_, M, N, NA>,
-    sampler: &dyn Sampler<N>,
-    indices: Range<u64>,
-    stop: &AtomicBool,
-    progress: &Tally,
-) -> Outcome
-where
-    M: Molecule<N, NA> + Sync,
-{
-    if super::lanes::applies(plan) {
-        return super::lanes::run_block_lanes(plan, sampler, indices, stop, progress);
-    }
-    run_block_scalar(plan, sampler, indices, stop, progress)
-}
-
-/// [`run_block`] one trajectory at a time.
+/// [`super::run_block`] one trajectory at a time.
 pub(super) fn run_block_scalar<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     sampler: &dyn Sampler<N>,
