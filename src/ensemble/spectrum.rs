@@ -102,7 +102,7 @@ fn write_svg(s: &Spectrum, sigmas: &[Vec<f64>], temperature: Option<f64>, dir: &
         y_label: y.to_owned(),
         // Plotted every ~resolution/6 (the file has every grid point): the plot stays small.
         content: Content::Band(
-            s.wavenumber.iter().zip(&values).step_by(plot_stride(&s)).map(|(&x, &v)| (x, v, 0.0)).collect(),
+            s.wavenumber.iter().zip(&values).step_by(plot_stride(s)).map(|(&x, &v)| (x, v, 0.0)).collect(),
         ),
     };
     let path = dir.join("spectrum.svg");
