@@ -25,7 +25,7 @@ use crate::runtime::ensemble::{CorrelationWorkspace, Histogram, Lifetimes, Momen
 use crate::runtime::frames::body_of_lab_exact;
 use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
-use crate::runtime::integrate::{Dop853, GaussLegendre, InvalidInput, Method, Observer, Rk4, SolveError, Stats};
+use crate::runtime::integrate::{InvalidInput, Method, Observer, SolveError, Stats};
 use crate::runtime::nalgebra::Vector3;
 use crate::runtime::sample::Sampler;
 
@@ -483,10 +483,11 @@ pub(super) fn panic_hook() -> Option<u64> {
 }
 
 /// One integrator, created once per block and reused for its trajectories.
+// One value per block: its size does not matter, and the workspace stays inline.
+#[allow(clippy::large_enum_variant)]
 enum Integrator {
-    Dop853(Dop853),
-    GaussLegendre(GaussLegendre),
-    Rk4(Rk4),
+    /// The scene's method ([`crate::runtime::integrate::Integrator`]).
+    Plain(crate::runtime::integrate::Integrator),
     /// DOP853 with the chart switch.
     Charts(Box<ChartIntegrator>),
 }
@@ -495,9 +496,7 @@ impl Integrator {
     fn new(method: &Method, dim: usize, atoms: usize, charts: bool) -> Result<Self, InvalidInput> {
         Ok(match method {
             Method::Dop853(o) if charts => Self::Charts(Box::new(ChartIntegrator::new(dim, atoms, *o)?)),
-            Method::Dop853(o) => Self::Dop853(Dop853::new(dim, *o)?),
-            Method::GaussLegendre(o) => Self::GaussLegendre(GaussLegendre::new(dim, *o)?),
-            Method::Rk4(o) => Self::Rk4(Rk4::new(dim, *o)?),
+            method => Self::Plain(crate::runtime::integrate::Integrator::new(method, dim)?),
         })
     }
 
@@ -510,9 +509,7 @@ impl Integrator {
         observer: &mut O,
     ) -> Result<Stats, SolveError<S::Error>> {
         match self {
-            Self::Dop853(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
-            Self::GaussLegendre(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
-            Self::Rk4(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
+            Self::Plain(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
             Self::Charts(_) => Err(SolveError::InvalidInput("the chart integrator runs through `Charts`".into())),
         }
     }
