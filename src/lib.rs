@@ -3,22 +3,43 @@
 //! A molecule is defined in `molecules/NAME.toml` (atoms, internal coordinates, body-frame
 //! positions as expressions, potential); `cargo build` generates straight-line Rust for its
 //! kinetic matrices and their derivatives ([`molecules`]), and the [`runtime`] turns them into
-//! Hamilton's equations and trajectories. The [`cli`] is the `rovib` command.
+//! Hamilton's equations and trajectories. A [`Simulation`] runs one scene's trajectory into a
+//! folder, [`ensemble::run_ensemble_with`] an ensemble's; both take a stop flag and a progress
+//! callback and never install signal handlers. The `rovib` command (feature `cli`) is a binary
+//! on top of this library.
+//!
+//! ```no_run
+//! use std::sync::atomic::AtomicBool;
+//! use rovib::Simulation;
+//!
+//! let sim = Simulation::load("scenes/h2o.toml".as_ref(), Some("out/h2o".as_ref()))?;
+//! let stop = AtomicBool::new(false);
+//! let report = sim.run(&stop, &mut |p| eprintln!("{}/{} outputs", p.done, p.total))?;
+//! println!("{} steps", report.stats.steps);
+//! # Ok::<(), rovib::Error>(())
+//! ```
 
-pub mod cli;
+pub mod bench;
 pub mod cpu;
 pub mod dir_lock;
 pub mod ensemble;
-pub mod interrupt;
+pub mod error;
+pub mod freq;
 pub mod molecules;
 pub mod output;
 pub mod parameters;
+#[cfg(feature = "svg")]
 pub mod plot;
+pub mod progress;
 pub mod restart;
 pub mod scene;
+pub mod simulation;
 pub mod start;
 
+pub use error::Error;
+pub use progress::Progress;
 pub use rovib_runtime as runtime;
+pub use simulation::{RunReport, Simulation};
 
 /// The README's Rust examples, compiled and run as doctests so that they stay true.
 #[cfg(doctest)]

@@ -1,9 +1,11 @@
-//! The `rovib` command line. The commands live in [`rovib::cli`]; this file only parses
-//! arguments and turns an error into one line on stderr and a non-zero exit status.
+//! The `rovib` command line, on the `rovib` library. The commands live in [`cli`]; this file
+//! only parses arguments and turns an error into one line on stderr and a non-zero exit status.
 
 use std::process::ExitCode;
 
 use clap::Parser;
+
+mod cli;
 
 fn main() -> ExitCode {
     // First, before any code built for the CPU features runs.
@@ -11,10 +13,10 @@ fn main() -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
-    let cli = rovib::cli::Cli::parse();
-    match rovib::cli::execute(cli) {
+    let cli = cli::Cli::parse();
+    match cli::execute(cli) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(rovib::cli::CliError::File(e)) => {
+        Err(rovib::Error::File(e)) => {
             // Already formatted as `error: ...` with its place and help.
             eprintln!("{e}");
             ExitCode::FAILURE

@@ -334,9 +334,9 @@ impl DipoleCsv {
     }
 }
 
-/// One ASE time unit in femtoseconds (Å·√(u/eV) with ASE's CODATA 2014 constants), the unit of
-/// the `momenta` column ASE reads.
-pub use crate::ensemble::states_xyz::ASE_TIME_IN_FS;
+/// One ASE time unit in femtoseconds, the unit of the `momenta` column ASE reads: `1e15 / (1e10 ·
+/// √(e/u))` with ASE's default (CODATA 2014) elementary charge and atomic mass unit.
+pub const ASE_TIME_IN_FS: f64 = 10.180_505_671_156_348;
 
 /// The `Properties=` value of every `lab.xyz` frame: per atom the element, the position (Å), the
 /// mass (u), the momentum in ASE's units (u·Å per ASE time unit, so that ASE's `Atoms` get the
@@ -523,9 +523,12 @@ impl Conservation {
     }
 }
 
+/// The restart file's name in a run's output directory (written by [`crate::restart`]).
+pub const RESTART_FILE: &str = "restart.json";
+
 /// Every file `rovib run` may write into its output directory.
 pub const RUN_FILES: [&str; 6] =
-    ["trajectory.csv", TRAJECTORY_UNITS_FILE, "lab.xyz", "dipole.csv", "summary.json", crate::restart::RESTART_FILE];
+    ["trajectory.csv", TRAJECTORY_UNITS_FILE, "lab.xyz", "dipole.csv", "summary.json", RESTART_FILE];
 
 /// Removes the files of [`RUN_FILES`] in `dir` that this run will not write (not in `keep`),
 /// and `summary.json` and `restart.json` in any case (they are written at the end, atomically,
@@ -533,7 +536,7 @@ pub const RUN_FILES: [&str; 6] =
 /// remains looking like this run's. Missing files are fine.
 pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), String> {
     for name in RUN_FILES {
-        if name != "summary.json" && name != crate::restart::RESTART_FILE && keep.contains(&name) {
+        if name != "summary.json" && name != RESTART_FILE && keep.contains(&name) {
             continue;
         }
         let path = dir.join(name);

@@ -5,12 +5,12 @@
 //! keep the compiled-in constants (folded into the generated code), see BENCHMARKS.md for what
 //! the run-time path costs.
 
-use crate::ensemble::scene::did_you_mean;
 use crate::runtime::diagnostic::FileError;
 use crate::runtime::lanes::{KineticLanes, Real};
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use crate::runtime::{Atom, Coordinate, KineticMatrices, Molecule};
 use crate::scene::Scene;
+use crate::scene::did_you_mean;
 
 /// Molecule `M` with its potential's parameters set to `values` (one per
 /// `M::parameters()`, in that order).

@@ -27,8 +27,8 @@ use serde::{Deserialize, Serialize};
 use crate::output::Conservation;
 use crate::runtime::integrate::Dop853Resume;
 
-/// The file name in a run's output directory.
-pub const RESTART_FILE: &str = "restart.json";
+/// The file name in a run's output directory (one of [`crate::output::RUN_FILES`]).
+pub use crate::output::RESTART_FILE;
 
 /// The largest `restart.json` read: the scene's text (at most
 /// [`MAX_INPUT_BYTES`](crate::runtime::diagnostic::MAX_INPUT_BYTES), 16 MiB, and at most 6 bytes

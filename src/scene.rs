@@ -895,3 +895,13 @@ fn integrator(
     })?;
     Ok(method)
 }
+
+/// The closest of `candidates` to `word` by edit distance (Levenshtein, `strsim`, ignoring
+/// case), if it is close enough to be a typo.
+pub fn did_you_mean<'a>(word: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    let (best, d) = candidates
+        .into_iter()
+        .map(|c| (c, strsim::levenshtein(&word.to_lowercase(), &c.to_lowercase())))
+        .min_by_key(|x| x.1)?;
+    (d <= 2.max(word.len() / 3)).then_some(best)
+}

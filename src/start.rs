@@ -390,3 +390,31 @@ pub fn production_system_unchecked<'m, M: Molecule<N, NA>, const N: usize, const
     system.reduce_body(start, &mut y0).map_err(|e| StartError::Message(format!("the initial state: {e}")))?;
     Ok((system, y0))
 }
+
+/// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
+pub type StopCondition = (usize, &'static str, [f64; 2]);
+
+/// `run.stop_outside` bound to the molecule; an unknown name is an error at its place (also
+/// used by ensembles, per trajectory).
+pub fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+) -> Result<Vec<StopCondition>, FileError> {
+    let coords = m.coordinates();
+    let names: Vec<&str> = coords.iter().map(|c| c.name).collect();
+    scene
+        .stop_outside
+        .iter()
+        .map(|(name, [low, high])| {
+            let k = find_name(
+                &scene.source(),
+                &names,
+                name,
+                || format!("{} has no coordinate `{}` (in run.stop_outside)", m.name(), name.get_ref()),
+                |known| format!("the coordinates of {} are {}", m.name(), known.join(", ")),
+            )?;
+            let to_au = |x: f64| scene.units.coordinate_to_au(coords[k].unit, x);
+            Ok((k, coords[k].name, [to_au(*low), to_au(*high)]))
+        })
+        .collect()
+}

@@ -45,7 +45,7 @@ fn fixed_steps_are_reported_in_the_scenes_time_unit() {
     let dir = common::cli::temp_dir("bench-units", "units");
     for (unit, fs) in [("fs", 1.0), ("ps", 1000.0)] {
         let out = dir.join(unit);
-        let report = rovib::cli::bench::bench(&scene(&dir, unit, fs), Some(&out), true).expect("bench runs");
+        let report = rovib::bench::bench(&scene(&dir, unit, fs), Some(&out), true).expect("bench runs");
         let markdown = std::fs::read_to_string(out.join("bench.md")).unwrap();
         assert!(markdown.contains(&format!("End time {} {unit}", 4.0 / fs)), "{markdown}");
         let rows = fixed_steps(&markdown);

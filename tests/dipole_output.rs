@@ -6,11 +6,11 @@
 
 use std::path::{Path, PathBuf};
 
-use rovib::cli::run::run;
 use rovib::molecules::H2o;
 use rovib::runtime::Molecule;
 use rovib::runtime::nalgebra::{SVector, Vector3};
 use rovib::runtime::units::{BOHR_IN_ANGSTROM, DEBYE_IN_E_BOHR};
+use rovib::simulation::run;
 
 /// Water's charges from molecules/h2o.toml: +q_H on each H, −2 q_H on O (e).
 const Q_H: f64 = 0.32922;
@@ -68,7 +68,7 @@ fn water_dipole_matches_the_charges_on_the_lab_frame_positions() {
     let initial = "positions = { O = [0.1, 0.2, -0.1], H1 = [1.0, 0.1, 0.0], H2 = [-0.2, 0.95, 0.05] }\n\
                    velocities = { O = [0.0001, 0.0, 0.0002], H1 = [0.0, 0.01, 0.003], H2 = [0.004, 0.0, -0.008] }";
     let scene = write_scene(&dir, "h2o", initial, "\"trajectory\", \"lab\", \"dipole\"");
-    run(&scene, Some(&dir), true).unwrap();
+    run(&scene, Some(&dir)).unwrap();
     let (header, dipole) = csv_rows(&dir.join("dipole.csv"));
     assert_eq!(header, ["t", "mu_x", "mu_y", "mu_z"]);
     let frames = xyz_frames(&dir.join("lab.xyz"));
@@ -109,7 +109,7 @@ fn water_dipole_matches_the_charges_on_the_lab_frame_positions() {
 fn rigid_water_keeps_its_measured_dipole_length_as_it_turns() {
     let dir = temp_dir("rigid");
     let scene = write_scene(&dir, "h2o_rigid", "euler = [10, 70, 30]\nj = [3, 7, 2]", "\"dipole\"");
-    run(&scene, Some(&dir), true).unwrap();
+    run(&scene, Some(&dir)).unwrap();
     assert!(!dir.join("trajectory.csv").exists() && !dir.join("lab.xyz").exists());
     let (_, rows) = csv_rows(&dir.join("dipole.csv"));
     for row in &rows {
@@ -125,7 +125,7 @@ fn rigid_water_keeps_its_measured_dipole_length_as_it_turns() {
 fn asking_a_molecule_without_a_dipole_is_a_located_error() {
     let dir = temp_dir("none");
     let scene = write_scene(&dir, "ch4", "", "\"dipole\"");
-    let Err(e) = run(&scene, Some(&dir), true) else { panic!("ch4 has no dipole") };
+    let Err(e) = run(&scene, Some(&dir)) else { panic!("ch4 has no dipole") };
     let e = e.to_string();
     assert!(e.contains("molecule `ch4` has no dipole surface") && e.contains("scene.toml:1:"), "{e}");
     // `molecules/ch4.toml`, or the file under ROVIB_MOLECULES_DIR.

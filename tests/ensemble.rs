@@ -344,7 +344,6 @@ fn an_interrupt_keeps_consistent_outputs_for_the_trajectories_that_finished() {
     // Drawing trajectory 100 raises the flag: with one thread, 0..100 have finished, 100 is cut
     // short at its first output time and no later one starts.
     sampler.stop_at = Some((100, Arc::clone(&o.stop)));
-    o.progress = false;
     let report = run_with_sampler(&H2o, &s, &sampler, "gaussian", &o).unwrap();
     assert_eq!(report.status, Status::Interrupted);
     assert_eq!(report.outcome.completed, 100);
@@ -408,10 +407,9 @@ fn a_states_file_starts_trajectory_i_from_row_i_and_kept_trajectories_are_writte
 /// merged, in either order, give the statistics of one pass over all the trajectories.
 #[test]
 fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
-    use std::sync::atomic::AtomicU64;
-
     use rovib::ensemble::output_times;
-    use rovib::ensemble::runner::{Plan, Progress, run_block};
+    use rovib::ensemble::run_block;
+    use rovib::ensemble::runner::{Plan, Tally};
     use rovib::ensemble::scene::parse_ensemble;
 
     let s = scene(120, STATISTICS, DOP853, 1000.0);
@@ -439,7 +437,7 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
     };
     let sampler = Gaussian::new(31);
     let stop = AtomicBool::new(false);
-    let progress = Progress { bar: None, failures: AtomicU64::new(0) };
+    let progress = Tally::default();
     let blocks: Vec<Outcome> =
         (0..4).map(|b| run_block(&plan, &sampler, b * 30..(b + 1) * 30, &stop, &progress)).collect();
     let shipped: Vec<Outcome> =
@@ -476,10 +474,9 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
 /// until the strict pivot test stops it, so failures are compared too.
 #[test]
 fn a_block_on_lanes_has_the_scalar_outcome_to_round_off() {
-    use std::sync::atomic::AtomicU64;
-
     use rovib::ensemble::output_times;
-    use rovib::ensemble::runner::{Plan, Progress, run_block};
+    use rovib::ensemble::run_block;
+    use rovib::ensemble::runner::{Plan, Tally};
     use rovib::ensemble::scene::parse_ensemble;
 
     let s = scene(70, STATISTICS, DOP853, 1000.0);
@@ -507,7 +504,7 @@ fn a_block_on_lanes_has_the_scalar_outcome_to_round_off() {
     };
     let sampler = Troubled(Gaussian::new(37));
     let stop = AtomicBool::new(false);
-    let progress = Progress { bar: None, failures: AtomicU64::new(0) };
+    let progress = Tally::default();
     let (scalar, lanes) = (plan(false, false), plan(true, false));
     assert!(rovib::ensemble::lanes::applies(&lanes) && !rovib::ensemble::lanes::applies(&scalar));
     let a = run_block(&scalar, &sampler, 3..73, &stop, &progress);

@@ -1,7 +1,7 @@
 //! Bad `[ensemble]` and `[statistics]` input: every error names the file, the line and what to
 //! change (one test per message).
 
-use rovib::cli::CliError;
+use rovib::Error;
 use rovib::ensemble::scene::{DEFAULT_SEED, parse_ensemble};
 use rovib::ensemble::{EnsembleOptions, run_ensemble};
 use rovib::runtime::diagnostic::FileError;
@@ -22,7 +22,7 @@ fn error(ensemble: &str) -> FileError {
     }
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-ensemble-scene");
     match run_ensemble(&scene, &EnsembleOptions::new(out)) {
-        Err(CliError::File(e)) => e,
+        Err(Error::File(e)) => e,
         other => panic!("expected a located error, got {other:?}"),
     }
 }
@@ -247,14 +247,14 @@ fn a_bad_number_in_the_states_file_is_located_in_that_file() {
     let path = dir.join("scene.toml");
     std::fs::write(&path, text).unwrap();
     let scene = rovib::ensemble::load_scene(&path).unwrap();
-    let Err(CliError::File(e)) = run_ensemble(&scene, &EnsembleOptions::new(dir.join("out"))) else {
+    let Err(Error::File(e)) = run_ensemble(&scene, &EnsembleOptions::new(dir.join("out"))) else {
         panic!("expected a located error")
     };
     assert_eq!((e.path.as_str(), e.line, e.column), (dir.join("states.csv").to_str().unwrap(), 3, 5), "{e}");
     assert!(e.message.contains("`oops` is not a finite number"), "{e}");
     // Too few states for the trajectories asked for: located at `trajectories` in the scene.
     std::fs::write(dir.join("states.csv"), "r1,r2,alpha\n1.8,1.8,1.82\n").unwrap();
-    let Err(CliError::File(e)) = run_ensemble(&scene, &EnsembleOptions::new(dir.join("out"))) else {
+    let Err(Error::File(e)) = run_ensemble(&scene, &EnsembleOptions::new(dir.join("out"))) else {
         panic!("expected a located error")
     };
     assert_eq!(e.line, 3, "{e}");

@@ -2,7 +2,7 @@
 //! against the modes tests/sampling.rs checks with an independent Cartesian Hessian and against
 //! the inertia tensor built here from the Cartesian positions and masses.
 
-use rovib::cli::freq::{HARTREE_IN_MHZ, freq, frequencies};
+use rovib::freq::{HARTREE_IN_MHZ, freq, frequencies};
 use rovib::molecules::H2o;
 use rovib::runtime::Molecule;
 use rovib::runtime::modes::NormalModes;
@@ -180,7 +180,7 @@ fn check_linear(name: &str, closed_form: [f64; 4]) -> Frequencies {
     f
 }
 
-use rovib::cli::freq::Frequencies;
+use rovib::freq::Frequencies;
 
 fn check_linear_against_cartesian_hessian<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M, f: &Frequencies) {
     let name = m.name();

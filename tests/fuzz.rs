@@ -8,11 +8,11 @@ use std::collections::HashMap;
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed};
-use rovib::cli::run::initial_state;
 use rovib::molecules::H2o;
 use rovib::runtime::diagnostic::FileError;
 use rovib::runtime::hamiltonian::hamiltonian;
 use rovib::scene::parse_scene;
+use rovib::start::initial_state;
 use rovib_codegen::definition::parse_definition;
 use rovib_codegen::expr::Graph;
 use rovib_codegen::generate_molecule;

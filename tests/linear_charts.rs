@@ -242,7 +242,7 @@ fn the_linear_hcn_scene_runs_through_its_crossings() {
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("rovib-linear-scene");
     let _ = std::fs::remove_dir_all(&out);
     let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hcn_linear.toml");
-    rovib::cli::run::run(&scene, Some(&out), true).expect("the scene runs");
+    rovib::simulation::run(&scene, Some(&out)).expect("the scene runs");
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     eprintln!("hcn_linear.toml: charts {} conservation {}", summary["charts"], summary["conservation"]);

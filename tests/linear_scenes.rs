@@ -1,5 +1,5 @@
 //! The shipped scenes of linear molecules (HCN, CO2 at and near their linear equilibria), run as
-//! a user runs them (`rovib run`, through `rovib::cli::run::run`) for their first 10⁴ ħ/E_h,
+//! a user runs them (`rovib run`, through `rovib::simulation::run`) for their first 10⁴ ħ/E_h,
 //! against a plain Cartesian propagation of the same atoms.
 //!
 //! The reference (tests/common/cartesian.rs) integrates Newton's equations in the lab frame with
@@ -149,7 +149,7 @@ fn check_scene_for<M: Molecule<3, 3> + Copy>(
     let path = dir.join(scene);
     std::fs::write(&path, shortened).unwrap();
     let out = dir.join("out");
-    rovib::cli::run::run(&path, Some(&out), true).unwrap_or_else(|e| panic!("{scene}: {e}"));
+    rovib::simulation::run(&path, Some(&out)).unwrap_or_else(|e| panic!("{scene}: {e}"));
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["status"], "completed", "{scene}: {summary}");

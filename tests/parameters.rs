@@ -186,14 +186,14 @@ fn an_ensemble_runs_with_the_scene_parameters() {
 /// trajectory, from the library (what the Python package calls) and from the command line.
 #[test]
 fn an_ensemble_refuses_an_unknown_parameter_at_its_place() {
-    use rovib::cli::CliError;
+    use rovib::Error;
     use rovib::ensemble::{EnsembleOptions, run_ensemble};
     let dir = ensemble_dir("unknown");
     let text = "molecule = \"h2o\"\n[ensemble]\ntrajectories = 4\nmethod = \"thermal\"\ntemperature = 300\n\
                 region = { energy_cap = 0.1 }\n[potential.parameters]\nbogus = 1\nRE = 1.0\n[run]\nend = 10\n";
     let scene = rovib::scene::parse_scene("u.toml", text).unwrap();
     match run_ensemble(&scene, &EnsembleOptions::new(dir.join("lib"))) {
-        Err(CliError::File(e)) => {
+        Err(Error::File(e)) => {
             assert_eq!((e.path.as_str(), e.line), ("u.toml", 9), "{e}");
             assert!(e.message.contains("h2o has no potential parameter `RE`"), "{e}");
             assert!(e.help.contains("did you mean `re`?"), "{e}");

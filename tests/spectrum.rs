@@ -19,8 +19,8 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::ensemble::{column, options};
-use rovib::cli::freq::frequencies;
 use rovib::ensemble::run_ensemble;
+use rovib::freq::frequencies;
 use rovib::molecules::{H2o, Hcn, Nh3};
 use rovib::runtime::modes::{NormalModes, stationary_point};
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};

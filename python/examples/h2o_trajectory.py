@@ -22,7 +22,8 @@ import rovib
 
 here = os.path.dirname(os.path.abspath(__file__))
 scene = os.path.join(here, "..", "..", "scenes", "h2o.toml")
-trajectory = rovib.run(scene)
+# Without out_dir the outputs would go to a temporary folder, removed once read.
+trajectory = rovib.run(scene, out_dir=os.path.join("out", "h2o_python"))
 print(f"{len(trajectory)} output times in {trajectory.out_dir}; columns: {', '.join(trajectory.names)}")
 
 
@@ -32,7 +33,7 @@ def coordinate(name):
 
 
 t = trajectory["t"]  # in the scene's time unit
-unit = trajectory.summary["time_unit"]
+unit = trajectory.time_unit
 r1 = coordinate("r1") * rovib.BOHR_IN_ANGSTROM
 r2 = coordinate("r2") * rovib.BOHR_IN_ANGSTROM
 c = trajectory.summary["conservation"]

@@ -2,9 +2,13 @@
 
 A thin layer over the Rust library (the extension module ``rovib._rovib``): every function runs
 the same code as the ``rovib`` command, so results equal the CLI's. Units are atomic unless
-stated: bohr, rad, electron masses, hartree, time in hbar/E_h (ħ/E_h ≈ 0.0242 fs); masses of
-atoms in Da; lab-frame positions in Å and velocities in Å/fs. Errors raise :class:`RovibError`
-(a ``ValueError``) with the CLI's message.
+stated: bohr, rad, electron masses, hartree; masses of atoms in Da; lab-frame positions in Å and
+velocities in Å/fs. Times of runs and ensembles (``Trajectory["t"]``, ``Ensemble.times``) are in
+the scene's time unit (``units.time``: "au", i.e. ħ/E_h ≈ 0.0242 fs, by default; "fs", "ps"),
+named by their ``time_unit``.
+Errors raise :class:`RovibError` (a ``ValueError``) with the CLI's message. Ctrl-C during a run
+stops it cleanly and raises ``KeyboardInterrupt``; no signal handler is installed. Without an
+``out_dir`` a run writes into a temporary folder that is removed once its results are read.
 """
 
 from __future__ import annotations
@@ -84,19 +88,25 @@ def _rows(x) -> Optional[List[List[float]]]:
 class Trajectory:
     """A finished run: the columns of ``trajectory.csv`` as NumPy arrays, and ``summary.json``.
 
-    ``columns`` maps each CSV header name to its array: ``t`` (the scene's time unit), ``q_NAME``
+    ``columns`` maps each CSV header name to its array: ``t`` (the scene's time unit,
+    ``time_unit``), ``q_NAME``
     (bohr or rad), ``p_NAME`` (ħ/bohr or ħ), ``euler_phi``, ``euler_theta``, ``euler_psi`` (rad),
     ``pe_phi``, ``pe_theta``, ``pe_psi`` (ħ), ``Jx``, ``Jy``, ``Jz`` (body frame, ħ), ``H`` (hartree), and with ``run.euler_unwrapped``
     ``euler_phi_unwrapped``, ``euler_psi_unwrapped``. ``units`` maps every column to its unit, in
     file order (from ``trajectory.units.json``). ``out_dir`` holds every file written (lab.xyz,
-    restart.json ...).
+    restart.json ...); it is None for a run into a temporary folder (removed after reading).
     """
 
-    out_dir: str
+    out_dir: Optional[str]
     columns: Dict[str, np.ndarray]
     summary: Dict[str, Any]
     units: Dict[str, str] = field(default_factory=dict)
     files: List[str] = field(default_factory=list)
+
+    @property
+    def time_unit(self) -> str:
+        """The unit of ``self["t"]``: the scene's ``units.time`` ("au" for ħ/E_h, "fs" or "ps")."""
+        return self.units.get("t", "au")
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.columns[name]
@@ -115,10 +125,15 @@ class Ensemble:
     """A finished ensemble: means and standard errors per output time and quantity.
 
     ``means[k, j]`` and ``stderr[k, j]`` are quantity ``quantities[j]`` (unit ``units[j]``) at
-    ``times[k]`` (hbar/E_h); ``summary`` is summary.json; ``out_dir`` holds every file written.
+    ``times[k]``, in the scene's time unit ``time_unit`` (as a trajectory's ``t``); ``summary``
+    is summary.json; ``out_dir`` holds every file written (None for a temporary folder, removed
+    after reading). ``correlations`` holds the columns of correlations.csv (``tau_UNIT`` in the
+    scene's time unit, ``n``, and per correlated quantity its C(τ), standard error and C(τ)/C(0))
+    and ``spectrum`` those of spectrum.csv (``wavenumber_cm-1``, the line shape and, for a thermal
+    ensemble, the cross sections), each as NumPy arrays; empty when the scene asks for none.
     """
 
-    out_dir: str
+    out_dir: Optional[str]
     times: np.ndarray
     quantities: List[str]
     units: List[str]
@@ -126,6 +141,9 @@ class Ensemble:
     stderr: np.ndarray
     summary: Dict[str, Any]
     report: Dict[str, Any]
+    time_unit: str = "au"
+    correlations: Dict[str, np.ndarray] = field(default_factory=dict)
+    spectrum: Dict[str, np.ndarray] = field(default_factory=dict)
 
     def mean(self, quantity: str) -> Tuple[np.ndarray, np.ndarray]:
         """The mean of ``quantity`` and its standard error at every output time."""
@@ -144,11 +162,19 @@ def _scene_path(scene, out_dir: str) -> str:
     return os.fspath(scene)
 
 
-def _out_dir(out_dir: Optional[PathLike]) -> str:
-    if out_dir is None:
-        return tempfile.mkdtemp(prefix="rovib-")
-    os.makedirs(out_dir, exist_ok=True)
-    return os.fspath(out_dir)
+def _in_out_dir(out_dir: Optional[PathLike], run):
+    """``run(folder)`` in ``out_dir`` (created), or in a temporary folder removed afterwards
+    (whatever happens, Ctrl-C included); a result read from a temporary folder has no
+    ``out_dir`` nor ``files``."""
+    if out_dir is not None:
+        os.makedirs(out_dir, exist_ok=True)
+        return run(os.fspath(out_dir))
+    with tempfile.TemporaryDirectory(prefix="rovib-") as tmp:
+        result = run(tmp)
+        result.out_dir = None
+        if hasattr(result, "files"):
+            result.files = []
+        return result
 
 
 def read_trajectory(out_dir: PathLike) -> Trajectory:
@@ -171,6 +197,19 @@ def read_trajectory(out_dir: PathLike) -> Trajectory:
     return Trajectory(out_dir=out_dir, columns=columns, summary=summary, units=units)
 
 
+def _read_columns(path: str) -> Dict[str, np.ndarray]:
+    """The columns of a CSV file of numbers (lines starting with ``#`` skipped), by header name;
+    empty if the file does not exist."""
+    if not os.path.exists(path):
+        return {}
+    with open(path, newline="", encoding="utf-8") as f:
+        reader = csv.reader(line for line in f if not line.startswith("#"))
+        header = next(reader)
+        rows = [[float(x) for x in row] for row in reader if row]
+    data = np.array(rows, dtype=float).reshape(len(rows), len(header))
+    return {name: data[:, j].copy() for j, name in enumerate(header)}
+
+
 def _read_json(path: str):
     if not os.path.exists(path):
         return None
@@ -182,18 +221,25 @@ def run(scene: Union[PathLike, Dict[str, Any]], out_dir: Optional[PathLike] = No
     """Runs a scene exactly as ``rovib run SCENE --out OUT_DIR`` does and reads its outputs.
 
     ``scene`` is a scene file's path or a dict with the same keys (written to
-    ``OUT_DIR/scene.toml``; relative paths inside it then resolve from OUT_DIR). ``out_dir``
-    defaults to a new temporary directory, which is kept. The scene must write "trajectory"
-    (the default outputs do).
+    ``OUT_DIR/scene.toml``; relative paths inside it then resolve from OUT_DIR). Without
+    ``out_dir`` the run writes into a temporary folder, removed once the results are read. The
+    scene must write "trajectory" (the default outputs do). Ctrl-C stops the run at its next
+    output time and raises ``KeyboardInterrupt`` (with ``out_dir``, the outputs so far stay there
+    and :func:`resume` continues them).
     """
-    out = _out_dir(out_dir)
-    path = _scene_path(scene, out)
-    files = [os.fspath(f) for f in _rovib.run_scene(path, out)]
-    if not os.path.exists(os.path.join(out, "trajectory.csv")):
-        raise RovibError(f"error: the run wrote no trajectory.csv into {out} (add \"trajectory\" to the scene's outputs)")
-    trajectory = read_trajectory(out)
-    trajectory.files = files
-    return trajectory
+
+    def go(out: str) -> Trajectory:
+        path = _scene_path(scene, out)
+        files = [os.fspath(f) for f in _rovib.run_scene(path, out)]
+        if not os.path.exists(os.path.join(out, "trajectory.csv")):
+            raise RovibError(
+                f"error: the run wrote no trajectory.csv into {out} (add \"trajectory\" to the scene's outputs)"
+            )
+        trajectory = read_trajectory(out)
+        trajectory.files = files
+        return trajectory
+
+    return _in_out_dir(out_dir, go)
 
 
 def resume(out_dir: PathLike, scene: Union[None, PathLike, Dict[str, Any]] = None) -> Trajectory:
@@ -225,39 +271,54 @@ def run_ensemble(
     """Runs the ensemble of a scene with an ``[ensemble]`` table as ``rovib ensemble`` does.
 
     ``threads`` overrides the scene's (default: the scene's, else every core); the statistics
-    do not depend on it. Returns the means and standard errors per output time (ħ/E_h).
+    do not depend on it. Returns the means and standard errors per output time, the times in the
+    scene's time unit (``time_unit``). Without ``out_dir`` the outputs go to a temporary folder,
+    removed once read. Ctrl-C stops the ensemble (no trajectory starts, running ones stop at
+    their next output time) and raises ``KeyboardInterrupt``.
     """
-    out = _out_dir(out_dir)
-    path = _scene_path(scene, out)
-    report = _rovib.run_ensemble_scene(path, out, threads)
-    summary = _read_json(os.path.join(out, "summary.json")) or {}
-    return Ensemble(
-        out_dir=out,
-        times=report["times"],
-        quantities=list(report["quantities"]),
-        units=list(report["units"]),
-        means=report["means"],
-        stderr=report["stderr"],
-        summary=summary,
-        report=report,
-    )
+
+    def go(out: str) -> Ensemble:
+        path = _scene_path(scene, out)
+        report = _rovib.run_ensemble_scene(path, out, threads)
+        summary = _read_json(os.path.join(out, "summary.json")) or {}
+        return Ensemble(
+            out_dir=out,
+            times=report["times"],
+            quantities=list(report["quantities"]),
+            units=list(report["units"]),
+            means=report["means"],
+            stderr=report["stderr"],
+            summary=summary,
+            report=report,
+            time_unit=report["time_unit"],
+            correlations=_read_columns(os.path.join(out, "correlations.csv")),
+            spectrum=_read_columns(os.path.join(out, "spectrum.csv")),
+        )
+
+    return _in_out_dir(out_dir, go)
 
 
 def from_lab(name: str, positions, velocities=None, initial_q=None) -> Dict[str, Any]:
     """rovib's phase state of lab-frame Cartesians of molecule ``name``.
 
     ``positions`` in Å and ``velocities`` in Å/fs (default zero), shape (atoms, 3) in the
-    molecule's atom order. Returns ``q``, ``p``, ``euler``, ``pe`` (atomic units), ``com``
-    (``position`` in bohr, ``velocity`` in bohr per ħ/E_h) and ``fit`` (residuals of the fit;
-    velocity parts the internal coordinates cannot represent are discarded and reported).
+    molecule's atom order. Returns ``q``, ``p``, ``euler``, ``pe`` (atomic units), the
+    orientation as a unit quaternion ``orientation`` (w, x, y, z) and the body-frame angular
+    momentum ``J`` (ħ), ``com`` (``position`` in bohr, ``velocity`` in bohr per ħ/E_h) and ``fit``
+    (residuals of the fit; velocity parts the internal coordinates cannot represent are
+    discarded and reported). Every orientation converts, the body z axis along the lab z axis
+    included (Euler θ = 0, where the Euler angles are one of equivalent choices and only
+    ``orientation`` and ``J`` determine the motion; :func:`to_lab` uses them when present).
     """
     return _rovib.from_lab_frame(name, _rows(positions), _rows(velocities), _vec(initial_q))
 
 
 def to_lab(name: str, state: Dict[str, Any]) -> Tuple[np.ndarray, np.ndarray]:
     """Lab-frame positions (Å) and velocities (Å/fs), shape (atoms, 3), of a state of molecule
-    ``name``: a dict with ``q``, ``p``, ``euler``, ``pe`` (atomic units) and optionally ``com``
-    as :func:`from_lab` returns it (default at rest at the origin)."""
+    ``name``: a dict with ``q``, ``p`` and either ``orientation`` (unit quaternion w, x, y, z)
+    and ``J`` (body frame, ħ), or ``euler`` and ``pe`` (atomic units), and optionally ``com`` as
+    :func:`from_lab` returns it (default at rest at the origin). ``orientation`` and ``J`` take
+    precedence: they are defined at every orientation, Euler θ = 0 included."""
     com = state.get("com") or {}
     return _rovib.to_lab_frame(
         name,
@@ -267,4 +328,6 @@ def to_lab(name: str, state: Dict[str, Any]) -> Tuple[np.ndarray, np.ndarray]:
         _vec(state.get("pe")),
         _vec(com.get("position")),
         _vec(com.get("velocity")),
+        _vec(state.get("orientation")),
+        _vec(state.get("J")),
     )

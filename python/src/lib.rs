@@ -1,12 +1,16 @@
 //! `rovib._rovib`: the Python extension module, a thin layer over the rovib library.
 //!
-//! Every function calls the same library code as the `rovib` command (`cli::run::run`,
-//! `ensemble::run_ensemble`, `runtime::hamiltonian::evaluate`, `runtime::frames`), so results
-//! from Python equal the CLI's by construction. Errors become `rovib.RovibError` (a
-//! `ValueError`) with the CLI's message text. The pure-Python package `rovib` (python/rovib/)
-//! wraps these functions: reading the CSV outputs into NumPy arrays, dict scenes, ASE.
+//! Every function calls the same library code as the `rovib` command (`Simulation`,
+//! `ensemble::run_ensemble_with`, `runtime::hamiltonian::evaluate`, `runtime::frames`), so
+//! results from Python equal the CLI's by construction. Runs take a stop flag that their
+//! progress callback raises when Python has a pending signal: Ctrl-C ends a run cleanly and
+//! raises `KeyboardInterrupt`, and no signal handler is installed. Errors become
+//! `rovib.RovibError` (a `ValueError`) with the CLI's message text. The pure-Python package
+//! `rovib` (python/rovib/) wraps these functions: reading the outputs into NumPy arrays, dict
+//! scenes, ASE.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use numpy::{PyArray1, PyArray2};
 use pyo3::create_exception;
@@ -14,13 +18,14 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 
-use rovib::cli::CliError;
 use rovib::ensemble::{EnsembleOptions, EnsembleReport};
-use rovib::molecules;
+use rovib::runtime::frames::{from_lab_body, to_lab_body};
+use rovib::runtime::hamiltonian::fast::BodyState;
 use rovib::runtime::hamiltonian::{PhaseState, evaluate as evaluate_state};
-use rovib::runtime::nalgebra::{DMatrix, SMatrix, SVector, Vector3};
+use rovib::runtime::nalgebra::{DMatrix, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 use rovib::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM};
-use rovib::runtime::{CentreOfMass, FitOptions, LabState, Molecule, MoleculeVisitor, from_lab, to_lab};
+use rovib::runtime::{CentreOfMass, FitOptions, LabState, Molecule, MoleculeVisitor, to_lab};
+use rovib::{Error, Progress, Simulation, molecules};
 
 create_exception!(
     _rovib,
@@ -30,10 +35,37 @@ create_exception!(
 );
 
 /// A `RovibError` with the CLI's text for `e` (a located file error is already `error: ...`).
-fn cli_error(e: CliError) -> PyErr {
+fn lib_error(e: Error) -> PyErr {
     match e {
-        CliError::File(f) => RovibError::new_err(f.to_string()),
-        CliError::Message(_) => RovibError::new_err(format!("error: {e}")),
+        Error::File(f) => RovibError::new_err(f.to_string()),
+        e => RovibError::new_err(format!("error: {e}")),
+    }
+}
+
+/// Runs `f` without the GIL, with a stop flag and a progress callback that checks Python's
+/// signals (on the calling thread, which is where Python runs its signal handlers). The first
+/// failed check (Ctrl-C: `KeyboardInterrupt`) raises the flag, so the run ends cleanly at its
+/// next output record, and is returned instead of the run's result.
+fn with_signals<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce(&AtomicBool, &mut dyn FnMut(Progress)) -> Result<T, Error> + Send,
+) -> PyResult<T> {
+    let stop = AtomicBool::new(false);
+    let mut pending: Option<PyErr> = None;
+    let result = py.detach(|| {
+        let mut check = |_: Progress| {
+            if pending.is_none()
+                && let Err(e) = Python::attach(|py| py.check_signals())
+            {
+                pending = Some(e);
+                stop.store(true, Ordering::SeqCst);
+            }
+        };
+        f(&stop, &mut check)
+    });
+    match pending {
+        Some(e) => Err(e),
+        None => result.map_err(lib_error),
     }
 }
 
@@ -193,9 +225,10 @@ impl MoleculeVisitor for EvalVisitor {
     }
 }
 
-/// A state converted from the lab frame.
+/// A state converted from the lab frame: q, p, Euler angles, their momenta, the orientation
+/// quaternion (w, x, y, z) and the body-frame J.
 struct FromLab {
-    state: [Vec<f64>; 4],
+    state: [Vec<f64>; 6],
     com: [Vec<f64>; 2],
     report: [f64; 3],
     iterations: usize,
@@ -235,14 +268,20 @@ impl MoleculeVisitor for FromLabVisitor {
                 SVector::zeros(),
             )?);
         }
-        let (s, com, report) =
-            from_lab(&m, &lab, &options).map_err(|e| format!("cannot convert the lab state of {}: {e}", m.name()))?;
+        // The body formulation holds every orientation, θ = 0 included (a molecule along the lab
+        // z axis); its Euler angles there are one of the equivalent choices and p_e = Mᵀ J.
+        let (body, com, report) = from_lab_body(&m, &lab, &options)
+            .map_err(|e| format!("cannot convert the lab state of {}: {e}", m.name()))?;
+        let s = body.to_phase();
+        let o = body.orientation.quaternion();
         Ok(FromLab {
             state: [
                 s.q.as_slice().to_vec(),
                 s.p.as_slice().to_vec(),
                 s.euler.as_slice().to_vec(),
                 s.pe.as_slice().to_vec(),
+                vec![o.w, o.i, o.j, o.k],
+                body.j.as_slice().to_vec(),
             ],
             com: [com.position.as_slice().to_vec(), com.velocity.as_slice().to_vec()],
             report: [report.position_residual, report.velocity_residual, report.discarded_kinetic_energy],
@@ -253,6 +292,9 @@ impl MoleculeVisitor for FromLabVisitor {
 
 struct ToLabVisitor {
     state: StateArgs,
+    /// The orientation quaternion (w, x, y, z) and body-frame J, which replace `euler` and `pe`
+    /// when given (defined at every orientation).
+    body: Option<([f64; 4], [f64; 3])>,
     com: [[f64; 3]; 2],
 }
 
@@ -263,8 +305,16 @@ impl MoleculeVisitor for ToLabVisitor {
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         let state = self.state.phase(&m)?;
         let com = CentreOfMass { position: Vector3::from(self.com[0]), velocity: Vector3::from(self.com[1]) };
-        let lab: LabState<NA> = to_lab(&m, &state, &com)
-            .map_err(|e| format!("cannot convert the state of {} to the lab frame: {e}", m.name()))?;
+        let lab: LabState<NA> = match self.body {
+            None => to_lab(&m, &state, &com),
+            Some(([w, x, y, z], j)) => {
+                let orientation = UnitQuaternion::try_new(Quaternion::new(w, x, y, z), 0.0)
+                    .ok_or_else(|| "state: `orientation` is zero or not finite".to_owned())?;
+                let body = BodyState { q: state.q, p: state.p, orientation, j: Vector3::from(j) };
+                to_lab_body(&m, &body, &com)
+            }
+        }
+        .map_err(|e| format!("cannot convert the state of {} to the lab frame: {e}", m.name()))?;
         Ok((dense(&lab.positions.transpose()), dense(&lab.velocities.transpose())))
     }
 }
@@ -335,11 +385,11 @@ fn evaluate<'py>(
 }
 
 /// Runs the scene file at `path` into `out_dir` exactly as `rovib run` does; returns the files
-/// written.
+/// written. Ctrl-C stops the run at its next output record and raises `KeyboardInterrupt`.
 #[pyfunction]
 fn run_scene(py: Python<'_>, path: PathBuf, out_dir: PathBuf) -> PyResult<Vec<PathBuf>> {
-    let report = py.detach(|| rovib::cli::run::run(&path, Some(&out_dir), true)).map_err(cli_error)?;
-    Ok(report.files)
+    let sim = Simulation::load(&path, Some(&out_dir)).map_err(lib_error)?;
+    Ok(with_signals(py, |stop, progress| sim.run(stop, progress))?.files)
 }
 
 /// Continues the run in `out_dir` from its restart.json exactly as `rovib run --resume OUT_DIR
@@ -347,11 +397,13 @@ fn run_scene(py: Python<'_>, path: PathBuf, out_dir: PathBuf) -> PyResult<Vec<Pa
 #[pyfunction]
 #[pyo3(signature = (out_dir, path=None))]
 fn resume_scene(py: Python<'_>, out_dir: PathBuf, path: Option<PathBuf>) -> PyResult<Vec<PathBuf>> {
-    let report = py.detach(|| rovib::cli::run::resume(&out_dir, path.as_deref(), true)).map_err(cli_error)?;
-    Ok(report.files)
+    let sim = Simulation::resume(&out_dir, path.as_deref()).map_err(lib_error)?;
+    Ok(with_signals(py, |stop, progress| sim.run(stop, progress))?.files)
 }
 
-/// Runs the ensemble of the scene file at `path` into `out_dir` as `rovib ensemble` does.
+/// Runs the ensemble of the scene file at `path` into `out_dir` as `rovib ensemble` does; the
+/// output times in the scene's time unit (`time_unit`). Ctrl-C stops it (the trajectories that
+/// finished are in `out_dir`) and raises `KeyboardInterrupt`.
 #[pyfunction]
 #[pyo3(signature = (path, out_dir, threads=None))]
 fn run_ensemble_scene<'py>(
@@ -360,14 +412,21 @@ fn run_ensemble_scene<'py>(
     out_dir: PathBuf,
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let report: EnsembleReport = py
-        .detach(|| {
-            let scene = rovib::ensemble::load_scene(&path)?;
-            let mut options = EnsembleOptions::new(out_dir);
-            options.threads = threads;
-            rovib::ensemble::run_ensemble(&scene, &options)
-        })
-        .map_err(cli_error)?;
+    let scene = rovib::ensemble::load_scene(&path).map_err(lib_error)?;
+    let mut options = EnsembleOptions::new(out_dir);
+    options.threads = threads;
+    let report: EnsembleReport = with_signals(py, |stop, progress| {
+        // The ensemble polls its own flag; the callback's is forwarded to it.
+        let forward = |p: Progress| {
+            progress(p);
+            if stop.load(Ordering::SeqCst) {
+                options.stop.store(true, Ordering::SeqCst);
+            }
+        };
+        let mut forward = forward;
+        rovib::ensemble::run_ensemble_with(&scene, &options, &mut forward)
+    })?;
+    let time_scale = scene.time_unit.in_au();
     let (k, nq) = (report.times.len(), report.quantities.len());
     let mut means = vec![vec![f64::NAN; nq]; k];
     let mut stderr = vec![vec![f64::NAN; nq]; k];
@@ -384,7 +443,9 @@ fn run_ensemble_scene<'py>(
     d.set_item("requested", report.requested)?;
     d.set_item("completed", report.outcome.completed)?;
     d.set_item("failed", report.outcome.failed.clone())?;
-    d.set_item("times", PyArray1::from_slice(py, &report.times))?;
+    let times: Vec<f64> = report.times.iter().map(|t| t / time_scale).collect();
+    d.set_item("times", PyArray1::from_vec(py, times))?;
+    d.set_item("time_unit", scene.time_unit.name())?;
     d.set_item("quantities", report.quantities.clone())?;
     d.set_item("units", report.units.clone())?;
     d.set_item("means", matrix(py, &means)?)?;
@@ -418,7 +479,7 @@ fn from_lab_frame<'py>(
     };
     let out = molecules::visit(name, visitor).ok_or_else(|| unknown_molecule(name))?.map_err(message)?;
     let d = PyDict::new(py);
-    for (key, values) in ["q", "p", "euler", "pe"].iter().zip(&out.state) {
+    for (key, values) in ["q", "p", "euler", "pe", "orientation", "J"].iter().zip(&out.state) {
         d.set_item(*key, PyArray1::from_slice(py, values))?;
     }
     let com = PyDict::new(py);
@@ -437,7 +498,7 @@ fn from_lab_frame<'py>(
 /// Lab-frame positions (Å) and velocities (Å/fs), one row per atom, of a phase state (atomic
 /// units) with its centre of mass (bohr, bohr per ħ/E_h; default at rest at the origin).
 #[pyfunction]
-#[pyo3(signature = (name, q=None, p=None, euler=None, pe=None, com_position=None, com_velocity=None))]
+#[pyo3(signature = (name, q=None, p=None, euler=None, pe=None, com_position=None, com_velocity=None, orientation=None, j=None))]
 fn to_lab_frame<'py>(
     py: Python<'py>,
     name: &str,
@@ -447,8 +508,18 @@ fn to_lab_frame<'py>(
     pe: Option<Vec<f64>>,
     com_position: Option<[f64; 3]>,
     com_velocity: Option<[f64; 3]>,
+    orientation: Option<[f64; 4]>,
+    j: Option<[f64; 3]>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    let body = match (orientation, j) {
+        (Some(o), Some(j)) => Some((o, j)),
+        (None, None) => None,
+        _ => {
+            return Err(message("state: give both `orientation` and `J`, or neither (then `euler` and `pe` are used)"));
+        }
+    };
     let visitor = ToLabVisitor {
+        body,
         state: StateArgs { q, p, euler, pe },
         com: [com_position.unwrap_or_default(), com_velocity.unwrap_or_default()],
     };

@@ -152,3 +152,26 @@ fn creating_a_solver_allocates() {
     });
     assert!(info.count_total > 0);
 }
+
+#[test]
+fn the_integrator_of_every_method_does_not_allocate_while_running_and_equals_solve() {
+    use rovib_runtime::integrate::{Integrator, Method, solve};
+    let methods = [
+        Method::Dop853(Dop853Options::default()),
+        Method::GaussLegendre(GaussLegendreOptions { stages: 3, step: 0.01, ..Default::default() }),
+        Method::Rk4(Rk4Options { step: 0.01, ..Default::default() }),
+    ];
+    for method in methods {
+        let mut integrator = Integrator::new(&method, 4).unwrap();
+        let (count, outputs) = allocations(|obs| {
+            integrator.integrate(&mut Kepler, 0.0, &Y0, 20.0, 0.1, obs).unwrap();
+        });
+        assert_eq!(outputs, 201);
+        assert_eq!(count, 0, "{method:?} allocated {count} times");
+        // The same numbers as the one-shot `solve`, bit for bit.
+        let (mut a, mut b) = (Sum { count: 0, sum: 0.0 }, Sum { count: 0, sum: 0.0 });
+        integrator.integrate(&mut Kepler, 0.0, &Y0, 20.0, 0.1, &mut a).unwrap();
+        solve(&mut Kepler, &method, 0.0, &Y0, 20.0, 0.1, &mut b).unwrap();
+        assert_eq!(a.sum.to_bits(), b.sum.to_bits(), "{method:?}");
+    }
+}

@@ -1,10 +1,12 @@
-//! `rovib ensemble SCENE.toml`: sample, run and reduce an ensemble (see [`crate::ensemble`]).
+//! `rovib ensemble SCENE.toml`: sample, run and reduce an ensemble (see [`rovib::ensemble`]).
 
 use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 
-use super::CliError;
-use crate::ensemble::{EnsembleOptions, EnsembleReport, load_scene, run_ensemble};
+use rovib::Error;
+use rovib::ensemble::{EnsembleOptions, EnsembleReport, load_scene, run_ensemble_with};
+
+use super::progress::Bar;
 
 /// Runs the ensemble of the scene at `path` into `out_dir` (default `out/SCENE_NAME`), with
 /// `threads` worker threads (default: the scene's, else every core), continuing its checkpoint
@@ -18,23 +20,23 @@ pub fn ensemble(
     quiet: bool,
     resume: bool,
     lanes: bool,
-) -> Result<Option<EnsembleReport>, CliError> {
+) -> Result<Option<EnsembleReport>, Error> {
     let out_dir = match out_dir {
         Some(d) => d.to_owned(),
         None => PathBuf::from("out").join(path.file_stem().unwrap_or_default()),
     };
     let mut options = EnsembleOptions::new(out_dir);
     options.threads = threads;
-    options.progress = !quiet && std::io::stderr().is_terminal();
-    options.stop = crate::interrupt::flag();
+    options.stop = super::interrupt::flag();
     options.resume = resume;
     options.lanes = lanes;
+    let mut bar = Bar::new(!quiet && std::io::stderr().is_terminal(), "trajectories", true);
     #[cfg(feature = "mpi")]
-    if crate::ensemble::mpi::launched() {
-        return crate::ensemble::mpi::run(path, &options);
+    if rovib::ensemble::mpi::launched() {
+        return rovib::ensemble::mpi::run(path, &options, &mut |p| bar.update(p));
     }
     let scene = load_scene(path)?;
-    run_ensemble(&scene, &options).map(Some)
+    run_ensemble_with(&scene, &options, &mut |p| bar.update(p)).map(Some)
 }
 
 /// The report printed on stdout.

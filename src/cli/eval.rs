@@ -1,22 +1,22 @@
 //! `rovib eval`: everything about one state, as one JSON object.
 
-use crate::runtime::diagnostic::{MAX_INPUT_BYTES, read_capped, read_text_capped};
+use rovib::runtime::diagnostic::{MAX_INPUT_BYTES, read_capped, read_text_capped};
 use std::path::Path;
 
 use serde::Deserialize;
 use serde_json::{Value, json};
 
-use super::{CliError, unknown_molecule};
-use crate::molecules;
-use crate::runtime::cartesian_system::CartesianSystem;
-use crate::runtime::charts::SWITCH_PIVOT;
-use crate::runtime::frames::{CentreOfMass, lab_of_body_any};
-use crate::runtime::hamiltonian::{
+use rovib::Error;
+use rovib::molecules;
+use rovib::runtime::cartesian_system::CartesianSystem;
+use rovib::runtime::charts::SWITCH_PIVOT;
+use rovib::runtime::frames::{CentreOfMass, lab_of_body_any};
+use rovib::runtime::hamiltonian::{
     BodyState, HamiltonianError, MetricFactor, PhaseState, body_angular_momentum, evaluate,
 };
-use crate::runtime::integrate::OdeSystem;
-use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
-use crate::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
+use rovib::runtime::integrate::OdeSystem;
+use rovib::runtime::nalgebra::{SMatrix, SVector, Vector3};
+use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
 
 /// The state file: atomic units; `p` and `pe` default to zero, `euler` to [0, π/2, 0].
 #[derive(Debug, Deserialize)]
@@ -41,16 +41,16 @@ fn vector<const K: usize>(
     meaning: &str,
     values: Option<&Vec<f64>>,
     default: SVector<f64, K>,
-) -> Result<SVector<f64, K>, CliError> {
+) -> Result<SVector<f64, K>, Error> {
     let Some(values) = values else { return Ok(default) };
     if values.len() != K {
-        return Err(CliError::Message(format!(
+        return Err(Error::Message(format!(
             "{file}: `{field}` has {} entries, expected {K} ({meaning})",
             values.len()
         )));
     }
     if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-        return Err(CliError::Message(format!("{file}: `{field}[{i}]` is not a finite number ({meaning})")));
+        return Err(Error::Message(format!("{file}: `{field}[{i}]` is not a finite number ({meaning})")));
     }
     Ok(SVector::from_column_slice(values))
 }
@@ -62,7 +62,7 @@ struct Eval<'a> {
 }
 
 impl MoleculeVisitor for Eval<'_> {
-    type Output = Result<Vec<(&'static str, Value)>, CliError>;
+    type Output = Result<Vec<(&'static str, Value)>, Error>;
 
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         let reference = m.reference_geometry();
@@ -73,7 +73,7 @@ impl MoleculeVisitor for Eval<'_> {
         let state = match self.state {
             Some(s) => {
                 if s.q.is_none() && reference.is_none() {
-                    return Err(CliError::Message(format!(
+                    return Err(Error::Message(format!(
                         "{}: `q` is missing and {} has no reference geometry to default to (give q)",
                         self.file,
                         m.name()
@@ -160,7 +160,7 @@ impl MoleculeVisitor for Eval<'_> {
                     fields.push(("J", json!(j.as_slice())));
                 }
             }
-            Err(e) => return Err(CliError::context(format!("cannot evaluate {}", m.name()), e)),
+            Err(e) => return Err(Error::context(format!("cannot evaluate {}", m.name()), e)),
         }
         if let Some(cartesian) = cartesian(&m, &state)? {
             fields.push(("cartesian", cartesian));
@@ -241,18 +241,18 @@ impl EulerChart {
 fn cartesian<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &M,
     state: &PhaseState<N>,
-) -> Result<Option<Value>, CliError> {
+) -> Result<Option<Value>, Error> {
     let Ok(system) = CartesianSystem::<M, N, NA>::new(m) else { return Ok(None) };
-    let body = BodyState::from_phase(state).map_err(|e| CliError::context("cannot evaluate the orientation", e))?;
+    let body = BodyState::from_phase(state).map_err(|e| Error::context("cannot evaluate the orientation", e))?;
     let lab = lab_of_body_any(m, &body, &CentreOfMass::AT_REST).map_err(|e| {
-        CliError::context(format!("cannot express this state of {} in lab-frame Cartesian coordinates", m.name()), e)
+        Error::context(format!("cannot express this state of {} in lab-frame Cartesian coordinates", m.name()), e)
     })?;
     let mut y = vec![0.0; 6 * NA];
     CartesianSystem::<M, N, NA>::flat(&lab, &mut y);
     let mut system = system;
-    let energy = system.energy(&y).map_err(|e| CliError::context("cannot evaluate the Cartesian energy", e))?;
+    let energy = system.energy(&y).map_err(|e| Error::context("cannot evaluate the Cartesian energy", e))?;
     let mut dy = vec![0.0; 6 * NA];
-    system.rhs(0.0, &y, &mut dy).map_err(|e| CliError::context("cannot evaluate Newton's equations", e))?;
+    system.rhs(0.0, &y, &mut dy).map_err(|e| Error::context("cannot evaluate Newton's equations", e))?;
     let masses = m.masses();
     let acceleration = SMatrix::<f64, 3, NA>::from_column_slice(&dy[3 * NA..]);
     let gradient = SMatrix::<f64, 3, NA>::from_fn(|a, i| -masses[i] * acceleration[(a, i)]);
@@ -272,7 +272,7 @@ fn cartesian<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 
 /// Evaluates `molecule` at the state in `state_path` (or its default state) and returns one
 /// JSON object, a key per line.
-pub fn eval(molecule: &str, state_path: Option<&Path>) -> Result<String, CliError> {
+pub fn eval(molecule: &str, state_path: Option<&Path>) -> Result<String, Error> {
     let file = match state_path {
         Some(p) if p.as_os_str() == "-" => "state on stdin".to_owned(),
         Some(p) => format!("state file {}", p.display()),
@@ -282,15 +282,15 @@ pub fn eval(molecule: &str, state_path: Option<&Path>) -> Result<String, CliErro
         None => None,
         Some(path) => {
             let text = if path.as_os_str() == "-" {
-                read_capped(std::io::stdin(), "the state from stdin", MAX_INPUT_BYTES).map_err(CliError::Message)?
+                read_capped(std::io::stdin(), "the state from stdin", MAX_INPUT_BYTES).map_err(Error::Message)?
             } else {
-                read_text_capped(path, MAX_INPUT_BYTES).map_err(CliError::Message)?
+                read_text_capped(path, MAX_INPUT_BYTES).map_err(Error::Message)?
             };
-            Some(serde_json::from_str(&text).map_err(|e| CliError::context(format!("invalid {file}"), e))?)
+            Some(serde_json::from_str(&text).map_err(|e| Error::context(format!("invalid {file}"), e))?)
         }
     };
     let fields = molecules::visit(molecule, Eval { state: state.as_ref(), file: &file })
-        .ok_or_else(|| unknown_molecule(molecule))??;
+        .ok_or_else(|| Error::unknown_molecule(molecule))??;
     // One key per line, each value compact: matrices read as rows.
     let lines: Vec<String> = fields.iter().map(|(k, v)| format!("  {}: {v}", Value::from(*k))).collect();
     Ok(format!("{{\n{}\n}}", lines.join(",\n")))

@@ -2,8 +2,8 @@
 
 use std::fmt::Write as _;
 
-use crate::molecules;
-use crate::runtime::{Molecule, MoleculeVisitor};
+use rovib::molecules;
+use rovib::runtime::{Molecule, MoleculeVisitor};
 
 struct Describe;
 

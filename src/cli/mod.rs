@@ -1,22 +1,20 @@
 //! The `rovib` commands: `list`, `eval`, `run`, `ensemble`, `bench`.
 //!
-//! Each command is generic over the molecule: [`crate::molecules::visit`] calls it with the
-//! generated type, so it runs on fixed-size, monomorphised code.
+//! The commands call the library ([`rovib::Simulation`], [`rovib::ensemble`], [`rovib::freq`],
+//! [`rovib::bench`]); this module owns what only a command line needs: arguments, progress bars
+//! on a terminal, Ctrl-C, and the report on stdout.
 
-use std::fmt;
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
+use rovib::Error;
 
-use crate::runtime::diagnostic::FileError;
-
-pub mod bench;
-pub mod bench_ensemble;
-pub mod ensemble;
+mod ensemble;
 mod eval;
-pub mod freq;
+mod interrupt;
 mod list;
-pub mod run;
+mod progress;
+mod run;
 
 /// Classical rotation-vibration dynamics of polyatomic molecules.
 #[derive(Debug, Parser)]
@@ -115,48 +113,8 @@ pub enum Command {
     },
 }
 
-/// A command's failure.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum CliError {
-    /// One line for the user.
-    Message(String),
-    /// A problem located in a file (scene), shown with its place and a fix.
-    File(FileError),
-}
-
-impl fmt::Display for CliError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            // One line, whatever the cause contained.
-            CliError::Message(m) => f.write_str(&m.replace('\n', " ")),
-            CliError::File(e) => write!(f, "{e}"),
-        }
-    }
-}
-
-impl std::error::Error for CliError {}
-
-impl From<FileError> for CliError {
-    fn from(e: FileError) -> Self {
-        CliError::File(e)
-    }
-}
-
-impl From<String> for CliError {
-    fn from(m: String) -> Self {
-        CliError::Message(m)
-    }
-}
-
-impl CliError {
-    /// An error from anything displayable, prefixed with context.
-    pub fn context(context: impl fmt::Display, e: impl fmt::Display) -> Self {
-        CliError::Message(format!("{context}: {e}"))
-    }
-}
-
 /// Runs one command.
-pub fn execute(cli: Cli) -> Result<(), CliError> {
+pub fn execute(cli: Cli) -> Result<(), Error> {
     match cli.command {
         Command::List => say(&list::list()),
         Command::Eval { molecule, state } => {
@@ -164,19 +122,19 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             say(&format!("{json}\n"))
         }
         Command::Run { scene: Some(scene), out, resume: None, quiet }
-            if crate::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) =>
+            if rovib::ensemble::load_scene(&scene).is_ok_and(|s| s.ensemble) =>
         {
             run_ensemble(&scene, out.as_deref(), None, quiet, false, true)
         }
-        Command::Freq { molecule, json } => say(&freq::freq(&molecule, json)?),
+        Command::Freq { molecule, json } => say(&rovib::freq::freq(&molecule, json)?),
         Command::Ensemble { scene, out, threads, quiet, resume, no_lanes } => {
             run_ensemble(&scene, out.as_deref(), threads, quiet, resume, !no_lanes)
         }
         Command::Run { scene, out, resume, quiet } => {
             let report = match (&resume, &scene) {
-                (Some(dir), scene) => run::resume(dir, scene.as_deref(), quiet)?,
-                (None, Some(scene)) => run::run(scene, out.as_deref(), quiet)?,
-                (None, None) => return Err(CliError::Message("give a scene file, or --resume DIR".into())),
+                (Some(dir), scene) => run::run(rovib::Simulation::resume(dir, scene.as_deref())?, quiet)?,
+                (None, Some(scene)) => run::run(rovib::Simulation::load(scene, out.as_deref())?, quiet)?,
+                (None, None) => return Err(Error::Message("give a scene file, or --resume DIR".into())),
             };
             if !quiet {
                 let c = &report.conservation;
@@ -203,7 +161,7 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             Ok(())
         }
         Command::Bench { scene, out, ensemble: true, trajectories, .. } => {
-            let report = bench_ensemble::bench(&scene, out.as_deref(), trajectories)?;
+            let report = rovib::bench::ensemble::bench(&scene, out.as_deref(), trajectories)?;
             let mut text = report.table.clone();
             for f in &report.files {
                 text.push_str(&format!("wrote {}\n", f.display()));
@@ -211,7 +169,7 @@ pub fn execute(cli: Cli) -> Result<(), CliError> {
             say(&text)
         }
         Command::Bench { scene, out, quick, .. } => {
-            let report = bench::bench(&scene, out.as_deref(), quick)?;
+            let report = rovib::bench::bench(&scene, out.as_deref(), quick)?;
             let mut text = format!(
                 "{} runs; reference final-state error ~{:.1e} bohr\n",
                 report.trials.len(),
@@ -233,7 +191,7 @@ fn run_ensemble(
     quiet: bool,
     resume: bool,
     lanes: bool,
-) -> Result<(), CliError> {
+) -> Result<(), Error> {
     // Under `mpirun` (with the `mpi` feature) only rank 0 has a report to print.
     let Some(report) = ensemble::ensemble(scene, out, threads, quiet, resume, lanes)? else {
         return Ok(());
@@ -241,19 +199,19 @@ fn run_ensemble(
     if !quiet {
         say(&ensemble::describe(&report))?;
     }
-    if report.status == crate::ensemble::Status::Failed {
+    if report.status == rovib::ensemble::Status::Failed {
         let dir = report.files.first().and_then(|f| f.parent()).map_or(String::new(), |d| d.display().to_string());
         let reasons: Vec<String> = report.outcome.failed.iter().map(|(r, n)| format!("{n} {r}")).collect();
-        return Err(CliError::Message(format!(
+        return Err(Error::Message(format!(
             "every one of the {} trajectories failed ({}): there are no statistics; the first failures are in \
              {dir}/summary.json",
             report.requested,
             reasons.join(", ")
         )));
     }
-    if report.status == crate::ensemble::Status::Interrupted {
+    if report.status == rovib::ensemble::Status::Interrupted {
         let dir = report.files.first().and_then(|f| f.parent()).map_or(String::new(), |d| d.display().to_string());
-        return Err(CliError::Message(format!(
+        return Err(Error::Message(format!(
             "interrupted: {} of {} trajectories completed ({} failed); consistent outputs for them are in {dir}",
             report.outcome.completed,
             report.requested,
@@ -265,40 +223,11 @@ fn run_ensemble(
 
 /// Writes to stdout. A closed pipe (`rovib list | head -1`) ends the output quietly instead of
 /// panicking as `println!` would.
-fn say(text: &str) -> Result<(), CliError> {
+fn say(text: &str) -> Result<(), Error> {
     use std::io::Write as _;
     let mut out = std::io::stdout().lock();
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(CliError::context("cannot write to stdout", e)),
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(Error::context("cannot write to stdout", e)),
         _ => Ok(()),
-    }
-}
-
-/// The error for a molecule name that is not compiled in.
-pub(crate) fn unknown_molecule(name: &str) -> CliError {
-    // Only a name a definition could have (a lowercase identifier) gets "add molecules/NAME.toml":
-    // an empty name would say "molecules/.toml".
-    let definable = name.chars().next().is_some_and(|c| c.is_ascii_lowercase())
-        && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
-    let add = if definable {
-        format!("add molecules/{name}.toml and rebuild to add it")
-    } else {
-        "a new molecule needs a name of lowercase letters, digits and `_`, starting with a letter, and its \
-         molecules/NAME.toml"
-            .to_owned()
-    };
-    CliError::Message(format!(
-        "unknown molecule `{}`; the compiled-in molecules are {} ({add})",
-        name.escape_debug(),
-        crate::molecules::NAMES.join(", ")
-    ))
-}
-
-impl From<crate::start::StartError> for CliError {
-    fn from(e: crate::start::StartError) -> Self {
-        match e {
-            crate::start::StartError::File(e) => CliError::File(e),
-            crate::start::StartError::Message(m) => CliError::Message(m),
-        }
     }
 }

@@ -9,7 +9,7 @@
 //! "Many trajectories per core"). Lanes of every width compute the same bits, so a block's
 //! outcome does not depend on the build's vector width. The observations are kept per
 //! trajectory and folded into the accumulators in index order at the end of the block, so the
-//! outcome is the scalar [`super::runner::run_block`]'s to round-off (`tests/ensemble.rs`
+//! outcome is the scalar [`super::run_block`]'s to round-off (`tests/ensemble.rs`
 //! compares the two block outcomes). A trajectory whose lane fails is run again by the scalar
 //! path, which reports its failure with the full error.
 //!
@@ -17,13 +17,13 @@
 //! when the build has AVX-512 (`RUSTFLAGS="-C target-cpu=native"` on such a CPU), `F64x4` with
 //! AVX2, else `F64x2` (one SSE2 register: the default, baseline x86-64 build).
 //!
-//! Used by [`super::runner::run_block`] when the plan asks for lanes and the run allows them:
+//! Used by [`super::run_block`] when the plan asks for lanes and the run allows them:
 //! DOP853, no frozen coordinate, no kept trajectory files.
 
 use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::runner::{Accumulators, Failure, Outcome, Plan, Progress, Stop, Watch, fold, run_block_scalar};
+use super::runner::{Accumulators, Failure, Outcome, Plan, Stop, Tally, Watch, fold, run_block_scalar};
 use crate::runtime::Molecule;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
@@ -206,13 +206,13 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
     }
 }
 
-/// [`super::runner::run_block`] on lanes (see the module docs); `plan` must satisfy [`applies`].
+/// [`super::run_block`] on lanes (see the module docs); `plan` must satisfy [`applies`].
 pub fn run_block_lanes<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     sampler: &dyn Sampler<N>,
     indices: Range<u64>,
     stop: &AtomicBool,
-    progress: &Progress,
+    progress: &Tally,
 ) -> Outcome
 where
     M: Molecule<N, NA> + Sync,

@@ -38,18 +38,18 @@ pub mod spectrum;
 pub mod states_file;
 pub mod states_xyz;
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
-
 use self::checkpoint::{Checkpoint, Header, Identity, Layout, Resumed};
-use self::runner::{Accumulators, BLOCK, Outcome, Plan, Progress, run_block};
+use self::runner::{Accumulators, BLOCK, Outcome, Plan, Tally, run_block_scalar};
 use self::scene::{Bound, EnsembleScene, MethodSpec, parse_ensemble};
 use self::schedule::{BlockResult, Collector, Remote, Work, block_range, caught, coordinate};
-use crate::cli::{CliError, unknown_molecule};
+use crate::Progress;
+use crate::error::Error;
 use crate::molecules;
 use crate::runtime::sample::{self, Sampler};
 use crate::runtime::{Molecule, MoleculeVisitor};
@@ -64,8 +64,6 @@ pub struct EnsembleOptions {
     pub out_dir: PathBuf,
     /// Worker threads, overriding the scene's `threads` (`None`: the scene's, else every core).
     pub threads: Option<usize>,
-    /// Show a progress bar (the caller decides: a terminal and not `--quiet`).
-    pub progress: bool,
     /// When set, no new trajectory starts and running ones stop at their next output time;
     /// the outputs then cover the trajectories that finished (status "interrupted").
     pub stop: Arc<AtomicBool>,
@@ -81,13 +79,12 @@ pub struct EnsembleOptions {
 }
 
 impl EnsembleOptions {
-    /// Outputs into `out_dir`, threads from the scene, no progress bar, a stop flag of its own,
+    /// Outputs into `out_dir`, threads from the scene, a stop flag of its own,
     /// a checkpoint, no resume.
     pub fn new(out_dir: impl Into<PathBuf>) -> Self {
         Self {
             out_dir: out_dir.into(),
             threads: None,
-            progress: false,
             stop: Arc::new(AtomicBool::new(false)),
             lanes: true,
             checkpoint: true,
@@ -114,7 +111,7 @@ pub trait Serve {
     /// Asks rank 0 for blocks, runs them with `work` and sends their outcomes back, until rank 0
     /// has no more; every message carries `identity` (this run), which rank 0 checks against its
     /// own before it accepts any block.
-    fn serve(&mut self, work: &Work<'_>, identity: &Identity) -> Result<(), CliError>;
+    fn serve(&mut self, work: &Work<'_>, identity: &Identity) -> Result<(), Error>;
 
     /// Processes in all.
     fn ranks(&self) -> usize;
@@ -211,17 +208,41 @@ impl EnsembleReport {
 }
 
 /// Reads and parses a scene file (which may have `[ensemble]`).
-pub fn load_scene(path: &Path) -> Result<Scene, CliError> {
+pub fn load_scene(path: &Path) -> Result<Scene, Error> {
     let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)
-        .map_err(CliError::Message)?;
+        .map_err(Error::Message)?;
     Ok(parse_scene(&path.display().to_string(), &text)?)
 }
 
 /// Runs the ensemble of `scene` (which must have `[ensemble]`) with its own sampler and writes
 /// ensemble.csv, histograms.csv, correlations.csv, summary.json, ensemble.svg and
 /// histograms.svg into `options.out_dir`.
-pub fn run_ensemble(scene: &Scene, options: &EnsembleOptions) -> Result<EnsembleReport, CliError> {
-    run_linked(scene, options, Link::Alone).map(|r| r.expect("a process alone writes a report"))
+pub fn run_ensemble(scene: &Scene, options: &EnsembleOptions) -> Result<EnsembleReport, Error> {
+    run_ensemble_with(scene, options, &mut |_| {})
+}
+
+/// [`run_ensemble`] with a progress callback: called on this thread as trajectories finish (and
+/// at least every 0.1 s), with the trajectories done and failed so far. Setting
+/// `options.stop` (from the callback or another thread) ends the run cleanly: no trajectory
+/// starts, running ones stop at their next output time, and the outputs cover those that
+/// finished (status "interrupted"; continue with [`EnsembleOptions::resume`]). No signal handler
+/// is installed.
+///
+/// ```no_run
+/// use rovib::ensemble::{EnsembleOptions, load_scene, run_ensemble_with};
+///
+/// let scene = load_scene("scenes/h2o_ensemble.toml".as_ref())?;
+/// let options = EnsembleOptions::new("out/h2o_ensemble");
+/// let report = run_ensemble_with(&scene, &options, &mut |p| eprintln!("{}/{}", p.done, p.total))?;
+/// println!("{} completed", report.outcome.completed);
+/// # Ok::<(), rovib::Error>(())
+/// ```
+pub fn run_ensemble_with(
+    scene: &Scene,
+    options: &EnsembleOptions,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<EnsembleReport, Error> {
+    run_linked(scene, options, Link::Alone, progress).map(|r| r.expect("a process alone writes a report"))
 }
 
 /// [`run_ensemble`] as one process of several: the report on rank 0 (and alone), `None` on the
@@ -230,12 +251,13 @@ pub fn run_linked(
     scene: &Scene,
     options: &EnsembleOptions,
     link: Link<'_>,
-) -> Result<Option<EnsembleReport>, CliError> {
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Option<EnsembleReport>, Error> {
     let ensemble = parse_ensemble(scene)?;
     let name = scene.molecule.get_ref().clone();
-    molecules::visit(&name, Visit { scene, ensemble: &ensemble, options, link }).ok_or_else(|| {
-        let e = unknown_molecule(&name);
-        CliError::File(scene.source().error(scene.molecule.span(), e.to_string(), "use a name from `rovib list`"))
+    molecules::visit(&name, Visit { scene, ensemble: &ensemble, options, link, progress }).ok_or_else(|| {
+        let e = Error::unknown_molecule(&name);
+        Error::File(scene.source().error(scene.molecule.span(), e.to_string(), "use a name from `rovib list`"))
     })?
 }
 
@@ -244,10 +266,11 @@ struct Visit<'a, 'l> {
     ensemble: &'a EnsembleScene,
     options: &'a EnsembleOptions,
     link: Link<'l>,
+    progress: &'a mut dyn FnMut(Progress),
 }
 
 impl MoleculeVisitor for Visit<'_, '_> {
-    type Output = Result<Option<EnsembleReport>, CliError>;
+    type Output = Result<Option<EnsembleReport>, Error>;
 
     /// With the scene's `[potential.parameters]` every trajectory, the sampler and the
     /// statistics use the potential with them (as `rovib run` does), else the compiled-in one.
@@ -263,7 +286,7 @@ impl MoleculeVisitor for Visit<'_, '_> {
 }
 
 impl Visit<'_, '_> {
-    fn go<M, const N: usize, const NA: usize>(self, m: M) -> Result<Option<EnsembleReport>, CliError>
+    fn go<M, const N: usize, const NA: usize>(self, m: M) -> Result<Option<EnsembleReport>, Error>
     where
         M: Molecule<N, NA> + Sync,
     {
@@ -277,7 +300,7 @@ impl Visit<'_, '_> {
             )
         })?;
         let description = bound.description.clone();
-        execute(&m, self.scene, self.ensemble, bound, &*sampler, &description, self.options, self.link)
+        execute(&m, self.scene, self.ensemble, bound, &*sampler, &description, self.options, self.link, self.progress)
     }
 }
 
@@ -291,7 +314,7 @@ pub fn run_with_sampler<M, const N: usize, const NA: usize>(
     sampler: &dyn Sampler<N>,
     description: &str,
     options: &EnsembleOptions,
-) -> Result<EnsembleReport, CliError>
+) -> Result<EnsembleReport, Error>
 where
     M: Molecule<N, NA> + Sync + Clone,
 {
@@ -308,15 +331,37 @@ fn run_with_sampler_as_given<M, const N: usize, const NA: usize>(
     sampler: &dyn Sampler<N>,
     description: &str,
     options: &EnsembleOptions,
-) -> Result<EnsembleReport, CliError>
+) -> Result<EnsembleReport, Error>
 where
     M: Molecule<N, NA> + Sync,
 {
     let ensemble = parse_ensemble(scene)?;
     let times = output_times(scene.t_end, scene.output_interval);
     let bound = ensemble.bind(m, scene, &times)?;
-    execute(m, scene, &ensemble, bound, sampler, description, options, Link::Alone)
+    execute(m, scene, &ensemble, bound, sampler, description, options, Link::Alone, &mut |_| {})
         .map(|r| r.expect("a process alone writes a report"))
+}
+
+/// Runs trajectories `indices` (a block) and returns their outcome. Never panics on a bad
+/// trajectory: each failure is recorded and the block goes on. Stops starting trajectories
+/// (and cuts running ones short at their next output time) once `stop` is set.
+///
+/// On SIMD lanes ([`lanes`]) when `plan.lanes` is set and the plan allows it, else one
+/// trajectory at a time; the outcome is the same.
+pub fn run_block<M, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    sampler: &dyn Sampler<N>,
+    indices: Range<u64>,
+    stop: &AtomicBool,
+    progress: &Tally,
+) -> Outcome
+where
+    M: Molecule<N, NA> + Sync,
+{
+    if lanes::applies(plan) {
+        return lanes::run_block_lanes(plan, sampler, indices, stop, progress);
+    }
+    run_block_scalar(plan, sampler, indices, stop, progress)
 }
 
 /// The output times of a run from 0 to `t_end` every `interval` (a.u.): the grid
@@ -343,14 +388,15 @@ fn execute<M, const N: usize, const NA: usize>(
     description: &str,
     options: &EnsembleOptions,
     link: Link<'_>,
-) -> Result<Option<EnsembleReport>, CliError>
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Option<EnsembleReport>, Error>
 where
     M: Molecule<N, NA> + Sync,
 {
     let reduction = crate::start::frozen_reduction(m, scene)?;
     let ranks = link.ranks();
     if ranks > 1 && ensemble.keep_trajectories.is_some() {
-        return Err(CliError::Message(
+        return Err(Error::Message(
             "`ensemble.keep_trajectories` is not available with more than one MPI rank (only rank 0 writes files); \
              remove it, or run the ensemble in one process"
                 .into(),
@@ -362,7 +408,7 @@ where
         None
     } else {
         std::fs::create_dir_all(&options.out_dir)
-            .map_err(|e| CliError::context(format!("cannot create {}", options.out_dir.display()), e))?;
+            .map_err(|e| Error::context(format!("cannot create {}", options.out_dir.display()), e))?;
         Some(crate::dir_lock::DirLock::acquire(&options.out_dir)?)
     };
     let plan = Plan {
@@ -382,7 +428,7 @@ where
         keep: ensemble.keep_trajectories.map(|k| (k, options.out_dir.join("trajectories"))),
         time_scale: scene.time_unit.in_au(),
         lanes: options.lanes,
-        stops: crate::cli::run::stop_conditions(m, scene)?,
+        stops: crate::start::stop_conditions(m, scene)?,
     };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let asked = options.threads.or(ensemble.threads);
@@ -395,14 +441,13 @@ where
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
-        .map_err(|e| CliError::context("cannot start the worker threads", e))?;
+        .map_err(|e| Error::context("cannot start the worker threads", e))?;
     let n = ensemble.trajectories;
-    let progress =
-        Progress { bar: (options.progress && !worker).then(|| progress_bar(n)), failures: AtomicU64::new(0) };
+    let tally = Tally::default();
     let run = |b: u64| -> BlockResult {
-        caught(b, n, || run_block(&plan, sampler, block_range(b, n), &options.stop, &progress))
+        caught(b, n, || run_block(&plan, sampler, block_range(b, n), &options.stop, &tally))
     };
-    let work = Work { threads, pool: &pool, run: &run, stop: &options.stop, progress: &progress };
+    let work = Work { threads, pool: &pool, run: &run, stop: &options.stop, progress: &tally };
 
     let empty = Outcome::new(Accumulators::new(&plan));
     let identity = Identity { header: run_header(scene, ensemble, options), layout: Layout::of(&empty.statistics) };
@@ -425,26 +470,21 @@ where
         let checkpoint = options.checkpoint.then(|| dir.join(CHECKPOINT_FILE));
         // The error itself is what matters; a summary that cannot be written is mentioned.
         match output::write_failed(dir, scene, m.name(), n, error, checkpoint.as_deref()) {
-            Ok(_) => CliError::Message(error.to_owned()),
-            Err(e) => CliError::Message(format!("{error}; also {e} (summary.json may still say \"running\")")),
+            Ok(_) => Error::Message(error.to_owned()),
+            Err(e) => Error::Message(format!("{error}; also {e} (summary.json may still say \"running\")")),
         }
     };
     output::remove_stale_outputs(dir, options.resume)?;
     output::write_running(dir, scene, m.name(), n, options.resume)?;
     let mut collector = Collector::new(n, empty, resumed, checkpoint, ranks);
-    if let Some(bar) = &progress.bar {
-        bar.inc(collector.resumed());
-    }
+    tally.done.fetch_add(collector.resumed(), Ordering::Relaxed);
     let begin = Instant::now();
-    let result = coordinate(&work, &mut collector, remote);
+    let result = coordinate(&work, &mut collector, remote, &mut || progress(tally.progress(n)));
     let wall_time = begin.elapsed().as_secs_f64();
-    if let Some(bar) = &progress.bar {
-        bar.finish_and_clear();
-    }
     if let Err(e) = result {
         let kept = if options.checkpoint {
             format!(
-                "; the blocks that finished are in {} (fix the cause, then run again with --resume)",
+                "; the blocks that finished are in {} (fix the cause, then continue it: `rovib ensemble --resume` or `EnsembleOptions::resume`)",
                 options.out_dir.join(CHECKPOINT_FILE).display()
             )
         } else {
@@ -486,7 +526,7 @@ where
     {
         // Every trajectory ran and the outputs are written: the checkpoint has served.
         std::fs::remove_file(c.path())
-            .map_err(|e| CliError::context(format!("cannot remove {}", c.path().display()), e))?;
+            .map_err(|e| Error::context(format!("cannot remove {}", c.path().display()), e))?;
     }
     Ok(Some(report))
 }
@@ -534,39 +574,27 @@ fn open_checkpoint(
     ensemble: &EnsembleScene,
     options: &EnsembleOptions,
     empty: &Outcome,
-) -> Result<(Option<(Checkpoint, Header)>, Resumed), CliError> {
+) -> Result<(Option<(Checkpoint, Header)>, Resumed), Error> {
     let path = options.out_dir.join(CHECKPOINT_FILE);
     if !options.checkpoint {
         if options.resume {
-            return Err(CliError::Message("--resume needs the checkpoint, which is turned off".into()));
+            return Err(Error::Message("resuming (`rovib ensemble --resume`, `EnsembleOptions::resume`) needs the checkpoint, which is turned off".into()));
         }
         return Ok((None, Resumed::default()));
     }
     let header = run_header(scene, ensemble, options);
     if options.resume {
         let (c, resumed) = Checkpoint::resume(&path, &header, checkpoint::size_limit(&header, empty))
-            .map_err(|e| CliError::Message(e.to_string()))?;
+            .map_err(|e| Error::Message(e.to_string()))?;
         return Ok((Some((c, header)), resumed));
     }
     if path.exists() {
-        return Err(CliError::Message(format!(
+        return Err(Error::Message(format!(
             "{} holds the finished blocks of an earlier run of this folder that did not complete; \
-             continue it with --resume, or delete the file to start again",
+             continue it (`rovib ensemble --resume` or `EnsembleOptions::resume`), or delete the file to start again",
             path.display()
         )));
     }
-    let c = Checkpoint::create(&path, &header).map_err(|e| CliError::Message(e.to_string()))?;
+    let c = Checkpoint::create(&path, &header).map_err(|e| Error::Message(e.to_string()))?;
     Ok((Some((c, header)), Resumed::default()))
-}
-
-fn progress_bar(n: u64) -> ProgressBar {
-    let bar = ProgressBar::new(n);
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} trajectories, {msg}, eta {eta}",
-        )
-        .expect("a valid template"),
-    );
-    bar.set_message("0 failed");
-    bar
 }

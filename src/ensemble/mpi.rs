@@ -40,7 +40,7 @@ use serde::{Deserialize, Serialize};
 use super::checkpoint::Identity;
 use super::schedule::{BlockResult, Dispatcher, Remote, Work};
 use super::{EnsembleOptions, EnsembleReport, Link, Serve, load_scene, run_linked};
-use crate::cli::CliError;
+use crate::error::Error;
 
 /// Tag of the messages to rank 0.
 pub const TO_ROOT: i32 = 1;
@@ -75,11 +75,15 @@ pub fn launched() -> bool {
 
 /// Runs the ensemble of the scene at `path` as one rank of the MPI job: the report on rank 0,
 /// `None` on the others.
-pub fn run(path: &Path, options: &EnsembleOptions) -> Result<Option<EnsembleReport>, CliError> {
+pub fn run(
+    path: &Path,
+    options: &EnsembleOptions,
+    progress: &mut dyn FnMut(crate::Progress),
+) -> Result<Option<EnsembleReport>, Error> {
     let (universe, threading) = mpi::initialize_with_threading(Threading::Funneled)
-        .ok_or_else(|| CliError::Message("MPI is already initialised in this process".into()))?;
+        .ok_or_else(|| Error::Message("MPI is already initialised in this process".into()))?;
     if threading == Threading::Single {
-        return Err(CliError::Message(
+        return Err(Error::Message(
             "the MPI library gives no thread support (MPI_THREAD_SINGLE); rovib needs MPI_THREAD_FUNNELED".into(),
         ));
     }
@@ -87,7 +91,7 @@ pub fn run(path: &Path, options: &EnsembleOptions) -> Result<Option<EnsembleRepo
     let ranks = usize::try_from(world.size()).unwrap_or(1);
     if world.rank() == 0 {
         let mut root = Root { world: &world, active: ranks - 1, ranks, expected: None };
-        let result = load_scene(path).and_then(|scene| run_linked(&scene, options, Link::Root(&mut root)));
+        let result = load_scene(path).and_then(|scene| run_linked(&scene, options, Link::Root(&mut root), progress));
         // Whatever happened here, every other rank is told to end before MPI is finalised.
         let released = root.release();
         let report = result?;
@@ -95,7 +99,7 @@ pub fn run(path: &Path, options: &EnsembleOptions) -> Result<Option<EnsembleRepo
         Ok(report)
     } else {
         let mut worker = Worker { world: &world, started: false, ranks };
-        match load_scene(path).and_then(|scene| run_linked(&scene, options, Link::Worker(&mut worker))) {
+        match load_scene(path).and_then(|scene| run_linked(&scene, options, Link::Worker(&mut worker), &mut |_| {})) {
             Ok(_) => Ok(None),
             // Rank 0 reports it (once, with the rank), and ends the run.
             Err(e) if !worker.started => {
@@ -120,7 +124,7 @@ struct Root<'w> {
 impl Root<'_> {
     /// Answers every rank still running with "no more work" (results they still send are
     /// dropped: the run has failed or ended).
-    fn release(&mut self) -> Result<(), CliError> {
+    fn release(&mut self) -> Result<(), Error> {
         let mut failure = None;
         while self.active > 0 {
             let (bytes, status) = self.world.any_process().receive_vec_with_tag::<u8>(TO_ROOT);
@@ -133,7 +137,7 @@ impl Root<'_> {
             }
             self.active -= 1;
         }
-        failure.map_or(Ok(()), |m| Err(CliError::Message(m)))
+        failure.map_or(Ok(()), |m| Err(Error::Message(m)))
     }
 }
 
@@ -227,7 +231,7 @@ impl Worker<'_> {
 }
 
 impl Serve for Worker<'_> {
-    fn serve(&mut self, work: &Work<'_>, identity: &Identity) -> Result<(), CliError> {
+    fn serve(&mut self, work: &Work<'_>, identity: &Identity) -> Result<(), Error> {
         self.started = true;
         let want = 2 * work.threads as u64;
         let mut results = Vec::new();

@@ -18,10 +18,12 @@ use std::path::{Path, PathBuf};
 use serde_json::json;
 
 use super::EnsembleReport;
-use super::plot::{Content, Panel, svg};
+#[cfg(feature = "svg")]
+use super::plot::svg;
+use super::plot::{Content, Panel};
 use super::runner::Plan;
 use super::scene::EnsembleScene;
-use crate::cli::CliError;
+use crate::error::Error;
 use crate::output::{OutputFile, write_summary};
 use crate::runtime::Molecule;
 use crate::scene::Scene;
@@ -118,7 +120,7 @@ pub fn write_running(
             "resume": resume,
             "trajectories": { "requested": requested },
             "note": "written when the ensemble started and replaced when it ends; a run that still says \"running\" \
-                     while no process holds the folder's lock was killed (continue it with --resume)",
+                     while no process holds the folder's lock was killed (continue it with `rovib ensemble --resume` or `EnsembleOptions::resume`)",
         }),
     )
 }
@@ -153,12 +155,12 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     report: &EnsembleReport,
     dir: &Path,
-) -> Result<Vec<PathBuf>, CliError> {
+) -> Result<Vec<PathBuf>, Error> {
     let tu = scene.time_unit.name();
     let ts = scene.time_unit.in_au();
     let acc = &report.outcome.statistics;
     let mut files = Vec::new();
-    let mut csv = |name: &str, lines: Vec<String>| -> Result<(), CliError> {
+    let mut csv = |name: &str, lines: Vec<String>| -> Result<(), Error> {
         let mut f = OutputFile::create(dir, name)?;
         for l in &lines {
             f.line(l)?;
@@ -264,12 +266,15 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             ),
         })
         .collect();
+    // The plots need the `svg` feature; the CSV files above hold the same figures.
+    #[cfg(feature = "svg")]
     for (name, panels) in [("ensemble.svg", panels), ("histograms.svg", hist_panels)] {
         let path = dir.join(name);
-        std::fs::write(&path, svg(&panels))
-            .map_err(|e| CliError::context(format!("cannot write {}", path.display()), e))?;
+        std::fs::write(&path, svg(&panels)).map_err(|e| Error::io("cannot write", &path, e))?;
         files.push(path);
     }
+    #[cfg(not(feature = "svg"))]
+    let _ = (panels, hist_panels);
 
     // summary.json
     let o = &report.outcome;

@@ -5,7 +5,11 @@
 //! Measured against the hand-written SVG this replaced (issue 16, BENCHMARKS.md "Plots"): see
 //! there for lines of code and file sizes.
 
+#![cfg_attr(not(feature = "svg"), allow(dead_code))]
+
+#[cfg(feature = "svg")]
 use plotters::coord::Shift;
+#[cfg(feature = "svg")]
 use plotters::prelude::*;
 
 /// What one panel shows.
@@ -31,7 +35,9 @@ pub struct Panel {
 const W: u32 = 420;
 const H: u32 = 300;
 const COLUMNS: usize = 3;
+#[cfg(feature = "svg")]
 const BAND: RGBColor = RGBColor(0x1f, 0x77, 0xb4);
+#[cfg(feature = "svg")]
 const BARS: RGBColor = RGBColor(0xd6, 0x27, 0x28);
 
 /// A tick label for `v` on an axis whose ticks are multiples of `step` (1, 2 or 5 times a
@@ -100,6 +106,7 @@ fn y_scale(lo: f64, hi: f64) -> (f64, Option<i32>) {
 }
 
 /// Draws `p` into `area`; `None` if plotters reports an error (the panel is then left unfinished).
+#[cfg(feature = "svg")]
 fn panel(area: &DrawingArea<SVGBackend<'_>, Shift>, p: &Panel) -> Option<()> {
     let (xs, ys): (Vec<f64>, Vec<f64>) = match &p.content {
         Content::Band(v) => {
@@ -163,6 +170,7 @@ fn panel(area: &DrawingArea<SVGBackend<'_>, Shift>, p: &Panel) -> Option<()> {
 }
 
 /// The panels in a grid of up to three columns, as a standalone SVG document.
+#[cfg(feature = "svg")]
 pub fn svg(panels: &[Panel]) -> String {
     let columns = panels.len().clamp(1, COLUMNS);
     let rows = panels.len().div_ceil(COLUMNS).max(1);
@@ -183,7 +191,7 @@ pub fn svg(panels: &[Panel]) -> String {
     out
 }
 
-#[cfg(test)]
+#[cfg(all(test, feature = "svg"))]
 mod tests {
     use super::*;
 

@@ -1,5 +1,5 @@
 //! The unit of work of an ensemble: a block of consecutive trajectory indices → its
-//! accumulators, failures and counts ([`run_block`]), and how block outcomes merge.
+//! accumulators, failures and counts ([`super::run_block`]), and how block outcomes merge.
 //!
 //! Trajectory `i` draws its initial state from the sampler (its own random stream, a function
 //! of `(seed, i)` only), is integrated with the production system, observed at the output
@@ -13,7 +13,6 @@ use std::ops::{ControlFlow, Range};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-use indicatif::ProgressBar;
 use serde::{Deserialize, Serialize};
 
 use super::quantity::Quantity;
@@ -26,7 +25,7 @@ use crate::runtime::ensemble::{CorrelationWorkspace, Histogram, Lifetimes, Momen
 use crate::runtime::frames::body_of_lab_exact;
 use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
-use crate::runtime::integrate::{Dop853, GaussLegendre, InvalidInput, Method, Observer, Rk4, SolveError, Stats};
+use crate::runtime::integrate::{InvalidInput, Method, Observer, SolveError, Stats};
 use crate::runtime::nalgebra::Vector3;
 use crate::runtime::sample::Sampler;
 
@@ -429,7 +428,7 @@ impl Outcome {
         self.failed.values().sum()
     }
 
-    pub(super) fn fail(&mut self, f: Failure, progress: &Progress) {
+    pub(super) fn fail(&mut self, f: Failure, progress: &Tally) {
         *self.failed.entry(f.reason.clone()).or_default() += 1;
         if self.first_failures.len() < LISTED_FAILURES {
             self.first_failures.push(f);
@@ -438,35 +437,38 @@ impl Outcome {
     }
 }
 
-/// The progress bar (if any) and the live count of failures it shows.
-pub struct Progress {
-    /// The bar, on a terminal.
-    pub bar: Option<ProgressBar>,
+/// The live counts of finished and failed trajectories, shared by the worker threads; the
+/// coordinating thread reads them for the progress callback.
+#[derive(Debug, Default)]
+pub struct Tally {
+    /// Trajectories finished (completed, failed or cut short) so far.
+    pub done: AtomicU64,
     /// Failures so far.
     pub failures: AtomicU64,
 }
 
-impl Progress {
+impl Tally {
     pub(super) fn done(&self) {
-        if let Some(b) = &self.bar {
-            b.inc(1);
-        }
+        self.done.fetch_add(1, Ordering::Relaxed);
     }
 
     fn failed(&self) {
-        let n = self.failures.fetch_add(1, Ordering::Relaxed) + 1;
-        if let Some(b) = &self.bar {
-            b.set_message(format!("{n} failed"));
-        }
+        self.failures.fetch_add(1, Ordering::Relaxed);
     }
 
     /// A block another process ran: its trajectories and failures.
     pub fn remote_block(&self, o: &Outcome) {
         let failed = o.failed_count();
-        let n = self.failures.fetch_add(failed, Ordering::Relaxed) + failed;
-        if let Some(b) = &self.bar {
-            b.inc(o.completed + failed + o.interrupted);
-            b.set_message(format!("{n} failed"));
+        self.failures.fetch_add(failed, Ordering::Relaxed);
+        self.done.fetch_add(o.completed + failed + o.interrupted, Ordering::Relaxed);
+    }
+
+    /// The counts as a [`crate::Progress`] out of `total` trajectories.
+    pub fn progress(&self, total: u64) -> crate::Progress {
+        crate::Progress {
+            done: self.done.load(Ordering::Relaxed),
+            total,
+            failed: self.failures.load(Ordering::Relaxed),
         }
     }
 }
@@ -481,10 +483,11 @@ pub(super) fn panic_hook() -> Option<u64> {
 }
 
 /// One integrator, created once per block and reused for its trajectories.
+// One value per block: its size does not matter, and the workspace stays inline.
+#[allow(clippy::large_enum_variant)]
 enum Integrator {
-    Dop853(Dop853),
-    GaussLegendre(GaussLegendre),
-    Rk4(Rk4),
+    /// The scene's method ([`crate::runtime::integrate::Integrator`]).
+    Plain(crate::runtime::integrate::Integrator),
     /// DOP853 with the chart switch.
     Charts(Box<ChartIntegrator>),
 }
@@ -493,9 +496,7 @@ impl Integrator {
     fn new(method: &Method, dim: usize, atoms: usize, charts: bool) -> Result<Self, InvalidInput> {
         Ok(match method {
             Method::Dop853(o) if charts => Self::Charts(Box::new(ChartIntegrator::new(dim, atoms, *o)?)),
-            Method::Dop853(o) => Self::Dop853(Dop853::new(dim, *o)?),
-            Method::GaussLegendre(o) => Self::GaussLegendre(GaussLegendre::new(dim, *o)?),
-            Method::Rk4(o) => Self::Rk4(Rk4::new(dim, *o)?),
+            method => Self::Plain(crate::runtime::integrate::Integrator::new(method, dim)?),
         })
     }
 
@@ -508,9 +509,7 @@ impl Integrator {
         observer: &mut O,
     ) -> Result<Stats, SolveError<S::Error>> {
         match self {
-            Self::Dop853(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
-            Self::GaussLegendre(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
-            Self::Rk4(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
+            Self::Plain(i) => i.integrate(system, 0.0, y0, t_end, interval, observer),
             Self::Charts(_) => Err(SolveError::InvalidInput("the chart integrator runs through `Charts`".into())),
         }
     }
@@ -670,35 +669,13 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
     }
 }
 
-/// Runs trajectories `indices` (a block) and returns their outcome. Never panics on a bad
-/// trajectory: each failure is recorded and the block goes on. Stops starting trajectories
-/// (and cuts running ones short at their next output time) once `stop` is set.
-///
-/// On SIMD lanes ([`super::lanes`]) when `plan.lanes` is set and the plan allows it, else one
-/// trajectory at a time; the outcome is the same.
-pub fn run_block<M, const N: usize, const NA: usize>(
-    plan: &Plan<'_, M, N, NA>,
-    sampler: &dyn Sampler<N>,
-    indices: Range<u64>,
-    stop: &AtomicBool,
-    progress: &Progress,
-) -> Outcome
-where
-    M: Molecule<N, NA> + Sync,
-{
-    if super::lanes::applies(plan) {
-        return super::lanes::run_block_lanes(plan, sampler, indices, stop, progress);
-    }
-    run_block_scalar(plan, sampler, indices, stop, progress)
-}
-
-/// [`run_block`] one trajectory at a time.
+/// [`super::run_block`] one trajectory at a time.
 pub(super) fn run_block_scalar<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     sampler: &dyn Sampler<N>,
     indices: Range<u64>,
     stop: &AtomicBool,
-    progress: &Progress,
+    progress: &Tally,
 ) -> Outcome
 where
     M: Molecule<N, NA> + Sync,

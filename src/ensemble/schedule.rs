@@ -17,7 +17,7 @@ use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
 use super::checkpoint::{Checkpoint, CheckpointError, Header, Identity, Resumed};
-use super::runner::{BLOCK, Outcome, Progress};
+use super::runner::{BLOCK, Outcome, Tally};
 
 /// A block's outcome, or the message of the panic that ended it.
 pub type BlockResult = Result<Outcome, String>;
@@ -251,19 +251,24 @@ pub struct Work<'a> {
     pub run: &'a (dyn Fn(u64) -> BlockResult + Sync),
     /// Set by Ctrl-C or SIGTERM (or by a block that came back interrupted): no block starts.
     pub stop: &'a AtomicBool,
-    /// The progress bar, advanced for blocks other processes ran.
-    pub progress: &'a Progress,
+    /// The live counts, advanced for blocks other processes ran.
+    pub progress: &'a Tally,
 }
+
+/// The longest wait between two calls of `coordinate`'s `report`.
+pub const REPORT_EVERY: Duration = Duration::from_millis(100);
 
 /// Runs the collector's remaining blocks on this process's threads and on `remote`'s processes
 /// until all are in (or the stop flag or an error ends the run), flushing the collector as
 /// blocks arrive. On an error (a panicking trajectory, a checkpoint that cannot be written, a
 /// process that could not start) no new block starts, the running ones finish and are recorded,
-/// and the first error is returned.
+/// and the first error is returned. `report` runs on this thread after each round of arrivals
+/// and at least every [`REPORT_EVERY`] (for a progress callback, which may set the stop flag).
 pub fn coordinate(
     work: &Work<'_>,
     collector: &mut Collector,
     mut remote: Option<&mut dyn Remote>,
+    report: &mut dyn FnMut(),
 ) -> Result<(), String> {
     let dispatcher = Mutex::new(Dispatcher::new(collector.todo()));
     let lock = || dispatcher.lock().unwrap_or_else(PoisonError::into_inner);
@@ -303,11 +308,8 @@ pub fn coordinate(
                 }
             }
             if !local_done {
-                let first = if remote.is_some() {
-                    rx.recv_timeout(Duration::from_millis(1))
-                } else {
-                    rx.recv().map_err(|_| RecvTimeoutError::Disconnected)
-                };
+                let wait = if remote.is_some() { Duration::from_millis(1) } else { REPORT_EVERY };
+                let first = rx.recv_timeout(wait);
                 match first {
                     Ok((b, result)) => {
                         collector.add(0, b, result);
@@ -324,6 +326,7 @@ pub fn coordinate(
             if let Err(e) = collector.flush() {
                 collector.fail(e.to_string());
             }
+            report();
             if collector.interrupted() {
                 // A process was stopped (SIGTERM on its node): the whole run stops.
                 work.stop.store(true, Ordering::Relaxed);

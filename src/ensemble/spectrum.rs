@@ -10,10 +10,11 @@
 
 use std::path::{Path, PathBuf};
 
+#[cfg(feature = "svg")]
 use super::plot::{Content, Panel, svg};
 use super::quantity::Quantity;
 use super::runner::{Accumulators, Plan};
-use crate::cli::CliError;
+use crate::error::Error;
 use crate::output::OutputFile;
 use crate::runtime::Molecule;
 use crate::runtime::spectrum::{QuantumCorrection, Spectrum};
@@ -57,7 +58,7 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     acc: &Accumulators,
     temperature: Option<f64>,
     dir: &Path,
-) -> Result<Vec<PathBuf>, CliError> {
+) -> Result<Vec<PathBuf>, Error> {
     let Some(s) = spectrum(plan, acc) else { return Ok(Vec::new()) };
     let mut header = vec!["wavenumber_cm-1".to_owned(), "lineshape_e2bohr2_per_hartree".to_owned()];
     let sigmas: Vec<Vec<f64>> = match temperature {
@@ -78,7 +79,17 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         f.line(&row)?;
     }
     f.flush()?;
-    let mut files = vec![f.path().to_owned()];
+    // The plot needs the `svg` feature; spectrum.csv holds the same figures.
+    #[cfg(feature = "svg")]
+    return Ok(vec![f.path().to_owned(), write_svg(&s, &sigmas, temperature, dir)?]);
+    #[cfg(not(feature = "svg"))]
+    Ok(vec![f.path().to_owned()])
+}
+
+/// Writes `spectrum.svg`: the cross section under the harmonic correction with a temperature,
+/// else the line shape.
+#[cfg(feature = "svg")]
+fn write_svg(s: &Spectrum, sigmas: &[Vec<f64>], temperature: Option<f64>, dir: &Path) -> Result<PathBuf, Error> {
     let (y, label, values) = match (&sigmas.get(1), temperature) {
         (Some(sigma), Some(t)) => {
             ("σ (cm²/molecule)", format!("IR absorption at {t} K (harmonic correction)"), (*sigma).clone())
@@ -91,17 +102,16 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         y_label: y.to_owned(),
         // Plotted every ~resolution/6 (the file has every grid point): the plot stays small.
         content: Content::Band(
-            s.wavenumber.iter().zip(&values).step_by(plot_stride(&s)).map(|(&x, &v)| (x, v, 0.0)).collect(),
+            s.wavenumber.iter().zip(&values).step_by(plot_stride(s)).map(|(&x, &v)| (x, v, 0.0)).collect(),
         ),
     };
     let path = dir.join("spectrum.svg");
-    std::fs::write(&path, svg(&[panel]))
-        .map_err(|e| CliError::context(format!("cannot write {}", path.display()), e))?;
-    files.push(path);
-    Ok(files)
+    std::fs::write(&path, svg(&[panel])).map_err(|e| Error::io("cannot write", &path, e))?;
+    Ok(path)
 }
 
 /// The step through the grid for the plot: points about a sixth of the resolution apart.
+#[cfg(feature = "svg")]
 fn plot_stride(s: &Spectrum) -> usize {
     let spacing = s.wavenumber.get(1).map_or(1.0, |w| w - s.wavenumber[0]);
     ((s.resolution() / 6.0 / spacing).floor() as usize).max(1)

@@ -21,9 +21,7 @@ use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::nalgebra::SMatrix;
 use crate::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM};
 
-/// One ASE time unit in femtoseconds: `1e15 / (1e10 · √(e/u))` with ASE's default (CODATA 2014)
-/// elementary charge and atomic mass unit.
-pub const ASE_TIME_IN_FS: f64 = 10.180_505_671_156_348;
+pub use crate::output::ASE_TIME_IN_FS;
 
 /// Where the columns of one atom line are.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -232,7 +232,7 @@ impl Method {
 /// at the output times `t0 + k·output_interval` up to and including `t_end` (exact rule below).
 ///
 /// This allocates the method's workspace for this one run; to run many trajectories without
-/// allocating, create a [`Dop853`], [`GaussLegendre`] or [`Rk4`] once and call its `integrate`.
+/// allocating, create an [`Integrator`] once and call its [`Integrator::integrate`].
 ///
 /// # Output times
 ///
@@ -260,13 +260,59 @@ where
     S: OdeSystem + ?Sized,
     O: Observer + ?Sized,
 {
-    let dim = system.dim();
-    match method {
-        Method::Dop853(o) => Dop853::new(dim, *o)?.integrate(system, t0, y0, t_end, output_interval, observer),
-        Method::GaussLegendre(o) => {
-            GaussLegendre::new(dim, *o)?.integrate(system, t0, y0, t_end, output_interval, observer)
+    Integrator::new(method, system.dim())?.integrate(system, t0, y0, t_end, output_interval, observer)
+}
+
+/// The integrator a [`Method`] selects, with its workspace: the one place that maps a method to
+/// its solver. Create it once for a system dimension and call [`Integrator::integrate`] for each
+/// trajectory; a step allocates nothing.
+#[derive(Clone, Debug)]
+pub enum Integrator {
+    /// [`Method::Dop853`].
+    Dop853(Dop853),
+    /// [`Method::GaussLegendre`].
+    GaussLegendre(GaussLegendre),
+    /// [`Method::Rk4`].
+    Rk4(Rk4),
+}
+
+impl Integrator {
+    /// The solver of `method` for systems of dimension `dim`.
+    ///
+    /// # Errors
+    ///
+    /// [`InvalidInput`] for options the method cannot run with.
+    pub fn new(method: &Method, dim: usize) -> Result<Self, InvalidInput> {
+        Ok(match method {
+            Method::Dop853(o) => Self::Dop853(Dop853::new(dim, *o)?),
+            Method::GaussLegendre(o) => Self::GaussLegendre(GaussLegendre::new(dim, *o)?),
+            Method::Rk4(o) => Self::Rk4(Rk4::new(dim, *o)?),
+        })
+    }
+
+    /// Integrates as [`solve`] does, reusing this integrator's workspace.
+    ///
+    /// # Errors
+    ///
+    /// As [`solve`].
+    pub fn integrate<S, O>(
+        &mut self,
+        system: &mut S,
+        t0: f64,
+        y0: &[f64],
+        t_end: f64,
+        output_interval: f64,
+        observer: &mut O,
+    ) -> Result<Stats, SolveError<S::Error>>
+    where
+        S: OdeSystem + ?Sized,
+        O: Observer + ?Sized,
+    {
+        match self {
+            Self::Dop853(i) => i.integrate(system, t0, y0, t_end, output_interval, observer),
+            Self::GaussLegendre(i) => i.integrate(system, t0, y0, t_end, output_interval, observer),
+            Self::Rk4(i) => i.integrate(system, t0, y0, t_end, output_interval, observer),
         }
-        Method::Rk4(o) => Rk4::new(dim, *o)?.integrate(system, t0, y0, t_end, output_interval, observer),
     }
 }
 

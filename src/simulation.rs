@@ -1,14 +1,15 @@
-//! `rovib run SCENE.toml`: integrate a scene and write its trajectory and diagnostics.
+//! One trajectory of a scene, integrated into an output folder (`rovib run SCENE.toml`): the
+//! start or a continuation from `restart.json`, the folder's lock, the output writers, the energy
+//! guard, the stop conditions and summary.json. [`Simulation`] is the entry point; it takes a
+//! stop flag and a progress callback and installs no signal handler.
 
-use std::io::IsTerminal as _;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
-
-use super::{CliError, unknown_molecule};
+use crate::Progress;
 use crate::dir_lock::DirLock;
+use crate::error::Error;
 use crate::molecules;
 use crate::output::{
     Conservation, DipoleCsv, LabXyz, RunSummary, TRAJECTORY_UNITS_FILE, TrajectoryCsv, energy_guard,
@@ -26,8 +27,7 @@ use crate::runtime::integrate::{Dop853, Dop853Resume, Method, Observer, OdeSyste
 use crate::runtime::nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::{Scene, parse_scene};
-use crate::start::frozen_reduction;
-use std::sync::Arc;
+use crate::start::{StopCondition, frozen_reduction, stop_conditions};
 use std::sync::atomic::{AtomicBool, Ordering};
 // The initial state and the production system live in `crate::start`; re-exported here for
 // callers that used these paths.
@@ -53,30 +53,100 @@ pub struct RunReport {
     pub stopped: Option<serde_json::Value>,
 }
 
-/// Runs the scene at `path`, writing into `out_dir` (default `out/SCENE_NAME`).
-pub fn run(path: &Path, out_dir: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
-    let (scene, out_dir) = load_scene(path, out_dir, "")?;
-    visit(&scene, &out_dir, quiet, None)
+/// One trajectory of a scene, ready to run into its output folder.
+///
+/// ```no_run
+/// use std::sync::atomic::AtomicBool;
+/// use rovib::Simulation;
+///
+/// let stop = AtomicBool::new(false);
+/// let sim = Simulation::load("scenes/h2o.toml".as_ref(), Some("out/h2o".as_ref()))?;
+/// let report = sim.run(&stop, &mut |p| eprintln!("{}/{} outputs", p.done, p.total))?;
+/// // Later, with a later `run.end` in the scene: continue from restart.json.
+/// let more = Simulation::resume("out/h2o".as_ref(), Some("scenes/h2o_longer.toml".as_ref()))?;
+/// more.run(&stop, &mut |_| {})?;
+/// # Ok::<(), rovib::Error>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Simulation {
+    scene: Scene,
+    out_dir: PathBuf,
+    restart: Option<Restart>,
 }
 
-/// Continues the run in `dir` from its `restart.json` (`rovib run --resume DIR [SCENE]`): with
-/// the scene stored there, or with `scene`, which may change `run.end` (to continue further) but
-/// nothing that would make the continuation a different run. Appends to trajectory.csv and
-/// lab.xyz, rewrites summary.json (this part's work, `resumed_from`) and restart.json.
-pub fn resume(dir: &Path, scene: Option<&Path>, quiet: bool) -> Result<RunReport, CliError> {
-    let restart = Restart::read(dir)?;
-    let stored = parse_scene(&restart.scene_path, &restart.scene_text)?;
-    let scene = match scene {
-        Some(path) => load_scene(path, Some(dir), "")?.0,
-        None => stored.clone(),
-    };
-    compatible(&scene, &stored, &restart)?;
-    visit(&scene, dir, quiet, Some(&restart))
+impl Simulation {
+    /// The scene at `path`, to run into `out_dir` (default `out/SCENE_NAME`, created).
+    pub fn load(path: &Path, out_dir: Option<&Path>) -> Result<Self, Error> {
+        let (scene, out_dir) = load_scene(path, out_dir, "")?;
+        Ok(Self { scene, out_dir, restart: None })
+    }
+
+    /// A parsed scene (see [`crate::scene::parse_scene`]), to run into `out_dir` (created when
+    /// the run starts).
+    pub fn from_scene(scene: Scene, out_dir: impl Into<PathBuf>) -> Self {
+        Self { scene, out_dir: out_dir.into(), restart: None }
+    }
+
+    /// The continuation of the run in `dir` from its `restart.json` (`rovib run --resume DIR
+    /// [SCENE]`): with the scene stored there, or with `scene`, which may change `run.end` (to
+    /// continue further) but nothing that would make the continuation a different run. The run
+    /// appends to trajectory.csv and lab.xyz and rewrites summary.json (this part's work,
+    /// `resumed_from`) and restart.json.
+    pub fn resume(dir: &Path, scene: Option<&Path>) -> Result<Self, Error> {
+        let restart = Restart::read(dir)?;
+        let stored = parse_scene(&restart.scene_path, &restart.scene_text)?;
+        let scene = match scene {
+            Some(path) => load_scene(path, Some(dir), "")?.0,
+            None => stored.clone(),
+        };
+        compatible(&scene, &stored, &restart)?;
+        Ok(Self { scene, out_dir: dir.to_owned(), restart: Some(restart) })
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The output folder.
+    pub fn out_dir(&self) -> &Path {
+        &self.out_dir
+    }
+
+    /// Runs to the scene's end (or its stop condition) on this thread, writing the outputs the
+    /// scene asks for. `progress` is called after each output record; when `stop` is set (by the
+    /// callback or another thread) the run ends after the current record, the files ending on a
+    /// whole row and frame, summary.json and restart.json written, and returns
+    /// [`Error::Interrupted`]. A run that fails keeps what it wrote and says where.
+    pub fn run(&self, stop: &AtomicBool, progress: &mut dyn FnMut(Progress)) -> Result<RunReport, Error> {
+        std::fs::create_dir_all(&self.out_dir).map_err(|e| Error::io("cannot create", &self.out_dir, e))?;
+        let name = self.scene.molecule.get_ref().clone();
+        let visitor = Run { scene: &self.scene, out_dir: &self.out_dir, stop, progress, resume: self.restart.as_ref() };
+        molecules::visit(&name, visitor).ok_or_else(|| {
+            let e = Error::unknown_molecule(&name);
+            Error::File(self.scene.source().error(
+                self.scene.molecule.span(),
+                e.to_string(),
+                "use a name from `rovib list`",
+            ))
+        })?
+    }
+}
+
+/// Runs the scene at `path` into `out_dir` (default `out/SCENE_NAME`) to its end, without a
+/// stop flag or progress: [`Simulation::load`] then [`Simulation::run`].
+pub fn run(path: &Path, out_dir: Option<&Path>) -> Result<RunReport, Error> {
+    Simulation::load(path, out_dir)?.run(&AtomicBool::new(false), &mut |_| {})
+}
+
+/// Continues the run in `dir` (see [`Simulation::resume`]) to its end.
+pub fn resume(dir: &Path, scene: Option<&Path>) -> Result<RunReport, Error> {
+    Simulation::resume(dir, scene)?.run(&AtomicBool::new(false), &mut |_| {})
 }
 
 /// Whether `scene` continues the run that wrote `restart` (with scene `stored`): the same
 /// molecule, integrator, output times, units, outputs and frozen coordinates, and a later end.
-fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), CliError> {
+fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), Error> {
     let frozen = |s: &Scene| s.frozen.iter().map(|f| f.get_ref().clone()).collect::<Vec<_>>();
     let parameters =
         |s: &Scene| s.parameters.iter().map(|(n, v)| (n.get_ref().clone(), v.to_bits())).collect::<Vec<_>>();
@@ -96,7 +166,7 @@ fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), Cl
     .filter_map(|(differs, what)| differs.then_some(what))
     .collect();
     if !differences.is_empty() {
-        return Err(CliError::Message(format!(
+        return Err(Error::Message(format!(
             "{} differs from the run being continued ({}) in {}: a continuation may change only run.end (and \
              run.max_energy_error, run.max_outputs)",
             scene.path,
@@ -105,7 +175,7 @@ fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), Cl
         )));
     }
     if scene.t_end <= restart.t_au {
-        return Err(CliError::Message(format!(
+        return Err(Error::Message(format!(
             "the run already reached t = {} {}, and the scene ends at {} {}: give a later run.end to continue",
             restart.t,
             restart.time_unit,
@@ -116,19 +186,11 @@ fn compatible(scene: &Scene, stored: &Scene, restart: &Restart) -> Result<(), Cl
     Ok(())
 }
 
-fn visit(scene: &Scene, out_dir: &Path, quiet: bool, resume: Option<&Restart>) -> Result<RunReport, CliError> {
-    let name = scene.molecule.get_ref().clone();
-    let visitor = Run { scene, out_dir, progress: !quiet && std::io::stderr().is_terminal(), resume };
-    molecules::visit(&name, visitor).ok_or_else(|| {
-        let e = unknown_molecule(&name);
-        CliError::File(scene.source().error(scene.molecule.span(), e.to_string(), "use a name from `rovib list`"))
-    })?
-}
-
 struct Run<'a> {
     scene: &'a Scene,
     out_dir: &'a Path,
-    progress: bool,
+    stop: &'a AtomicBool,
+    progress: &'a mut dyn FnMut(Progress),
     resume: Option<&'a Restart>,
 }
 
@@ -156,7 +218,7 @@ pub fn start_energy_warning(name: &str, h0: f64, u_ref: f64) -> Option<String> {
 }
 
 impl MoleculeVisitor for Run<'_> {
-    type Output = Result<RunReport, CliError>;
+    type Output = Result<RunReport, Error>;
 
     /// With the scene's `[potential.parameters]` the molecule runs with them (the run-time
     /// path), else with its compiled-in constants.
@@ -169,10 +231,10 @@ impl MoleculeVisitor for Run<'_> {
 }
 
 impl Run<'_> {
-    fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, CliError> {
+    fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, Error> {
         let scene = self.scene;
         if scene.outputs.dipole && !m.has_dipole() {
-            return Err(CliError::File(scene.source().error(
+            return Err(Error::File(scene.source().error(
                 scene.molecule.span(),
                 format!("the scene asks for the \"dipole\" output, but molecule `{}` has no dipole surface", m.name()),
                 format!(
@@ -205,8 +267,8 @@ impl Run<'_> {
                             .clone()
                             .or_else(|| charts::to_cartesian(&m, &start.body).ok())
                             .and_then(|y| CartesianSystem::new(&m).ok()?.energy(&y).ok())
-                            .ok_or_else(|| CliError::Message("the initial state: no finite energy".into()))?,
-                        Err(e) => return Err(CliError::context("the initial state", e)),
+                            .ok_or_else(|| Error::Message("the initial state: no finite energy".into()))?,
+                        Err(e) => return Err(Error::context("the initial state", e)),
                     };
                     warnings.extend(start_energy_warning(m.name(), h0, m.potential(&q_ref)));
                 }
@@ -224,9 +286,6 @@ impl Run<'_> {
                 )
             }
         };
-        for w in &warnings {
-            eprintln!("warning: {w}");
-        }
         let layout = layout(system.reduction(), &m);
         let stops = stop_conditions(&m, scene)?;
 
@@ -291,8 +350,9 @@ impl Run<'_> {
             time_scale: scene.time_unit.in_au(),
             time_unit: scene.time_unit.name(),
             com,
-            progress: self.progress.then(|| progress_bar(scene)),
-            stop: crate::interrupt::flag(),
+            progress: self.progress,
+            total: (scene.t_end / scene.output_interval).ceil() as u64 + 1,
+            stop: self.stop,
             interrupted: false,
             t_reached: None,
             error: None,
@@ -332,9 +392,6 @@ impl Run<'_> {
                 .map_err(|e| charts::map_error(e, ChartError::Internal))
         };
         let wall_time = begin.elapsed().as_secs_f64();
-        if let Some(bar) = &recorder.progress {
-            bar.finish_and_clear();
-        }
         // Keep everything written so far, whatever happened.
         let flushed = recorder.flush();
 
@@ -396,25 +453,35 @@ impl Run<'_> {
             }
         }
         let where_ = format!("output so far is in {}", self.out_dir.display());
+        // The warnings about the scene, which a failed run has no report to carry.
+        let notes: String = warnings.iter().map(|w| format!("; warning: {w}")).collect();
         let message = match (failure, interrupted, summary_error) {
-            (Some(f), _, Some(s)) => Some(format!("{f}; also {s} (no summary.json); {where_}")),
-            (Some(f), _, None) => Some(format!("{f}; {where_}")),
-            (None, true, s) => Some(format!(
-                "interrupted at t = {} {}{}; {where_}{}",
-                t_reached.unwrap_or(0.0),
-                scene.time_unit.name(),
-                s.map(|s| format!("; {s} (no summary.json)")).unwrap_or_default(),
-                if scene.outputs.restart {
-                    format!("; continue with `rovib run --resume {}`", self.out_dir.display())
-                } else {
-                    String::new()
-                }
-            )),
+            (Some(f), _, Some(s)) => Some(format!("{f}; also {s} (no summary.json); {where_}{notes}")),
+            (Some(f), _, None) => Some(format!("{f}; {where_}{notes}")),
+            (None, true, s) => {
+                return Err(Error::Interrupted {
+                    message: format!(
+                        "interrupted at t = {} {}{}; {where_}{}",
+                        t_reached.unwrap_or(0.0),
+                        scene.time_unit.name(),
+                        s.map(|s| format!("; {s} (no summary.json)")).unwrap_or_default(),
+                        if scene.outputs.restart {
+                            format!(
+                                "; continue it with `rovib run --resume {}` or `Simulation::resume`",
+                                self.out_dir.display()
+                            )
+                        } else {
+                            String::new()
+                        }
+                    ),
+                    out_dir: self.out_dir.to_owned(),
+                });
+            }
             (None, false, Some(s)) => Some(s),
             (None, false, None) => None,
         };
         if let Some(message) = message {
-            return Err(CliError::Message(message));
+            return Err(Error::Message(message));
         }
         let stats = stats.unwrap_or_default();
         Ok(RunReport {
@@ -461,12 +528,12 @@ fn charts_json(report: Option<&ChartReport>, scene: &Scene) -> serde_json::Value
 }
 
 /// The body state stored in a restart file.
-fn restart_body<const N: usize>(r: &Restart) -> Result<BodyState<N>, CliError> {
+fn restart_body<const N: usize>(r: &Restart) -> Result<BodyState<N>, Error> {
     let [w, x, y, z] = r.state.orientation;
     let orientation = UnitQuaternion::try_new(Quaternion::new(w, x, y, z), 0.0)
-        .ok_or_else(|| CliError::Message("the restart file's orientation quaternion is zero".into()))?;
+        .ok_or_else(|| Error::Message("the restart file's orientation quaternion is zero".into()))?;
     if r.state.q.len() != N || r.state.p.len() != N {
-        return Err(CliError::Message(format!("the restart file has {} coordinates, expected {N}", r.state.q.len())));
+        return Err(Error::Message(format!("the restart file has {} coordinates, expected {N}", r.state.q.len())));
     }
     Ok(BodyState {
         q: SVector::from_column_slice(&r.state.q),
@@ -505,34 +572,6 @@ fn integrate_charts<M: Molecule<N, NA>, O: ChartObserver, const N: usize, const 
         }
         _ => charts::integrate(system, options, t0, ChartStart::Fresh(start), t_end, interval, observer, report),
     }
-}
-
-/// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
-type StopCondition = (usize, &'static str, [f64; 2]);
-
-/// `run.stop_outside` bound to the molecule; an unknown name is an error at its place (also
-/// used by ensembles, per trajectory).
-pub(crate) fn stop_conditions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
-    m: &M,
-    scene: &Scene,
-) -> Result<Vec<StopCondition>, CliError> {
-    let coords = m.coordinates();
-    let names: Vec<&str> = coords.iter().map(|c| c.name).collect();
-    scene
-        .stop_outside
-        .iter()
-        .map(|(name, [low, high])| {
-            let k = crate::start::find_name(
-                &scene.source(),
-                &names,
-                name,
-                || format!("{} has no coordinate `{}` (in run.stop_outside)", m.name(), name.get_ref()),
-                |known| format!("the coordinates of {} are {}", m.name(), known.join(", ")),
-            )?;
-            let to_au = |x: f64| scene.units.coordinate_to_au(coords[k].unit, x);
-            Ok((k, coords[k].name, [to_au(*low), to_au(*high)]))
-        })
-        .collect()
 }
 
 /// Whether a resumed run continues DOP853 from its own continuation point (else it restarts the
@@ -577,8 +616,8 @@ fn resumed_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &'m M,
     scene: &Scene,
     r: &Restart,
-) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), CliError> {
-    let bad = |what: String| CliError::Message(format!("the restart file does not fit {}: {what}", m.name()));
+) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), Error> {
+    let bad = |what: String| Error::Message(format!("the restart file does not fit {}: {what}", m.name()));
     if r.molecule != m.name() {
         return Err(bad(format!("it is of {}", r.molecule)));
     }
@@ -605,16 +644,6 @@ fn resumed_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
         return Err(bad(format!("its state has {} components, the run's system {}", r.y.len(), system.dim())));
     }
     Ok((system, r.y.clone()))
-}
-
-fn progress_bar(scene: &Scene) -> ProgressBar {
-    let outputs = (scene.t_end / scene.output_interval).ceil() as u64 + 1;
-    let bar = ProgressBar::new(outputs);
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} outputs, eta {eta}")
-            .expect("a valid template"),
-    );
-    bar
 }
 
 /// An [`OdeSystem`] that counts its right-hand-side evaluations, so that a run the solver stops
@@ -702,9 +731,12 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     time_scale: f64,
     time_unit: &'static str,
     com: (Vector3<f64>, Vector3<f64>),
-    progress: Option<ProgressBar>,
-    /// Set by SIGINT/SIGTERM; polled after each output record, so the run stops between records.
-    stop: Arc<AtomicBool>,
+    /// Called after each output record.
+    progress: &'m mut dyn FnMut(Progress),
+    /// Output records of the whole run (the progress total).
+    total: u64,
+    /// The caller's stop flag, polled after each output record, so the run stops between records.
+    stop: &'m AtomicBool,
     /// Whether the run stopped on `stop`.
     interrupted: bool,
     /// The last output time recorded, a.u.
@@ -814,9 +846,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
                 "checked": "at output times",
             }));
         }
-        if let Some(bar) = &self.progress {
-            bar.inc(1);
-        }
+        (self.progress)(Progress { done: self.records, total: self.total, failed: 0 });
         Ok(())
     }
 

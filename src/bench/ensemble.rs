@@ -19,15 +19,15 @@ use std::path::{Path, PathBuf};
 
 use rand_distr::{Distribution as _, StandardNormal};
 
-use super::CliError;
-use super::run::initial_state;
 use crate::ensemble::{EnsembleOptions, EnsembleReport, run_with_sampler};
+use crate::error::Error;
 use crate::molecules;
 use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
 use crate::runtime::sample::{self, SampleError, Sampler};
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::{Scene, parse_scene};
+use crate::simulation::initial_state;
 
 /// How often each configuration runs (the best wall time is kept).
 pub const REPEATS: usize = 3;
@@ -87,13 +87,13 @@ impl<const N: usize> Sampler<N> for Spread<N> {
 
 /// Runs the ensemble benchmark of the scene at `path` (which has `[ensemble]`
 /// and no `[statistics]`) with `trajectories` trajectories (default the scene's).
-pub fn bench(path: &Path, out_dir: Option<&Path>, trajectories: Option<u64>) -> Result<EnsembleBenchReport, CliError> {
+pub fn bench(path: &Path, out_dir: Option<&Path>, trajectories: Option<u64>) -> Result<EnsembleBenchReport, Error> {
     let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)
-        .map_err(CliError::Message)?;
+        .map_err(Error::Message)?;
     let name = path.display().to_string();
     let scene = parse_scene(&name, &text)?;
     if !scene.ensemble || text.lines().any(|l| l.trim_start().starts_with("[statistics]")) {
-        return Err(CliError::Message(format!(
+        return Err(Error::Message(format!(
             "{name}: `rovib bench --ensemble` needs a scene with [ensemble] and without [statistics] \
              (it sets its own), e.g. scenes/h2o_ensemble_bench.toml"
         )));
@@ -104,7 +104,7 @@ pub fn bench(path: &Path, out_dir: Option<&Path>, trajectories: Option<u64>) -> 
     };
     let molecule = scene.molecule.get_ref().clone();
     molecules::visit(&molecule, Visit { scene: &scene, text: &text, out_dir: &out_dir, trajectories })
-        .ok_or_else(|| super::unknown_molecule(&molecule))?
+        .ok_or_else(|| Error::unknown_molecule(&molecule))?
 }
 
 struct Visit<'a> {
@@ -115,7 +115,7 @@ struct Visit<'a> {
 }
 
 impl MoleculeVisitor for Visit<'_> {
-    type Output = Result<EnsembleBenchReport, CliError>;
+    type Output = Result<EnsembleBenchReport, Error>;
 
     fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
     where
@@ -150,7 +150,7 @@ impl MoleculeVisitor for Visit<'_> {
             quoted(&names)
         );
         let none = "\n[statistics]\nmeans = []\n".to_owned();
-        let variant = |statistics: &str| -> Result<Scene, CliError> {
+        let variant = |statistics: &str| -> Result<Scene, Error> {
             let mut text = self.text.to_owned();
             if let Some(n) = self.trajectories {
                 text = replace_trajectories(&text, n);
@@ -204,9 +204,9 @@ impl MoleculeVisitor for Visit<'_> {
         }
         let table = table(&trials, &description, self.scene);
         std::fs::create_dir_all(self.out_dir)
-            .map_err(|e| CliError::context(format!("cannot create {}", self.out_dir.display()), e))?;
+            .map_err(|e| Error::context(format!("cannot create {}", self.out_dir.display()), e))?;
         let md = self.out_dir.join("ensemble_bench.md");
-        std::fs::write(&md, &table).map_err(|e| CliError::context(format!("cannot write {}", md.display()), e))?;
+        std::fs::write(&md, &table).map_err(|e| Error::context(format!("cannot write {}", md.display()), e))?;
         Ok(EnsembleBenchReport { trials, sampler: description, table, files: vec![md] })
     }
 }

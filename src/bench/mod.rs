@@ -15,14 +15,17 @@
 //!   with an observer that only copies the state at output times; energies are computed
 //!   afterwards, outside the timing.
 
+pub mod ensemble;
+
 use std::fmt::Write as _;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use super::CliError;
+use crate::error::Error;
 use crate::molecules;
 use crate::output::{OutputFile, energy_scale};
+#[cfg(feature = "svg")]
 use crate::plot::{Panel, Series, svg};
 use crate::runtime::diagnostic::Compact;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
@@ -63,11 +66,11 @@ pub struct BenchReport {
 
 /// Runs the work-precision benchmark of the scene at `path` into `out_dir`
 /// (default `out/SCENE_NAME/bench`). `quick` uses fewer tolerances and steps.
-pub fn bench(path: &Path, out_dir: Option<&Path>, quick: bool) -> Result<BenchReport, CliError> {
+pub fn bench(path: &Path, out_dir: Option<&Path>, quick: bool) -> Result<BenchReport, Error> {
     let (scene, out_dir) = load_scene(path, out_dir, "bench")?;
     let name = scene.molecule.get_ref().clone();
     molecules::visit(&name, Bench { scene: &scene, out_dir: &out_dir, quick })
-        .ok_or_else(|| super::unknown_molecule(&name))?
+        .ok_or_else(|| Error::unknown_molecule(&name))?
 }
 
 struct Bench<'a> {
@@ -83,11 +86,11 @@ pub const MAX_STATE_BYTES: u64 = 64 << 20;
 /// The number of output states a run keeps (`t0`, the grid, `t_end`), or the error when they
 /// would take more than [`MAX_STATE_BYTES`]: a scene with many output times is refused with the
 /// numbers instead of aborting on an allocation.
-fn check_buffer(scene: &Scene, dim: usize) -> Result<usize, CliError> {
+fn check_buffer(scene: &Scene, dim: usize) -> Result<usize, Error> {
     let outputs = (scene.t_end / scene.output_interval).ceil() + 2.0;
     let bytes = outputs * dim as f64 * 8.0;
     if bytes.is_nan() || bytes > MAX_STATE_BYTES as f64 {
-        return Err(CliError::Message(format!(
+        return Err(Error::Message(format!(
             "rovib bench keeps every output state of a run: {} output times × {dim} numbers × 8 bytes = {} MiB, \
              more than its limit of {} MiB; lengthen run.output_interval (the diagram uses the final state and \
              the energy at output times, which a few hundred outputs sample well)",
@@ -111,13 +114,13 @@ fn lab_positions<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 }
 
 impl MoleculeVisitor for Bench<'_> {
-    type Output = Result<BenchReport, CliError>;
+    type Output = Result<BenchReport, Error>;
 
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         let scene = self.scene;
         let start = initial_state(&m, scene)?;
         let (system, y0) = production_system(&m, scene, &start.body)?;
-        let h0 = system.energy(&y0).map_err(|e| CliError::context("the initial state", e))?;
+        let h0 = system.energy(&y0).map_err(|e| Error::context("the initial state", e))?;
         let outputs = check_buffer(scene, y0.len())?;
 
         // One timed run: the states at output times, the work counters, the best wall time.
@@ -148,13 +151,13 @@ impl MoleculeVisitor for Bench<'_> {
 
         let tight = |rtol: f64| Method::Dop853(Dop853Options { rtol, atol: rtol, ..Default::default() });
         let (reference, ref_stats, _) = run(&tight(1e-14));
-        let reference = reference.map_err(|e| CliError::context("the reference run (DOP853 at 1e-14) failed", e))?;
+        let reference = reference.map_err(|e| Error::context("the reference run (DOP853 at 1e-14) failed", e))?;
         let (check, _, _) = run(&tight(1e-13));
-        let check = check.map_err(|e| CliError::context("the reference check (DOP853 at 1e-13) failed", e))?;
+        let check = check.map_err(|e| Error::context("the reference check (DOP853 at 1e-13) failed", e))?;
         let dim = y0.len();
         let last = |states: &[f64]| states[states.len() - dim..].to_vec();
         let ref_final =
-            lab_positions(&system, &last(&reference)).ok_or_else(|| CliError::Message("bad reference state".into()))?;
+            lab_positions(&system, &last(&reference)).ok_or_else(|| Error::Message("bad reference state".into()))?;
         let final_error =
             |states: &[f64]| lab_positions(&system, &last(states)).map_or(f64::INFINITY, |x| (x - ref_final).amax());
         let reference_error = final_error(&check);
@@ -222,16 +225,16 @@ impl MoleculeVisitor for Bench<'_> {
             trials.push(trial);
         }
 
-        let files = vec![
-            write_csv(self.out_dir, &trials)?,
-            write_svg(self.out_dir, scene, &trials, reference_error)?,
-            write_markdown(self.out_dir, scene, m.name(), &trials, reference_error, &ref_stats)?,
-        ];
+        let mut files = vec![write_csv(self.out_dir, &trials)?];
+        // bench.svg needs the `svg` feature (plotters); without it bench.csv and bench.md hold the same figures.
+        #[cfg(feature = "svg")]
+        files.push(write_svg(self.out_dir, scene, &trials, reference_error)?);
+        files.push(write_markdown(self.out_dir, scene, m.name(), &trials, reference_error, &ref_stats)?);
         Ok(BenchReport { trials, reference_error, files })
     }
 }
 
-fn write_csv(dir: &Path, trials: &[Trial]) -> Result<PathBuf, CliError> {
+fn write_csv(dir: &Path, trials: &[Trial]) -> Result<PathBuf, Error> {
     let mut f = OutputFile::create(dir, "bench.csv")?;
     f.line("method,parameter,parameter_unit,status,wall_time_s,rhs_evals,steps,rejected_steps,final_position_error_bohr,max_relative_energy_error")?;
     for t in trials {
@@ -256,6 +259,7 @@ fn write_csv(dir: &Path, trials: &[Trial]) -> Result<PathBuf, CliError> {
     Ok(f.path().to_owned())
 }
 
+#[cfg(feature = "svg")]
 fn families(trials: &[Trial]) -> Vec<&'static str> {
     let mut names: Vec<&'static str> = Vec::new();
     for t in trials {
@@ -266,7 +270,8 @@ fn families(trials: &[Trial]) -> Vec<&'static str> {
     names
 }
 
-fn write_svg(dir: &Path, scene: &Scene, trials: &[Trial], reference_error: f64) -> Result<PathBuf, CliError> {
+#[cfg(feature = "svg")]
+fn write_svg(dir: &Path, scene: &Scene, trials: &[Trial], reference_error: f64) -> Result<PathBuf, Error> {
     let series = |error: fn(&Trial) -> f64| -> Vec<Series> {
         families(trials)
             .into_iter()
@@ -328,7 +333,7 @@ fn write_markdown(
     trials: &[Trial],
     reference_error: f64,
     ref_stats: &Stats,
-) -> Result<PathBuf, CliError> {
+) -> Result<PathBuf, Error> {
     let mut s = String::new();
     let t_end = scene.t_end / scene.time_unit.in_au();
     let _ = writeln!(s, "# Work-precision: {molecule}, {} (`{}`)\n", scene.description, scene.path);

@@ -11,7 +11,7 @@ use std::fmt::Write as _;
 
 use serde_json::json;
 
-use crate::cli::{CliError, unknown_molecule};
+use crate::error::Error;
 use crate::molecules;
 use crate::runtime::cartesian_modes::{CartesianModes, is_linear};
 use crate::runtime::modes::{ModesError, NormalModes, STATIONARY_TOLERANCE, stationary_point};
@@ -65,14 +65,14 @@ pub fn rotational_constants(inertia: &crate::runtime::nalgebra::Matrix3<f64>) ->
 struct Freq;
 
 impl MoleculeVisitor for Freq {
-    type Output = Result<Frequencies, CliError>;
+    type Output = Result<Frequencies, Error>;
 
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         let start = m
             .reference_geometry()
-            .ok_or_else(|| CliError::Message(format!("{} has no reference geometry to start from", m.name())))?;
+            .ok_or_else(|| Error::Message(format!("{} has no reference geometry to start from", m.name())))?;
         let q0: SVector<f64, N> = stationary_point(&m, &start).map_err(|e| {
-            CliError::context(format!("no stationary point of {} near its reference geometry", m.name()), e)
+            Error::context(format!("no stationary point of {} near its reference geometry", m.name()), e)
         })?;
         let mut x0 = SMatrix::<f64, 3, NA>::zeros();
         m.positions(&q0, &mut x0);
@@ -84,7 +84,7 @@ impl MoleculeVisitor for Freq {
                 }
                 Err(e @ ModesError::NotMinimum { .. }) => (Vec::new(), Vec::new(), Some(e.to_string())),
                 Err(e) => {
-                    return Err(CliError::context(
+                    return Err(Error::context(
                         format!(
                             "{} is linear at its stationary point, where the internal coordinates and Euler angles are \
                              singular; its normal modes need the Cartesian Hessian",
@@ -102,7 +102,7 @@ impl MoleculeVisitor for Freq {
                     None,
                 ),
                 Err(e @ ModesError::NotMinimum { .. }) => (Vec::new(), Vec::new(), Some(e.to_string())),
-                Err(e) => return Err(CliError::context("no normal modes", e)),
+                Err(e) => return Err(Error::context("no normal modes", e)),
             }
         };
         let mut k = KineticMatrices::default();
@@ -130,12 +130,12 @@ impl MoleculeVisitor for Freq {
 }
 
 /// The stationary point, modes and rotational constants of molecule `name`.
-pub fn frequencies(name: &str) -> Result<Frequencies, CliError> {
-    molecules::visit(name, Freq).ok_or_else(|| unknown_molecule(name))?
+pub fn frequencies(name: &str) -> Result<Frequencies, Error> {
+    molecules::visit(name, Freq).ok_or_else(|| Error::unknown_molecule(name))?
 }
 
 /// The text (or JSON with `json`) that `rovib freq` prints.
-pub fn freq(name: &str, json: bool) -> Result<String, CliError> {
+pub fn freq(name: &str, json: bool) -> Result<String, Error> {
     let f = frequencies(name)?;
     if json {
         let v = json!({

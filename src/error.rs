@@ -1,0 +1,99 @@
+//! The library's error: what went wrong in loading a scene, running a simulation or an
+//! ensemble, or writing their outputs, with the place (a scene line, a file path) and a fix.
+
+use std::fmt;
+use std::path::PathBuf;
+
+use thiserror::Error as ThisError;
+
+use crate::runtime::diagnostic::FileError;
+
+/// A failure of a library call.
+#[derive(Debug, ThisError)]
+pub enum Error {
+    /// A problem located in a file (a scene, a molecule definition), shown with its place and a fix.
+    #[error("{0}")]
+    File(FileError),
+    /// An input/output failure on a named path.
+    #[error("{context} {}: {source}", path.display())]
+    Io {
+        /// What was being done, e.g. "cannot create".
+        context: String,
+        /// The file or folder.
+        path: PathBuf,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
+    /// The stop flag ended the run; the outputs up to the last whole record are in `out_dir`.
+    #[error("{message}")]
+    Interrupted {
+        /// What was done and how to continue, one line.
+        message: String,
+        /// The output folder.
+        out_dir: PathBuf,
+    },
+    /// Anything else, one line with its context.
+    #[error("{}", .0.replace('\n', " "))]
+    Message(String),
+}
+
+impl From<FileError> for Error {
+    fn from(e: FileError) -> Self {
+        Error::File(e)
+    }
+}
+
+impl From<String> for Error {
+    fn from(m: String) -> Self {
+        Error::Message(m)
+    }
+}
+
+impl From<crate::start::StartError> for Error {
+    fn from(e: crate::start::StartError) -> Self {
+        match e {
+            crate::start::StartError::File(e) => Error::File(e),
+            crate::start::StartError::Message(m) => Error::Message(m),
+        }
+    }
+}
+
+impl Error {
+    /// An error from anything displayable, prefixed with context.
+    pub fn context(context: impl fmt::Display, e: impl fmt::Display) -> Self {
+        Error::Message(format!("{context}: {e}"))
+    }
+
+    /// An input/output error on `path`.
+    pub fn io(context: impl Into<String>, path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io { context: context.into(), path: path.into(), source }
+    }
+
+    /// Whether the stop flag ended the run.
+    pub fn is_interrupted(&self) -> bool {
+        matches!(self, Error::Interrupted { .. })
+    }
+
+    /// The error for a molecule name that is not compiled in.
+    pub fn unknown_molecule(name: &str) -> Self {
+        // Only a name a definition could have (a lowercase identifier) gets "add
+        // molecules/NAME.toml": an empty name would say "molecules/.toml".
+        let definable = name.chars().next().is_some_and(|c| c.is_ascii_lowercase())
+            && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
+        let add = if definable {
+            format!("add molecules/{name}.toml and rebuild to add it")
+        } else {
+            "a new molecule needs a name of lowercase letters, digits and `_`, starting with a letter, and its \
+             molecules/NAME.toml"
+                .to_owned()
+        };
+        Error::Message(format!(
+            "unknown molecule `{}`; the compiled-in molecules are {} ({add})",
+            name.escape_debug(),
+            crate::molecules::NAMES.join(", ")
+        ))
+    }
+}
+
+/// A library result.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
