@@ -14,7 +14,7 @@
 //! Each ensemble is small and short (a few seconds in the test profile); the tolerances come
 //! from the standard errors stated at each check.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

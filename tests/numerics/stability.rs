@@ -19,9 +19,9 @@
 //!   energy in one O–H stretch, every integrator against the Cartesian propagation.
 //!
 //! How `rovib run` stops (non-finite right-hand side, collapsing step, singular metric) is
-//! tested through the binary in `tests/stress_cli.rs`.
+//! tested through the binary in `tests/commands/stress_cli.rs`.
 
-mod common;
+use crate::common;
 
 use std::ops::ControlFlow;
 
