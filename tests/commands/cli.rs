@@ -42,6 +42,23 @@ fn list_names_every_molecule_with_atoms_and_coordinates() {
     assert_eq!(text.matches("at run time").count(), 1, "{text}");
 }
 
+/// What the build used to print as a cargo warning for the shipped linear molecules (CO2, HCN)
+/// is a note of `rovib list`, once, under the molecule; a bent molecule has none.
+#[test]
+fn list_notes_that_a_reference_geometry_is_linear_under_the_molecule() {
+    let text = String::from_utf8(rovib(&["list"], None).stdout).unwrap();
+    for name in ["co2", "hcn"] {
+        let note = format!("  note:        the reference geometry of molecule `{name}` ({}) is linear", common::source_of(name));
+        assert_eq!(text.matches(&note).count(), 1, "{text}");
+        let block = text.split("\n\n").find(|b| b.starts_with(&format!("{name} ("))).unwrap();
+        assert!(block.contains(&note), "the note is under its molecule: {block}");
+        assert_eq!(rovib::molecules::notes(name).count(), 1);
+    }
+    assert_eq!(rovib::molecules::notes("h2o").count(), 0);
+    let h2o = text.split("\n\n").find(|b| b.starts_with("h2o (")).unwrap();
+    assert!(!h2o.contains("note:"), "{h2o}");
+}
+
 #[test]
 fn eval_prints_every_quantity_consistent_with_the_library() {
     let state = r#"{"q": [1.85, 1.75, 1.9], "p": [0.3, -0.2, 0.5], "euler": [0.4, 1.2, -0.7], "pe": [2.0, -1.0, 3.0]}"#;
