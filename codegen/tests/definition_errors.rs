@@ -347,7 +347,7 @@ fn two_directories_add_up_and_a_molecule_defined_in_both_is_an_error_naming_both
     assert_eq!(names, [("aa", "/home/me/mine/aa.toml"), ("xy2", "molecules/xy2.toml")], "in name order");
     let registry = std::fs::read_to_string(out.join("molecules.rs")).unwrap();
     assert!(registry.contains("Generated from `/home/me/mine/aa.toml`"), "{registry}");
-    assert!(registry.contains("pub const NAMES: [&str; 2] = [\"aa\", \"xy2\"]"), "{registry}");
+    assert!(registry.contains("pub const NAMES: [&str; 2usize] = [\"aa\", \"xy2\"]"), "{registry}");
 
     std::fs::write(user.join("xy2.toml"), GOOD).unwrap();
     let errors = rovib_codegen::generate_dirs(&dirs, &out, &Default::default()).unwrap_err();
