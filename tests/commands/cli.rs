@@ -48,7 +48,10 @@ fn list_names_every_molecule_with_atoms_and_coordinates() {
 fn list_notes_that_a_reference_geometry_is_linear_under_the_molecule() {
     let text = String::from_utf8(rovib(&["list"], None).stdout).unwrap();
     for name in ["co2", "hcn"] {
-        let note = format!("  note:        the reference geometry of molecule `{name}` ({}) is linear", common::source_of(name));
+        let note = format!(
+            "  note:        the reference geometry of molecule `{name}` ({}) is linear",
+            common::source_of(name)
+        );
         assert_eq!(text.matches(&note).count(), 1, "{text}");
         let block = text.split("\n\n").find(|b| b.starts_with(&format!("{name} ("))).unwrap();
         assert!(block.contains(&note), "the note is under its molecule: {block}");
