@@ -1,11 +1,14 @@
 //! Generates Rust for every molecule definition in `molecules/` (see `rovib-codegen`).
 //!
-//! Thin on purpose: it calls `rovib_codegen::generate`, prints one `rerun-if-changed` per
+//! Thin on purpose: it calls `rovib_codegen::generate_dirs`, prints one `rerun-if-changed` per
 //! definition, warns (`cargo::warning`) about molecules whose generated code is large enough to
-//! make rustc slow, and on a bad definition prints readable errors and exits 1 (never a panic).
+//! make rustc slow or whose definition is probably mistaken, writes the molecules' notes for
+//! `rovib list` (`molecule_notes.rs`), and on a bad definition prints readable errors and exits
+//! 1 (never a panic).
 //!
-//! `ROVIB_MOLECULES_DIR`, if set, replaces `molecules/` (for building a private set of
-//! molecules without editing the checkout). `ROVIB_KINETIC_JACOBIAN=generated` also generates
+//! `ROVIB_MOLECULES_DIR`, if set, adds the definitions of that directory to the shipped
+//! `molecules/` (a molecule defined in both is an error naming both files);
+//! `ROVIB_MOLECULES_ONLY=1` builds that directory's molecules alone. `ROVIB_KINETIC_JACOBIAN=generated` also generates
 //! the symbolic `kinetic_jacobian` (the reference path's ∂a/∂q, ∂A/∂q, ∂I/∂q) instead of the
 //! runtime's default, which assembles them from the generated ∂T/∂q; it grows like n³ and is
 //! meant for small molecules. `ROVIB_LARGE_MOLECULE_FORMS=expanded` generates large molecules
@@ -19,6 +22,7 @@ fn main() {
     let out_dir = PathBuf::from(std::env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     println!("cargo::rerun-if-changed=build.rs");
     println!("cargo::rerun-if-env-changed=ROVIB_MOLECULES_DIR");
+    println!("cargo::rerun-if-env-changed=ROVIB_MOLECULES_ONLY");
     println!("cargo::rerun-if-env-changed=ROVIB_KINETIC_JACOBIAN");
     println!("cargo::rerun-if-env-changed=ROVIB_LARGE_MOLECULE_FORMS");
     let mut options = match std::env::var("ROVIB_KINETIC_JACOBIAN").as_deref() {
@@ -46,13 +50,34 @@ fn main() {
             std::process::exit(1);
         }
     }
-    let (dir, display) = match std::env::var("ROVIB_MOLECULES_DIR") {
-        Ok(d) if !d.is_empty() => (PathBuf::from(&d), d),
-        _ => (manifest.join("molecules"), "molecules".to_owned()),
+    let shipped = (manifest.join("molecules"), "molecules".to_owned());
+    let user = match std::env::var("ROVIB_MOLECULES_DIR") {
+        Ok(d) if !d.is_empty() => Some((PathBuf::from(&d), d)),
+        _ => None,
     };
-    // The directory itself, so that adding a definition reruns generation.
-    println!("cargo::rerun-if-changed={}", dir.display());
-    match rovib_codegen::generate_with(&dir, &display, &out_dir, &options) {
+    let dirs = match (std::env::var("ROVIB_MOLECULES_ONLY").as_deref(), user) {
+        (Ok("") | Ok("0") | Err(_), user) => std::iter::once(shipped).chain(user).collect::<Vec<_>>(),
+        (Ok("1"), Some(user)) => vec![user],
+        (Ok("1"), None) => {
+            eprintln!(
+                "rovib: ROVIB_MOLECULES_ONLY=1 needs ROVIB_MOLECULES_DIR, the directory whose molecules to build"
+            );
+            std::process::exit(1);
+        }
+        (Ok(other), _) => {
+            eprintln!(
+                "rovib: ROVIB_MOLECULES_ONLY={other:?} is not understood; use `1` (only the molecules of \
+                 ROVIB_MOLECULES_DIR) or `0` (the default: the shipped molecules and those of ROVIB_MOLECULES_DIR)"
+            );
+            std::process::exit(1);
+        }
+    };
+    // The directories themselves, so that adding a definition reruns generation.
+    for (dir, _) in &dirs {
+        println!("cargo::rerun-if-changed={}", dir.display());
+    }
+    let dirs: Vec<(&std::path::Path, &str)> = dirs.iter().map(|(d, name)| (d.as_path(), name.as_str())).collect();
+    match rovib_codegen::generate_dirs(&dirs, &out_dir, &options) {
         Ok(report) => {
             for input in &report.inputs {
                 println!("cargo::rerun-if-changed={}", input.display());
@@ -60,8 +85,26 @@ fn main() {
             for warning in report.molecules.iter().filter_map(|m| m.size_warning()) {
                 println!("cargo::warning={warning}");
             }
-            for note in report.molecules.iter().flat_map(|m| &m.notes) {
-                println!("cargo::warning={note}");
+            for warning in report.molecules.iter().flat_map(|m| &m.warnings) {
+                println!("cargo::warning={warning}");
+            }
+            // Notes are facts about a molecule, not problems of the build: `rovib list` shows them.
+            let notes: Vec<String> = report
+                .molecules
+                .iter()
+                .flat_map(|m| m.notes.iter().map(move |note| format!("    ({:?}, {:?}),\n", m.name, note)))
+                .collect();
+            let source = format!(
+                "/// Notes on the compiled-in molecules, (molecule, note), for `rovib list`.\n\
+                 pub const NOTES: &[(&str, &str)] = &[\n{}];\n",
+                notes.concat()
+            );
+            let path = out_dir.join("molecule_notes.rs");
+            if std::fs::read_to_string(&path).ok().as_deref() != Some(source.as_str())
+                && let Err(e) = std::fs::write(&path, source)
+            {
+                eprintln!("rovib: cannot write {}: {e}; check that OUT_DIR is writable", path.display());
+                std::process::exit(1);
             }
         }
         Err(errors) => {

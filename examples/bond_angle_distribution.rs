@@ -4,8 +4,8 @@
 //! the bond angle α, with its mean and standard deviation).
 //!
 //! ```sh
-//! cargo run --release --example bond_angle_distribution                  # out/bond_angle_distribution.csv
-//! cargo run --release --example bond_angle_distribution -- angles.csv    # another CSV path
+//! cargo run --release --features examples --example bond_angle_distribution                  # out/bond_angle_distribution.csv
+//! cargo run --release --features examples --example bond_angle_distribution -- angles.csv    # another CSV path
 //! ```
 //!
 //! It prints the histogram as text and writes it as CSV (columns `alpha_low_deg`,

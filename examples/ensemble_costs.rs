@@ -12,7 +12,7 @@
 //! (default: the system's temporary folder).
 //!
 //! ```sh
-//! cargo run --release --features mpi --example ensemble_costs            # or: -- ROUNDS DIR
+//! cargo run --release --features mpi,examples --example ensemble_costs            # or: -- ROUNDS DIR
 //! ```
 //! Without `--features mpi` the message is the same JSON without its 30-byte envelope.
 

@@ -6,8 +6,8 @@
 //! α = 104.5°, slightly asymmetric so that no element vanishes by symmetry):
 //!
 //! ```sh
-//! cargo run --release --example g_matrices
-//! cargo run --release --example g_matrices -- 0.9578 0.9578 104.5    # r1/Å r2/Å alpha/deg
+//! cargo run --release --features examples --example g_matrices
+//! cargo run --release --features examples --example g_matrices -- 0.9578 0.9578 104.5    # r1/Å r2/Å alpha/deg
 //! ```
 //!
 //! Running it is a check: it stops with a message (and exit status 101) unless `G22` equals

@@ -15,8 +15,8 @@
 //!    per trajectory (mean of 8 runs in each round).
 //!
 //! ```sh
-//! cargo run --release --example lanes_bench            # 7 rounds
-//! cargo run --release --example lanes_bench -- 15      # more rounds
+//! cargo run --release --features examples --example lanes_bench            # 7 rounds
+//! cargo run --release --features examples --example lanes_bench -- 15      # more rounds
 //! ```
 //!
 //! `lanes_bench profile-scalar` and `lanes_bench profile-x2` run only one ensemble pass of that

@@ -9,7 +9,7 @@
 //!
 //! ```sh
 //! cargo build --release --features mpi
-//! cargo run --release --features mpi --example mpi_scaling        # or: -- TRAJECTORIES ROUNDS
+//! cargo run --release --features mpi,examples --example mpi_scaling        # or: -- TRAJECTORIES ROUNDS
 //! ```
 //! Runs `scenes/h2o_ensemble_bench.toml` (water, 10⁴ a.u., DOP853 at 1e-8) with the number of
 //! trajectories given (default 4000). `mpirun` runs with `--oversubscribe --bind-to none`

@@ -5,7 +5,7 @@
 //! molecule (reference geometry stretched and bent by varying amounts, varied momenta and J).
 //!
 //! ```sh
-//! cargo run --release --example parameters_cost            # or: -- ROUNDS EVALS_PER_ROUND
+//! cargo run --release --features examples --example parameters_cost            # or: -- ROUNDS EVALS_PER_ROUND
 //! ```
 
 mod common;

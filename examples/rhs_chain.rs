@@ -4,7 +4,7 @@
 //! the previous output) from each of the states in a file, timed with this thread's CPU time.
 //!
 //! ```sh
-//! cargo run --release --example rhs_chain -- STATES ITERS
+//! cargo run --release --features examples --example rhs_chain -- STATES ITERS
 //! ```
 //!
 //! `STATES` holds one state a line, 12 numbers in atomic units in the seed's variables

@@ -5,7 +5,7 @@
 //! `ROVIB_MOLECULES_DIR` (docs/src/history/benchmarks.md, "Large molecules").
 //!
 //! ```sh
-//! cargo run --release --example rhs_cost -- [ROUNDS [EVALS]] [NAME...]
+//! cargo run --release --features examples --example rhs_cost -- [ROUNDS [EVALS]] [NAME...]
 //! ```
 //!
 //! Prints one line per molecule: `name N median_ns min_ns max_ns` (per evaluation, over the

@@ -13,8 +13,8 @@
 //!   G = `G22` from the runtime, ω² the eigenvalues of G·F.
 //!
 //! ```sh
-//! cargo run --release --example rotational_constants             # every molecule
-//! cargo run --release --example rotational_constants -- h2o nh3  # some of them
+//! cargo run --release --features examples --example rotational_constants             # every molecule
+//! cargo run --release --features examples --example rotational_constants -- h2o nh3  # some of them
 //! ```
 //!
 //! Not every reference geometry is an equilibrium (ch4.toml's has one angle of 96°; see the

@@ -1,5 +1,5 @@
 //! Draws per second of the thermal sampler for water and methane at 300 K (energy cap 0.05
-//! hartree): `cargo run --release --example sampling_rate`.
+//! hartree): `cargo run --release --features examples --example sampling_rate`.
 
 use std::time::Instant;
 

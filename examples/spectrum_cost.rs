@@ -10,7 +10,7 @@
 //!    the three cross sections, thread CPU time, many repetitions.
 //!
 //! ```sh
-//! cargo run --release --example spectrum_cost            # or: -- TRAJECTORIES ROUNDS
+//! cargo run --release --features examples --example spectrum_cost            # or: -- TRAJECTORIES ROUNDS
 //! ```
 
 mod common;

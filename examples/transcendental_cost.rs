@@ -5,7 +5,7 @@
 //! `[−3, 3]` (angles, Morse exponents). docs/src/history/benchmarks.md, "Many trajectories per core".
 //!
 //! ```sh
-//! cargo run --release --example transcendental_cost -- 7
+//! cargo run --release --features examples --example transcendental_cost -- 7
 //! ```
 
 use std::hint::black_box;

@@ -17,3 +17,10 @@
 )]
 
 include!(concat!(env!("OUT_DIR"), "/molecules.rs"));
+include!(concat!(env!("OUT_DIR"), "/molecule_notes.rs"));
+
+/// The notes on the molecule called `name` (e.g. that its reference geometry is linear), which
+/// `rovib list` prints; empty for a molecule without notes or an unknown name.
+pub fn notes(name: &str) -> impl Iterator<Item = &'static str> {
+    NOTES.iter().filter(move |(molecule, _)| *molecule == name).map(|(_, note)| *note)
+}

@@ -11,7 +11,7 @@
 //!
 //! **What "exactly" means.** With DOP853 a continued run takes the same steps as one run to the
 //! later end time would have, so every output after the first run's last one is bit for bit
-//! that run's (`tests/restart.rs` checks it). With the fixed-step methods the continuation
+//! that run's (`tests/commands/restart.rs` checks it). With the fixed-step methods the continuation
 //! restarts the step grid at the last output time from the state written there, which is the
 //! uninterrupted run's own step sequence when the output interval is a whole number of steps.
 //!

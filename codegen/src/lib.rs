@@ -72,9 +72,15 @@ pub struct GeneratedMolecule {
     pub graph_nodes: usize,
     /// Wall time from reading the definition to formatted source.
     pub codegen_time: Duration,
-    /// Notes for the build (not errors), e.g. a reference geometry where the Euler chart is
-    /// singular ([`singular_reference_note`]).
+    /// The definition file as named in messages, e.g. `molecules/h2o.toml`.
+    pub path: String,
+    /// Facts about the molecule worth knowing before a run (not errors), e.g. a reference
+    /// geometry where the Euler chart is singular ([`singular_reference_note`]). `rovib list`
+    /// prints them; the build does not.
     pub notes: Vec<String>,
+    /// What is probably a mistake in the definition but not an error, e.g. a piecewise potential
+    /// whose branches do not meet ([`piecewise::jump_notes`]). The build prints them as warnings.
+    pub warnings: Vec<String>,
     /// (atom, coordinate) pairs whose raw position depends on the coordinate: the sparsity the
     /// generated code exploits (out of `atoms · coordinates`).
     pub nonzero_derivatives: usize,
@@ -165,10 +171,12 @@ pub fn generate_molecule_in(
     let mut def = definition::parse_definition_in(path, text, base)?;
     let exprs = kinetic::build(&mut def, options);
     let nonzero_derivatives = exprs.nonzero_derivatives;
-    let mut notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
-    if piecewise::has_branches(&def.graph) {
-        notes.extend(piecewise::jump_notes(&def, exprs.potential, &exprs.potential_gradient));
-    }
+    let notes: Vec<String> = singular_reference_note(&def, &exprs).into_iter().collect();
+    let warnings = if piecewise::has_branches(&def.graph) {
+        piecewise::jump_notes(&def, exprs.potential, &exprs.potential_gradient)
+    } else {
+        Vec::new()
+    };
     // Variables: coordinates, ω, velocities (kinetic), then positions (cartesian), then the
     // parameters (parametric, last); the dipole adds none.
     let mut cartesian = cartesian::build(&mut def);
@@ -202,7 +210,9 @@ pub fn generate_molecule_in(
         stats,
         graph_nodes: def.graph.len(),
         codegen_time: start.elapsed(),
+        path: path.to_owned(),
         notes,
+        warnings,
         nonzero_derivatives,
         data_files: def.data_files.clone(),
     })
@@ -277,6 +287,18 @@ pub fn generate_with(
     out_dir: &Path,
     options: &Options,
 ) -> Result<Report, Vec<DefinitionError>> {
+    generate_dirs(&[(molecules_dir, display_dir)], out_dir, options)
+}
+
+/// [`generate_with`] for the definitions of several directories together, each given with how
+/// it is named in messages (e.g. the shipped `molecules/` and a user's own directory). Two
+/// definitions of the same molecule name (or type name), in one directory or in two, are an
+/// error naming both files.
+pub fn generate_dirs(
+    dirs: &[(&Path, &str)],
+    out_dir: &Path,
+    options: &Options,
+) -> Result<Report, Vec<DefinitionError>> {
     let io_error = |path: String, e: std::io::Error, help: &str| DefinitionError {
         path,
         line: 0,
@@ -285,17 +307,27 @@ pub fn generate_with(
         help: help.to_owned(),
         source_line: None,
     };
-    let mut inputs: Vec<PathBuf> = std::fs::read_dir(molecules_dir)
-        .map_err(|e| {
-            vec![io_error(display_dir.to_owned(), e, "create the molecules directory with one NAME.toml per molecule")]
-        })?
-        .filter_map(|entry| entry.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .collect();
-    inputs.sort();
+    let mut inputs: Vec<(PathBuf, String)> = Vec::new();
+    for &(molecules_dir, display_dir) in dirs {
+        let mut found: Vec<PathBuf> = std::fs::read_dir(molecules_dir)
+            .map_err(|e| {
+                vec![io_error(
+                    display_dir.to_owned(),
+                    e,
+                    "create the molecules directory with one NAME.toml per molecule",
+                )]
+            })?
+            .filter_map(|entry| entry.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        found.sort();
+        inputs.extend(found.into_iter().map(|p| (p, display_dir.to_owned())));
+    }
+    let display_dirs: Vec<&str> = dirs.iter().map(|&(_, d)| d).collect();
+    let display_dir = display_dirs.join(", ");
     let mut molecules = Vec::new();
     let mut errors = Vec::new();
-    for input in &inputs {
+    for (input, display_dir) in &inputs {
         let file_name = input.file_name().and_then(|s| s.to_str()).unwrap_or_default();
         let display = format!("{display_dir}/{file_name}");
         let text = match rovib_base::input::read_text_capped(input, rovib_base::input::MAX_INPUT_BYTES) {
@@ -317,30 +349,46 @@ pub fn generate_with(
             Err(e) => errors.extend(e),
         }
     }
+    molecules.sort_by(|a, b| a.name.cmp(&b.name));
+    let mut inputs: Vec<PathBuf> = inputs.into_iter().map(|(p, _)| p).collect();
     if molecules.is_empty() && errors.is_empty() {
         errors.push(DefinitionError {
             path: display_dir.to_owned(),
             line: 0,
             column: 0,
             message: "no molecule definitions found".into(),
-            help: format!("add at least one {display_dir}/NAME.toml (see the README)"),
+            help: format!(
+                "add at least one {}/NAME.toml (see the README)",
+                display_dirs.last().unwrap_or(&"molecules")
+            ),
             source_line: None,
         });
     }
     // Type names come from molecule names with `_` dropped, so `h2o` and `h_2o` would both be
-    // `H2o`: report every such pair, naming both files.
+    // `H2o`; two files may also define the same name: report every such pair, naming both files.
     for (i, m) in molecules.iter().enumerate() {
         if let Some(first) = molecules[..i].iter().find(|f| f.type_name == m.type_name) {
+            let (message, help) = if first.name == m.name {
+                (
+                    format!("`{}` and `{}` both define the molecule `{}`", first.path, m.path, m.name),
+                    "remove or rename one of the two; to build only the molecules of ROVIB_MOLECULES_DIR (replacing \
+                     the shipped ones), set ROVIB_MOLECULES_ONLY=1",
+                )
+            } else {
+                (
+                    format!(
+                        "molecules `{}` ({}) and `{}` ({}) both give the type name `{}`",
+                        first.name, first.path, m.name, m.path, m.type_name
+                    ),
+                    "rename one of the two files and its `name`; type names are the names in CamelCase without `_`",
+                )
+            };
             errors.push(DefinitionError {
-                path: format!("{display_dir}/{}.toml", m.name),
+                path: m.path.clone(),
                 line: 0,
                 column: 0,
-                message: format!(
-                    "molecules `{}` ({display_dir}/{}.toml) and `{}` both give the type name `{}`",
-                    first.name, first.name, m.name, m.type_name
-                ),
-                help: "rename one of the two files and its `name`; type names are the names in CamelCase without `_`"
-                    .into(),
+                message,
+                help: help.into(),
                 source_line: None,
             });
         }
@@ -359,7 +407,7 @@ pub fn generate_with(
     for m in &molecules {
         write(&template::file_name(&m.name), &m.source).map_err(|e| vec![e])?;
     }
-    write("molecules.rs", &template::registry(&molecules, display_dir)).map_err(|e| vec![e])?;
+    write("molecules.rs", &template::registry(&molecules, &display_dir)).map_err(|e| vec![e])?;
     // Data files too, so that a changed CSV file regenerates its molecule.
     inputs.extend(molecules.iter().flat_map(|m| m.data_files.iter().cloned()));
     Ok(Report { molecules, inputs })
@@ -388,7 +436,9 @@ mod tests {
             graph_nodes: 0,
             data_files: Vec::new(),
             codegen_time: Duration::from_millis(1500),
+            path: "molecules/big.toml".into(),
             notes: Vec::new(),
+            warnings: Vec::new(),
             nonzero_derivatives: 0,
         }
     }

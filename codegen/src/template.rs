@@ -592,7 +592,7 @@ pub(crate) fn registry(molecules: &[GeneratedMolecule], display_dir: &str) -> St
         let module = Ident::new(&m.name, Span::call_site());
         let ty = Ident::new(&m.type_name, Span::call_site());
         let file = format!("/{}", file_name(&m.name));
-        let doc = format!(" Generated from `{display_dir}/{}.toml`.", m.name);
+        let doc = format!(" Generated from `{}`.", m.path);
         quote! {
             #[doc = #doc]
             pub mod #module {
@@ -622,6 +622,6 @@ pub(crate) fn registry(molecules: &[GeneratedMolecule], display_dir: &str) -> St
             }
         }
     };
-    let header = format!("// @generated from {display_dir}/*.toml by rovib-codegen; do not edit.");
+    let header = format!("// @generated from {display_dir} (*.toml) by rovib-codegen; do not edit.");
     emit::format_file(&header, items).expect("the registry is valid Rust")
 }

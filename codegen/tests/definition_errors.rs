@@ -330,6 +330,34 @@ fn every_error_of_a_directory_is_reported() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A second directory adds its molecules to the first; a molecule defined in both is an error
+/// naming both files.
+#[test]
+fn two_directories_add_up_and_a_molecule_defined_in_both_is_an_error_naming_both_files() {
+    let dir = std::env::temp_dir().join(format!("rovib-codegen-dirs-{}", std::process::id()));
+    let (shipped, user, out) = (dir.join("shipped"), dir.join("user"), dir.join("out"));
+    for d in [&shipped, &user, &out] {
+        std::fs::create_dir_all(d).unwrap();
+    }
+    std::fs::write(shipped.join("xy2.toml"), GOOD).unwrap();
+    std::fs::write(user.join("aa.toml"), GOOD.replace("xy2", "aa")).unwrap();
+    let dirs = [(shipped.as_path(), "molecules"), (user.as_path(), "/home/me/mine")];
+    let report = rovib_codegen::generate_dirs(&dirs, &out, &Default::default()).expect("both directories build");
+    let names: Vec<(&str, &str)> = report.molecules.iter().map(|m| (m.name.as_str(), m.path.as_str())).collect();
+    assert_eq!(names, [("aa", "/home/me/mine/aa.toml"), ("xy2", "molecules/xy2.toml")], "in name order");
+    let registry = std::fs::read_to_string(out.join("molecules.rs")).unwrap();
+    assert!(registry.contains("Generated from `/home/me/mine/aa.toml`"), "{registry}");
+    assert!(registry.contains("pub const NAMES: [&str; 2usize] = [\"aa\", \"xy2\"]"), "{registry}");
+
+    std::fs::write(user.join("xy2.toml"), GOOD).unwrap();
+    let errors = rovib_codegen::generate_dirs(&dirs, &out, &Default::default()).unwrap_err();
+    assert_eq!(errors.len(), 1, "{errors:?}");
+    assert_eq!(errors[0].path, "/home/me/mine/xy2.toml");
+    assert_eq!(errors[0].message, "`molecules/xy2.toml` and `/home/me/mine/xy2.toml` both define the molecule `xy2`");
+    assert!(errors[0].help.contains("ROVIB_MOLECULES_ONLY=1"), "{}", errors[0].help);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Values that are finite as written but overflow in atomic units: located errors, not a
 /// panic while printing an infinite literal.
 #[test]

@@ -103,7 +103,10 @@ fn molecules_with_one_type_name_are_refused_naming_both_files() {
         let (first, second) = if a < b { (a, b) } else { (b, a) };
         assert_eq!(
             e.message,
-            format!("molecules `{first}` (molecules/{first}.toml) and `{second}` both give the type name `{ty}`")
+            format!(
+                "molecules `{first}` (molecules/{first}.toml) and `{second}` (molecules/{second}.toml) both give the type \
+                 name `{ty}`"
+            )
         );
         assert_eq!(e.path, format!("molecules/{second}.toml"));
         let _ = std::fs::remove_dir_all(&dir);

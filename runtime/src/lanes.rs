@@ -18,7 +18,7 @@
 //!   build (baseline or `-C target-cpu=native`: nothing here depends on FMA);
 //! - a lane's trajectory is the one-trajectory (`f64`) trajectory to round-off.
 //!
-//! `tests/lanes.rs` checks both. libm lane by lane would make the lanes equal `f64` bit for
+//! `tests/numerics/lanes.rs` checks both. libm lane by lane would make the lanes equal `f64` bit for
 //! bit, but it costs a third of the lanes' gain on AVX-512 (docs/src/history/benchmarks.md, "Many trajectories
 //! per core").
 //!

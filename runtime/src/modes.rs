@@ -255,7 +255,7 @@ mod tests {
     use super::*;
 
     /// A hand-written bent triatomic with two coordinates would need the whole trait; the
-    /// integration tests (tests/sampling.rs) check the modes of the generated molecules. Here:
+    /// integration tests (tests/ensembles/sampling.rs) check the modes of the generated molecules. Here:
     /// the Newton step of a quadratic is exact.
     #[test]
     fn newton_step_of_a_quadratic() {

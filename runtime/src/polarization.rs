@@ -18,7 +18,7 @@
 //! `O(N⁴)` per evaluation, and independent of the molecule's size at build time.
 //!
 //! Checked against a hand-written `kinetic_jacobian` (`runtime/tests/hamiltonian.rs`) and
-//! against finite differences of `kinetic` for every shipped molecule (`tests/generated_code.rs`).
+//! against finite differences of `kinetic` for every shipped molecule (`tests/numerics/generated_code.rs`).
 
 use nalgebra::{SVector, Vector3};
 

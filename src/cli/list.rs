@@ -23,6 +23,9 @@ impl MoleculeVisitor for Describe {
                 m.coordinates().iter().map(|c| format!("{} [{}]", c.name, c.unit.name())).collect();
             let _ = writeln!(s, "  coordinates: {}", coords.join(", "));
         }
+        for note in molecules::notes(m.name()) {
+            let _ = writeln!(s, "  note:        {}", note.strip_prefix("note: ").unwrap_or(note));
+        }
         s
     }
 }

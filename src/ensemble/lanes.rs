@@ -9,7 +9,7 @@
 //! "Many trajectories per core"). Lanes of every width compute the same bits, so a block's
 //! outcome does not depend on the build's vector width. The observations are kept per
 //! trajectory and folded into the accumulators in index order at the end of the block, so the
-//! outcome is the scalar [`super::run_block`]'s to round-off (`tests/ensemble.rs`
+//! outcome is the scalar [`super::run_block`]'s to round-off (`tests/ensembles/ensemble.rs`
 //! compares the two block outcomes). A trajectory whose lane fails is run again by the scalar
 //! path, which reports its failure with the full error.
 //!

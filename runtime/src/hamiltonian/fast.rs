@@ -121,7 +121,7 @@
 //!
 //! # Tests
 //!
-//! `tests/fast_path.rs` (for every shipped molecule): [`rhs`] against the G-matrix path's [`super::rhs`]
+//! `tests/numerics/fast_path.rs` (for every shipped molecule): [`rhs`] against the G-matrix path's [`super::rhs`]
 //! at random states; the J = 0 system against the G-matrix path restricted to `p_e = 0`; the frozen
 //! system against central finite differences of its own Hamiltonian built independently (the
 //! reduced metric with `DMatrix` and a general inverse); no allocation; and a DOP853 trajectory

@@ -7,7 +7,7 @@
 //! operations as [`super::Dop853::integrate`]. Every lane therefore computes exactly what the
 //! scalar solver computes for that trajectory, bit for bit, provided the lane system computes
 //! the scalar system's numbers bit for bit: the same steps, rejections, outputs and counts
-//! (`tests/lanes.rs` checks this with the scalar solver on the lane right-hand side, one
+//! (`tests/numerics/lanes.rs` checks this with the scalar solver on the lane right-hand side, one
 //! trajectory in every lane). [`crate::hamiltonian::lanes::ProductionLanes`] computes the scalar
 //! production system's numbers to round-off (its `sin_cos` and `exp` are vector polynomials),
 //! so its trajectories are the scalar ones to round-off.

@@ -5,7 +5,7 @@
 //! Shown able to fail (docs/src/history/benchmarks.md, "Ensembles over MPI"): a resume that skips a block, and
 //! blocks merged in arrival order, both fail the byte comparison here.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};

@@ -3,7 +3,7 @@
 //! `p_e = 0` for J = 0, finite differences of an independently built reduced Hamiltonian for
 //! frozen coordinates, a trajectory of the G-matrix path system; and no allocation.
 
-mod common;
+use crate::common;
 
 use common::for_each_molecule;
 

@@ -12,7 +12,7 @@
 //!   the generated gradient, G = G22 from `InverseMetric`, against the molecule's known
 //!   harmonic wavenumbers or observed fundamentals (each test says which, and why its tolerance).
 
-mod common;
+use crate::common;
 
 use common::internal_coordinates::{self as ic, V3};
 use common::{Rng, random_q};

@@ -12,7 +12,7 @@
 //!
 //! [`to_lab`]: rovib::runtime::frames::to_lab
 
-mod common;
+use crate::common;
 
 use common::cartesian::{CrossCheck, CrossCheckReport, cross_check, cross_check_with_masses, oscillations};
 use common::internal_coordinates::{self, Dual, V3, dihedral};

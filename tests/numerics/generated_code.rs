@@ -2,7 +2,7 @@
 //! matrices recomputed from the generated positions with finite-difference jacobians, every
 //! q-derivative against finite differences, and the centre of mass at the origin.
 
-mod common;
+use crate::common;
 
 use common::for_each_molecule;
 

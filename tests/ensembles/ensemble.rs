@@ -1,7 +1,7 @@
 //! Ensembles through the library API: statistics against direct computation, reproducibility
 //! across thread counts, energy conservation, failures, interrupts and states files.
 
-mod common;
+use crate::common;
 use common::ensemble::{column, csv};
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -10,7 +10,7 @@
 //! lab-frame angular momentum must be conserved across every switch. With J = 0 (planar bend)
 //! and with J ≠ 0 (the bend precesses about the lab angular momentum).
 
-mod common;
+use crate::common;
 
 use common::cartesian::CartesianSystem as Reference;
 use common::internal_coordinates;

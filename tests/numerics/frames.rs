@@ -2,7 +2,7 @@
 //! angular momentum in both frames, the least-squares velocity projection, and the errors
 //! (non-representable positions, gimbal lock, non-finite input).
 
-mod common;
+use crate::common;
 
 use common::for_each_molecule;
 

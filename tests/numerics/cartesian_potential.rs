@@ -9,7 +9,7 @@
 //! obey (no net force, no net torque: U is invariant under translation and rotation); and the
 //! lab fit of such molecules needs no iteration.
 
-mod common;
+use crate::common;
 
 use common::internal_coordinates::{self as ic, jacobian};
 use common::{Rng, for_each_molecule, random_q};

@@ -3,7 +3,7 @@
 use std::io::Write as _;
 use std::process::{Command, Output, Stdio};
 
-mod common;
+use crate::common;
 
 fn rovib(args: &[&str], stdin: Option<&str>) -> Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_rovib"))
@@ -40,6 +40,26 @@ fn list_names_every_molecule_with_atoms_and_coordinates() {
     assert!(text.contains(&format!("h2o ({h2o}): 3 atoms, 3 internal coordinates\n  atoms:       O (O, 15.99491461957 Da), H1 (H, 1.00782503223 Da), H2 (H, 1.00782503223 Da)\n  coordinates: r1 [angstrom], r2 [angstrom], alpha [rad]")), "{text}");
     // The unit note once, not per coordinate.
     assert_eq!(text.matches("at run time").count(), 1, "{text}");
+}
+
+/// What the build used to print as a cargo warning for the shipped linear molecules (CO2, HCN)
+/// is a note of `rovib list`, once, under the molecule; a bent molecule has none.
+#[test]
+fn list_notes_that_a_reference_geometry_is_linear_under_the_molecule() {
+    let text = String::from_utf8(rovib(&["list"], None).stdout).unwrap();
+    for name in ["co2", "hcn"] {
+        let note = format!(
+            "  note:        the reference geometry of molecule `{name}` ({}) is linear",
+            common::source_of(name)
+        );
+        assert_eq!(text.matches(&note).count(), 1, "{text}");
+        let block = text.split("\n\n").find(|b| b.starts_with(&format!("{name} ("))).unwrap();
+        assert!(block.contains(&note), "the note is under its molecule: {block}");
+        assert_eq!(rovib::molecules::notes(name).count(), 1);
+    }
+    assert_eq!(rovib::molecules::notes("h2o").count(), 0);
+    let h2o = text.split("\n\n").find(|b| b.starts_with("h2o (")).unwrap();
+    assert!(!h2o.contains("note:"), "{h2o}");
 }
 
 #[test]

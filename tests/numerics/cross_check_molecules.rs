@@ -7,7 +7,7 @@
 //! (that needs constraint forces); its rotation is checked against the seed path in
 //! `tests/fast_path.rs` and by its conserved H, |J| and L in `tests/scenes.rs`.
 
-mod common;
+use crate::common;
 
 use common::cartesian::{CrossCheck, cross_check};
 use common::internal_coordinates::{self, Dual, V3};

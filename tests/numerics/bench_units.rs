@@ -2,7 +2,7 @@
 //! atomic units beside it. Checked against CODATA's atomic unit of time, not against our own
 //! conversion: 1 a.u. = ħ/E_h = 2.4188843265857e-17 s.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -12,7 +12,7 @@
 //!   (the scalar solver on the lane right-hand side, one trajectory in every lane), and against
 //!   the scalar production system (`ReducedSystem`, libm) to round-off.
 
-mod common;
+use crate::common;
 
 use std::ops::ControlFlow;
 

@@ -15,7 +15,7 @@
 //!
 //! The long scenes also run over their full 10 ps (`near_linear_scenes_over_their_full_length`).
 
-mod common;
+use crate::common;
 
 use std::convert::Infallible;
 use std::ops::ControlFlow;

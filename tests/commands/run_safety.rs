@@ -1,7 +1,7 @@
 //! `rovib run` as a careless or hostile user drives it: stale files of an earlier run, two runs
 //! into one directory, SIGINT/SIGTERM, a full disk, an energy guard at H(0) ≈ 0.
 
-mod common;
+use crate::common;
 
 use common::cli::rovib;
 use std::path::{Path, PathBuf};

@@ -14,7 +14,7 @@
 //! And the case that must NOT stop: CO2 with J = 0 bends through linear and completes.
 //! `STABILITY.md` records the figures.
 
-mod common;
+use crate::common;
 
 use common::cli::temp_dir;
 use std::path::Path;

@@ -2,7 +2,7 @@
 //! thread, and a stop flag that ends the run cleanly (no signal handler involved); an interrupted
 //! simulation continues with `Simulation::resume` to the same trajectory as a run without a stop.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -2,7 +2,7 @@
 //! finite differences of H, the block-inverse identity, Wilson's G matrix for water, finite
 //! differences of G, and the exact symmetries (p_φ conserved, J = W p_e).
 
-mod common;
+use crate::common;
 
 use common::for_each_molecule;
 

@@ -2,7 +2,7 @@
 //! runner's statistics must show for the right distribution (equipartition, Liouville
 //! stationarity, the energy shell) and byte-identical outputs on 1 and 2 threads.
 
-mod common;
+use crate::common;
 use common::ensemble::{column, csv};
 use std::path::PathBuf;
 

@@ -5,7 +5,7 @@
 //! to T/2 were written by the first run; the last of them (served by the shortened step) differ
 //! from the uninterrupted run's by the local error, within the tolerances.
 
-mod common;
+use crate::common;
 
 use common::cli::{rovib, temp_dir};
 use std::path::{Path, PathBuf};

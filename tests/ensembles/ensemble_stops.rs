@@ -8,7 +8,7 @@
 //! Also: an `end` that is not a multiple of `output_interval` leaves the short last interval
 //! out of the correlations.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -1,0 +1,19 @@
+//! Tests of ensembles, samplers, spectra and scene parsing on the library, and the fuzz targets.
+//!
+//! One test binary of several modules (each module a former `tests/NAME.rs`), so that the
+//! library with every generated molecule is linked once per group rather than once per file:
+//! `cargo test --test ensembles MODULE::` runs one module.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod ensemble;
+mod ensemble_fuzz;
+mod ensemble_samplers;
+mod ensemble_scene;
+mod ensemble_stops;
+mod fuzz;
+mod linear_scenes;
+mod sampling;
+mod scene_limits;
+mod spectrum;
