@@ -185,3 +185,64 @@ fn a_trajectory_that_leaves_the_region_contributes_zero_after_its_stop() {
         );
     }
 }
+
+#[test]
+fn kept_trajectories_write_the_dipole_and_the_spectrum_stops_at_max_wavenumber() {
+    let text = scene_text(64, 2000.0, "pair", "").replace("seed = 2811\n", "seed = 2811\nkeep_trajectories = 32\n");
+    let scene = parse_scene("pair.toml", &text).unwrap();
+    let dir = out_dir("kept");
+    run_ensemble(&scene, &common::ensemble::options(dir.clone(), 2)).unwrap();
+    for index in [0, 32] {
+        let kept = dir.join(format!("trajectories/{index}"));
+        let (dh, dipole) = csv(&kept.join("dipole.csv"));
+        assert_eq!(dh, ["t", "mu_x", "mu_y", "mu_z"]);
+        let (th, states) = csv(&kept.join("trajectory.csv"));
+        assert_eq!(dipole.len(), 101, "every output time");
+        assert_eq!(dipole.len(), states.len());
+        // |mu| = mu0 exp(-d/rho) at every output, with d from trajectory.csv (bohr).
+        let d = column(&th, "q_d");
+        for (row, state) in dipole.iter().zip(&states) {
+            let norm = (row[1] * row[1] + row[2] * row[2] + row[3] * row[3]).sqrt();
+            let exact = MU0 * (-state[d] / RHO).exp();
+            assert!((norm - exact).abs() <= 1e-12 * exact, "t = {}: |mu| = {norm:e}, {exact:e}", row[0]);
+        }
+    }
+    // The spectrum ends at the scene's max_wavenumber (1500 cm-1), not at the default 5000.
+    let text = std::fs::read_to_string(dir.join("spectrum.csv")).unwrap();
+    assert!(text.starts_with("# pair estimator"), "{}", &text[..80]);
+    let body: String = text.lines().skip(1).map(|l| format!("{l}\n")).collect();
+    std::fs::write(dir.join("spectrum_body.csv"), body).unwrap();
+    let (sh, rows) = csv(&dir.join("spectrum_body.csv"));
+    let w = column(&sh, "wavenumber_cm-1");
+    let last = rows.last().unwrap()[w];
+    assert!(last <= 1500.0 && last > 1400.0, "last wavenumber {last}");
+}
+
+#[test]
+fn spectrum_keys_are_checked_at_their_place() {
+    let base = scene_text(64, 2000.0, "pair", "");
+    let line_of = |text: &str, needle: &str| text.lines().position(|l| l.contains(needle)).unwrap() + 1;
+    let expect = |text: String, needle: &str, says: &str| {
+        let e = match parse_scene("pair.toml", &text) {
+            Ok(scene) => run_ensemble(&scene, &common::ensemble::options(out_dir("bad"), 1)).unwrap_err().to_string(),
+            Err(e) => e.to_string(),
+        };
+        let at = format!("pair.toml:{}:", line_of(&text, needle));
+        assert!(e.contains(&at) && e.contains(says), "expected {at} and {says:?} in\n{e}");
+    };
+    expect(base.replace("estimator = \"pair\"", "estimator = \"pairs\""), "estimator", "unknown spectrum estimator");
+    expect(base.replace("max_wavenumber = 1500.0", "max_wavenumber = -3.0"), "max_wavenumber", "positive finite");
+    expect(base.replace("max_wavenumber = 1500.0", "maximum = 3.0"), "maximum", "unknown field");
+    expect(
+        base.replace("estimator = \"pair\"", "estimator = \"stationary\"\npair_volume = 10.0"),
+        "pair_volume",
+        "pair estimator only",
+    );
+    expect(base.replace("correlations = [\"mu_x\", \"mu_y\", \"mu_z\"]", "correlations = [\"d\"]"), "[spectrum]", "dipole");
+    expect(base.replace("estimator = \"pair\"", "estimator = \"pair\"\npair_volume = -1.0"), "pair_volume", "positive");
+    // A single run has no [spectrum].
+    let single = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/h2o.toml")).unwrap()
+        + "\n[spectrum]\nestimator = \"pair\"\n";
+    let e = parse_scene("single.toml", &single).unwrap_err().to_string();
+    assert!(e.contains("[spectrum] table without an [ensemble]"), "{e}");
+}

@@ -96,9 +96,9 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let mut f = OutputFile::create(dir, "spectrum.csv")?;
     if plan.spectrum.pair() {
         f.line(&format!(
-            "# pair estimator: <mu(0).mu(tau)> for tau in [-T, T], T = {:?} a.u., flat-top window (1 for |tau| <= T/2, \
-             cos^2 taper to 0 at T); the lineshape is the spectral density per pair of the sampled region",
-            s.length
+            "# pair estimator: <mu(0).mu(tau)> for tau in [-T; T] with T = {:?} a.u.; flat-top window (1 for |tau| <= \
+             T/2; cos^2 taper to 0 at T); the lineshape is the spectral density per pair of the sampled region",
+            plan.interval * plan.correlation_lags().saturating_sub(1) as f64
         ))?;
     } else {
         f.line(&format!("# resolution (FWHM) {:?} cm-1, Hann taper over T = {:?} a.u.", s.resolution(), s.length))?;
