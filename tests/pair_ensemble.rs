@@ -238,7 +238,11 @@ fn spectrum_keys_are_checked_at_their_place() {
         "pair_volume",
         "pair estimator only",
     );
-    expect(base.replace("correlations = [\"mu_x\", \"mu_y\", \"mu_z\"]", "correlations = [\"d\"]"), "[spectrum]", "dipole");
+    expect(
+        base.replace("correlations = [\"mu_x\", \"mu_y\", \"mu_z\"]", "correlations = [\"d\"]"),
+        "[spectrum]",
+        "dipole",
+    );
     expect(base.replace("estimator = \"pair\"", "estimator = \"pair\"\npair_volume = -1.0"), "pair_volume", "positive");
     // A single run has no [spectrum].
     let single = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/h2o.toml")).unwrap()

@@ -119,8 +119,7 @@ pub fn flat_top(k: usize, n: usize) -> f64 {
 pub fn spectrum<M, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>, acc: &Accumulators) -> Option<Spectrum> {
     let c = two_sided_dipole_correlation(plan, acc)?;
     let lags = plan.correlation_lags();
-    let even: Vec<f64> =
-        (0..lags).map(|k| 0.5 * (c[lags - 1 + k] + c[lags - 1 - k]) * flat_top(k, lags)).collect();
+    let even: Vec<f64> = (0..lags).map(|k| 0.5 * (c[lags - 1 + k] + c[lags - 1 - k]) * flat_top(k, lags)).collect();
     Some(Spectrum::from_correlation(&even, plan.interval, plan.spectrum.max_wavenumber, super::spectrum::PADDING))
 }
 

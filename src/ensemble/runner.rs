@@ -778,161 +778,168 @@ where
         // The pair estimator's forward run, kept while the backward one runs.
         let mut forward: Option<(usize, Option<Stop>, Stats, ChartReport)> = None;
         for pass in 0..passes {
-        // Pass 1 (pair estimator only) runs backward in time: the state with its momenta reversed.
-        let state = if pass == 0 { drawn } else { super::pair::reversed(&drawn) };
-        let failure = |reason: &str, time: Option<f64>, detail: String| {
-            let detail = if pass == 0 { detail } else { format!("backward in time (t is -t): {detail}") };
-            failure(reason, time, detail)
-        };
-        let out = if pass == 0 { &mut buffer } else { &mut backward };
-        // The sampled state is the template: frozen coordinates stay at its values.
-        let mut system = ReducedSystem::from_body(plan.molecule, plan.reduction, &state).with_min_pivot(plan.min_pivot);
-        // A state at a singular geometry starts in the Cartesian chart when the plan switches
-        // (the chart integrator checks it: an `InvalidInput` there is an invalid initial state).
-        if let Err(e) = system.reduce_body(&state, &mut y0)
-            && !switching
-        {
-            outcome.fail(failure("invalid initial state", Some(0.0), e.to_string()), progress);
-            break;
-        }
-        let csv = match &plan.keep {
-            Some((k, dir)) if index % k == 0 && pass == 0 => {
-                let dir = dir.join(index.to_string());
-                let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
-                match std::fs::create_dir_all(&dir)
-                    .map_err(|e| e.to_string())
-                    .and_then(|()| TrajectoryCsv::create(&dir, &plan.molecule.coordinates(), unit, false))
-                {
-                    Ok(c) => Some(c),
-                    Err(e) => {
-                        outcome.fail(failure("output", Some(0.0), e), progress);
-                        break;
-                    }
-                }
-            }
-            _ => None,
-        };
-        // A kept trajectory of a molecule with a dipole surface also writes dipole.csv.
-        let dipole = match (&csv, &plan.keep) {
-            (Some(_), Some((_, dir))) if plan.molecule.has_dipole() => {
-                match crate::output::DipoleCsv::create(&dir.join(index.to_string())) {
-                    Ok(d) => Some(d),
-                    Err(e) => {
-                        outcome.fail(failure("output", Some(0.0), e), progress);
-                        break;
-                    }
-                }
-            }
-            _ => None,
-        };
-        let mut watch = Watch {
-            system,
-            plan,
-            buffer: out,
-            needs_potential,
-            needs_dipole: needs_dipole || dipole.is_some(),
-            k: 0,
-            initial_energy: 0.0,
-            stop,
-            failure: None,
-            interrupted: false,
-            csv,
-            dipole,
-            cartesian: if switching { CartesianSystem::new(plan.molecule).ok() } else { None },
-            last_q: state.q,
-            stopped: None,
-        };
-        let mut chart_report = ChartReport::default();
-        let result = match &mut integrator {
-            Integrator::Charts(charts) => charts
-                .integrate(
-                    &system,
-                    0.0,
-                    ChartStart::Fresh(&state),
-                    plan.t_end,
-                    plan.interval,
-                    &mut watch,
-                    &mut chart_report,
-                )
-                .map(|()| chart_report.stats)
-                .map_err(|e| match e {
-                    // The settings were checked when the integrators were made: what is left is
-                    // a start that neither chart can hold.
-                    SolveError::InvalidInput(why) => ("invalid initial state", why, Some(0.0)),
-                    e => solve_reason(&e, chart_reason),
-                }),
-            other => other
-                .integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch)
-                .map_err(|e| solve_reason(&e, hamiltonian_reason)),
-        };
-        if let Some(csv) = &mut watch.csv
-            && let Err(e) = csv.flush()
-        {
-            watch.failure.get_or_insert(("output", plan.t_end, e));
-        }
-        if let Some(d) = &mut watch.dipole
-            && let Err(e) = d.flush()
-        {
-            watch.failure.get_or_insert(("output", plan.t_end, e));
-        }
-        // A kept trajectory's chart switches beside its trajectory.csv.
-        if switching
-            && watch.csv.is_some()
-            && let Some((_, dir)) = &plan.keep
-            && let Err(e) = write_chart_report(&dir.join(index.to_string()), &chart_report, plan.time_scale)
-        {
-            watch.failure.get_or_insert(("output", plan.t_end, e));
-        }
-        let (k, interrupted, observed, stopped) = (watch.k, watch.interrupted, watch.failure.take(), watch.stopped);
-        match (result, observed) {
-            (Err((reason, detail, time)), _) => {
-                outcome.fail(failure(reason, time, detail), progress);
+            // Pass 1 (pair estimator only) runs backward in time: the state with its momenta reversed.
+            let state = if pass == 0 { drawn } else { super::pair::reversed(&drawn) };
+            let failure = |reason: &str, time: Option<f64>, detail: String| {
+                let detail = if pass == 0 { detail } else { format!("backward in time (t is -t): {detail}") };
+                failure(reason, time, detail)
+            };
+            let out = if pass == 0 { &mut buffer } else { &mut backward };
+            // The sampled state is the template: frozen coordinates stay at its values.
+            let mut system =
+                ReducedSystem::from_body(plan.molecule, plan.reduction, &state).with_min_pivot(plan.min_pivot);
+            // A state at a singular geometry starts in the Cartesian chart when the plan switches
+            // (the chart integrator checks it: an `InvalidInput` there is an invalid initial state).
+            if let Err(e) = system.reduce_body(&state, &mut y0)
+                && !switching
+            {
+                outcome.fail(failure("invalid initial state", Some(0.0), e.to_string()), progress);
                 break;
             }
-            (Ok(_), Some((reason, t, detail))) => {
-                outcome.fail(failure(reason, Some(t), detail), progress);
-                break;
-            }
-            (Ok(_), None) if interrupted => {
-                outcome.interrupted += 1;
-                continue 'trajectories;
-            }
-            (Ok(_), None) if k != n_times && stopped.is_none() => {
-                let detail = format!("{k} output times observed, {n_times} expected");
-                outcome.fail(failure("output", Some(plan.t_end), detail), progress);
-                break;
-            }
-            (Ok(stats), None) if pass + 1 < passes => forward = Some((k, stopped, stats, chart_report)),
-            (Ok(stats), None) => {
-                // The backward run's work and chart switches count with the forward run's.
-                let (k, stopped, stats, chart_report, back) = match forward.take() {
-                    Some((kf, sf, mut total, mut report)) => {
-                        total.steps += stats.steps;
-                        total.rhs_evals += stats.rhs_evals;
-                        report.switches += chart_report.switches;
-                        report.cartesian_time += chart_report.cartesian_time;
-                        (kf, sf, total, report, Some(k))
-                    }
-                    None => (k, stopped, stats, chart_report, None),
-                };
-                outcome.completed += 1;
-                outcome.steps += stats.steps;
-                outcome.rhs_evaluations += stats.rhs_evals;
-                if switching {
-                    outcome.charts.add(index, &chart_report);
-                }
-                outcome.count_lifetime(plan, index, k, stopped);
-                match back {
-                    Some(kb) => {
-                        fold(plan, &mut outcome.statistics, &buffer, k, None, &mut series, &mut correlation);
-                        super::pair::fold_pair(plan, &mut outcome.statistics, &buffer, k, &backward, kb);
-                    }
-                    None => {
-                        fold(plan, &mut outcome.statistics, &buffer, k, workspace.as_mut(), &mut series, &mut correlation)
+            let csv = match &plan.keep {
+                Some((k, dir)) if index % k == 0 && pass == 0 => {
+                    let dir = dir.join(index.to_string());
+                    let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
+                    match std::fs::create_dir_all(&dir)
+                        .map_err(|e| e.to_string())
+                        .and_then(|()| TrajectoryCsv::create(&dir, &plan.molecule.coordinates(), unit, false))
+                    {
+                        Ok(c) => Some(c),
+                        Err(e) => {
+                            outcome.fail(failure("output", Some(0.0), e), progress);
+                            break;
+                        }
                     }
                 }
+                _ => None,
+            };
+            // A kept trajectory of a molecule with a dipole surface also writes dipole.csv.
+            let dipole = match (&csv, &plan.keep) {
+                (Some(_), Some((_, dir))) if plan.molecule.has_dipole() => {
+                    match crate::output::DipoleCsv::create(&dir.join(index.to_string())) {
+                        Ok(d) => Some(d),
+                        Err(e) => {
+                            outcome.fail(failure("output", Some(0.0), e), progress);
+                            break;
+                        }
+                    }
+                }
+                _ => None,
+            };
+            let mut watch = Watch {
+                system,
+                plan,
+                buffer: out,
+                needs_potential,
+                needs_dipole: needs_dipole || dipole.is_some(),
+                k: 0,
+                initial_energy: 0.0,
+                stop,
+                failure: None,
+                interrupted: false,
+                csv,
+                dipole,
+                cartesian: if switching { CartesianSystem::new(plan.molecule).ok() } else { None },
+                last_q: state.q,
+                stopped: None,
+            };
+            let mut chart_report = ChartReport::default();
+            let result = match &mut integrator {
+                Integrator::Charts(charts) => charts
+                    .integrate(
+                        &system,
+                        0.0,
+                        ChartStart::Fresh(&state),
+                        plan.t_end,
+                        plan.interval,
+                        &mut watch,
+                        &mut chart_report,
+                    )
+                    .map(|()| chart_report.stats)
+                    .map_err(|e| match e {
+                        // The settings were checked when the integrators were made: what is left is
+                        // a start that neither chart can hold.
+                        SolveError::InvalidInput(why) => ("invalid initial state", why, Some(0.0)),
+                        e => solve_reason(&e, chart_reason),
+                    }),
+                other => other
+                    .integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch)
+                    .map_err(|e| solve_reason(&e, hamiltonian_reason)),
+            };
+            if let Some(csv) = &mut watch.csv
+                && let Err(e) = csv.flush()
+            {
+                watch.failure.get_or_insert(("output", plan.t_end, e));
             }
-        }
+            if let Some(d) = &mut watch.dipole
+                && let Err(e) = d.flush()
+            {
+                watch.failure.get_or_insert(("output", plan.t_end, e));
+            }
+            // A kept trajectory's chart switches beside its trajectory.csv.
+            if switching
+                && watch.csv.is_some()
+                && let Some((_, dir)) = &plan.keep
+                && let Err(e) = write_chart_report(&dir.join(index.to_string()), &chart_report, plan.time_scale)
+            {
+                watch.failure.get_or_insert(("output", plan.t_end, e));
+            }
+            let (k, interrupted, observed, stopped) = (watch.k, watch.interrupted, watch.failure.take(), watch.stopped);
+            match (result, observed) {
+                (Err((reason, detail, time)), _) => {
+                    outcome.fail(failure(reason, time, detail), progress);
+                    break;
+                }
+                (Ok(_), Some((reason, t, detail))) => {
+                    outcome.fail(failure(reason, Some(t), detail), progress);
+                    break;
+                }
+                (Ok(_), None) if interrupted => {
+                    outcome.interrupted += 1;
+                    continue 'trajectories;
+                }
+                (Ok(_), None) if k != n_times && stopped.is_none() => {
+                    let detail = format!("{k} output times observed, {n_times} expected");
+                    outcome.fail(failure("output", Some(plan.t_end), detail), progress);
+                    break;
+                }
+                (Ok(stats), None) if pass + 1 < passes => forward = Some((k, stopped, stats, chart_report)),
+                (Ok(stats), None) => {
+                    // The backward run's work and chart switches count with the forward run's.
+                    let (k, stopped, stats, chart_report, back) = match forward.take() {
+                        Some((kf, sf, mut total, mut report)) => {
+                            total.steps += stats.steps;
+                            total.rhs_evals += stats.rhs_evals;
+                            report.switches += chart_report.switches;
+                            report.cartesian_time += chart_report.cartesian_time;
+                            (kf, sf, total, report, Some(k))
+                        }
+                        None => (k, stopped, stats, chart_report, None),
+                    };
+                    outcome.completed += 1;
+                    outcome.steps += stats.steps;
+                    outcome.rhs_evaluations += stats.rhs_evals;
+                    if switching {
+                        outcome.charts.add(index, &chart_report);
+                    }
+                    outcome.count_lifetime(plan, index, k, stopped);
+                    match back {
+                        Some(kb) => {
+                            fold(plan, &mut outcome.statistics, &buffer, k, None, &mut series, &mut correlation);
+                            super::pair::fold_pair(plan, &mut outcome.statistics, &buffer, k, &backward, kb);
+                        }
+                        None => fold(
+                            plan,
+                            &mut outcome.statistics,
+                            &buffer,
+                            k,
+                            workspace.as_mut(),
+                            &mut series,
+                            &mut correlation,
+                        ),
+                    }
+                }
+            }
         }
         progress.done();
     }
