@@ -659,7 +659,7 @@ where
         }
         let n = points.max(2) as f64;
         let mean = sum / n;
-        if !(mean > 0.0) {
+        if mean.is_nan() || mean <= 0.0 {
             return None;
         }
         let variance = (sum2 / n - mean * mean).max(0.0) * n / (n - 1.0);
