@@ -34,7 +34,7 @@ const MU0: f64 = 5.0;
 const RHO: f64 = 1.0;
 const D: [f64; 2] = [5.5, 20.0];
 const R: [f64; 2] = [1.47, 2.67];
-const ELECTRON_MASSES_PER_DALTON: f64 = 1822.888_486_209;
+const ELECTRON_MASSES_PER_DALTON: f64 = 1_822.888_486_209;
 
 fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
     let n = 20_000;
