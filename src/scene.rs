@@ -222,6 +222,7 @@ struct RawScene {
     // Parsed with their places by `crate::ensemble::scene`.
     ensemble: Option<toml::Value>,
     statistics: Option<toml::Value>,
+    spectrum: Option<toml::Value>,
     #[serde(default)]
     integrator: Option<Spanned<RawIntegrator>>,
     run: Spanned<RawRun>,
@@ -368,6 +369,13 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             ));
         }
     };
+    if raw.spectrum.is_some() && raw.ensemble.is_none() {
+        return Err(src.whole_file(
+            "a [spectrum] table without an [ensemble] table",
+            "add [ensemble] (see the README's \"Ensembles\") or remove [spectrum]; `rovib run` writes dipole.csv with \
+             run.outputs = [..., \"dipole\"]",
+        ));
+    }
     if raw.statistics.is_some() && raw.ensemble.is_none() {
         return Err(src.whole_file(
             "a [statistics] table without an [ensemble] table",

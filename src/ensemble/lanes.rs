@@ -63,6 +63,7 @@ pub fn applies<M: Molecule<N, NA>, const N: usize, const NA: usize>(plan: &Plan<
         && plan.reduction.active.iter().all(|&a| a)
         && plan.reduction.rotation == crate::runtime::hamiltonian::fast::RotationPart::Free
         && plan.keep.is_none()
+        && !plan.spectrum.pair()
 }
 
 /// What became of one trajectory of the block.
@@ -178,6 +179,7 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             failure: None,
             interrupted: false,
             csv: None,
+            dipole: None,
             cartesian: None,
             // Lanes hold internal-chart states only: no Cartesian state, so no branch to follow.
             last_q: crate::runtime::nalgebra::SVector::zeros(),

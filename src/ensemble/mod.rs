@@ -28,6 +28,7 @@ pub mod lifetimes;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod output;
+pub mod pair;
 mod plot;
 pub mod quantity;
 pub mod resources;
@@ -35,6 +36,7 @@ pub mod runner;
 pub mod scene;
 pub mod schedule;
 pub mod spectrum;
+pub mod spectrum_scene;
 pub mod states_file;
 pub mod states_xyz;
 
@@ -182,6 +184,9 @@ pub struct EnsembleReport {
     pub seed: u64,
     /// How the initial states were drawn.
     pub sampler: String,
+    /// The dipole's moments over the sampled states and the sampler's configurational integral,
+    /// for an ensemble with a spectrum (`pair`).
+    pub phase_space: Option<pair::PhaseSpace>,
     /// Files written.
     pub files: Vec<PathBuf>,
 }
@@ -429,6 +434,7 @@ where
         time_scale: scene.time_unit.in_au(),
         lanes: options.lanes,
         stops: crate::start::stop_conditions(m, scene)?,
+        spectrum: ensemble.spectrum.settings.clone(),
     };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let asked = options.threads.or(ensemble.threads);
@@ -517,6 +523,7 @@ where
         resumed,
         seed: ensemble.seed,
         sampler: description.to_owned(),
+        phase_space: spectrum::dipole_correlated(&plan).then(|| pair::phase_space(m, sampler, n)),
         files: Vec::new(),
     };
     report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)

@@ -30,10 +30,11 @@ use crate::scene::Scene;
 
 /// Every file `rovib ensemble` writes into its output folder, besides `checkpoint.jsonl` and the
 /// kept trajectories (`trajectories/INDEX/`).
-pub const ENSEMBLE_FILES: [&str; 8] = [
+pub const ENSEMBLE_FILES: [&str; 9] = [
     "ensemble.csv",
     "histograms.csv",
     "correlations.csv",
+    "moments.csv",
     "spectrum.csv",
     "spectrum.svg",
     "ensemble.svg",
@@ -221,6 +222,8 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let mut header = vec![format!("tau_{tu}"), "n".to_owned()];
     for &qi in &plan.correlations {
         let (name, unit) = (plan.quantities[qi].name(m), plan.quantities[qi].unit(m));
+        // A compound unit is squared as a whole: (e*bohr)^2.
+        let unit = if unit.contains(['*', '/']) { format!("({unit})") } else { unit.to_owned() };
         header.push(format!("{name}_C_{unit}^2"));
         header.push(format!("{name}_C_stderr_{unit}^2"));
         header.push(format!("{name}_C_normalised"));
@@ -228,11 +231,14 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let mut lines = vec![header.join(",")];
     // Lags on the uniform grid only (`Plan::correlation_lags`); `n`: the trajectories whose
     // span covers the lag, which every correlated quantity shares.
-    for (lag, t) in plan.times.iter().enumerate().take(plan.correlation_lags()) {
+    // The pair estimator keeps τ from −T to T: row i is lag i − (lags − 1), C(0) at lags − 1.
+    let zero = plan.correlation_span() - plan.correlation_lags();
+    for lag in 0..plan.correlation_span() {
+        let t = if lag >= zero { plan.times[lag - zero] } else { -plan.times[zero - lag] };
         let n = acc.correlations.first().map_or(0, |c| c[lag].count());
         let mut row = format!("{:?},{n}", t / ts);
         for c in &acc.correlations {
-            let (mean, c0) = (c[lag].mean(), c[0].mean());
+            let (mean, c0) = (c[lag].mean(), c[zero].mean());
             row.push_str(&format!(",{mean:?},{:?},{:?}", c[lag].standard_error(), mean / c0));
         }
         lines.push(row);
@@ -247,6 +253,10 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         _ => None,
     };
     files.extend(super::spectrum::write(plan, acc, temperature, dir)?);
+    let spectrum = super::spectrum::spectrum(plan, acc);
+    if let Some(phase) = &report.phase_space {
+        files.push(super::pair::write_moments(phase, spectrum.as_ref(), dir)?);
+    }
 
     // Plots.
     let panels: Vec<Panel> = (0..nm)
@@ -334,7 +344,12 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         }).collect::<Vec<_>>(),
         "charts": charts_json(plan, &o.charts, ts),
         "stops": super::lifetimes::summary(m, plan, o, ts),
-        "correlation": "C(tau) = sum_t dx(t) dx(t+tau) / (n - tau), dx = x - (time mean of x along the trajectory), n its outputs, averaged over the trajectories whose outputs span the lag (count per lag: column n of correlations.csv); lags on the uniform grid k * output_interval only",
+        "spectrum": super::pair::summary(plan, report.phase_space.as_ref(), spectrum.as_ref()),
+        "correlation": if plan.spectrum.pair() {
+            "C(tau) = x(0) x(tau) for tau from -T to T (negative tau: the trajectory run backward in time from its sampled state, momenta reversed), no mean subtracted, averaged over every completed trajectory (0 after a stop); lags on the uniform grid k * output_interval only"
+        } else {
+            "C(tau) = sum_t dx(t) dx(t+tau) / (n - tau), dx = x - (time mean of x along the trajectory), n its outputs, averaged over the trajectories whose outputs span the lag (count per lag: column n of correlations.csv); lags on the uniform grid k * output_interval only"
+        },
     });
     files.push(write_summary(dir, &summary)?);
     Ok(files)

@@ -74,6 +74,8 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     /// Run the trajectories on SIMD lanes where the plan allows it (DOP853, nothing frozen, no
     /// kept trajectories): the same results to round-off, faster (see `super::lanes`).
     pub lanes: bool,
+    /// The `[spectrum]` settings; the pair estimator runs every trajectory backward in time too.
+    pub spectrum: super::spectrum_scene::SpectrumSettings,
     /// `run.stop_outside`: a trajectory stops at the first output time at which one of these
     /// coordinates (index, name, bounds in a.u.) is outside its bounds; that output is its last.
     pub stops: Vec<StopCondition>,
@@ -105,6 +107,13 @@ impl<M, const N: usize, const NA: usize> Plan<'_, M, N, NA> {
             _ if self.times[n - 1] - self.times[n - 2] < self.interval * (1.0 - 1e-9) => n - 1,
             _ => n,
         }
+    }
+
+    /// The correlation values kept per quantity: one per lag, or for the pair estimator one per
+    /// lag on each side of τ = 0 (`2·lags − 1`, τ from −T to T).
+    pub fn correlation_span(&self) -> usize {
+        let lags = self.correlation_lags();
+        if self.spectrum.pair() && lags > 0 { 2 * lags - 1 } else { lags }
     }
 
     /// The first stop condition `q` meets (outside its bounds): its index, the side and the
@@ -261,7 +270,7 @@ impl Accumulators {
             n_means: plan.n_means,
             means: vec![Moments::new(); plan.times.len() * plan.n_means],
             histograms,
-            correlations: vec![vec![Moments::new(); plan.correlation_lags()]; plan.correlations.len()],
+            correlations: vec![vec![Moments::new(); plan.correlation_span()]; plan.correlations.len()],
         }
     }
 
@@ -562,6 +571,8 @@ pub(super) struct Watch<'a, 'm, M, const N: usize, const NA: usize> {
     pub(super) failure: Option<(&'static str, f64, String)>,
     pub(super) interrupted: bool,
     pub(super) csv: Option<TrajectoryCsv>,
+    /// A kept trajectory's dipole.csv (molecules with a dipole surface).
+    pub(super) dipole: Option<crate::output::DipoleCsv>,
     /// The Cartesian chart, for a plan that switches charts.
     pub(super) cartesian: Option<CartesianSystem<'m, M, N, NA>>,
     /// q at the last output (the branch for the closed-form coordinates of a Cartesian state).
@@ -642,6 +653,12 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
         for (v, q) in row.iter_mut().zip(&self.plan.quantities) {
             *v = q.value(body, h, u, &rotation, &mu);
         }
+        if let Some(d) = &mut self.dipole
+            && let Err(e) = d.row(t / self.plan.time_scale, &mu)
+        {
+            self.failure = Some(("output", t, e));
+            return ControlFlow::Break(());
+        }
         if let Some(csv) = &mut self.csv {
             let phase = body.to_phase();
             let (euler, pe) = (phase.euler.into(), phase.pe.into());
@@ -699,6 +716,9 @@ where
     let needs_potential = plan.quantities.iter().any(Quantity::needs_potential);
     let needs_dipole = plan.quantities.iter().any(Quantity::needs_dipole);
     let mut buffer = vec![0.0; n_times * nq];
+    // The pair estimator's backward run (`super::pair`).
+    let mut backward = if plan.spectrum.pair() { vec![0.0; n_times * nq] } else { Vec::new() };
+    let passes = if plan.spectrum.pair() { 2 } else { 1 };
     let mut y0 = vec![0.0; dim];
     let lags = plan.correlation_lags();
     let mut workspace = (!plan.correlations.is_empty()).then(|| CorrelationWorkspace::new(lags));
@@ -706,7 +726,7 @@ where
     let mut correlation = vec![0.0; lags];
     let panic_at = panic_hook();
 
-    for index in indices {
+    'trajectories: for index in indices {
         if stop.load(Ordering::Relaxed) {
             outcome.interrupted += 1;
             continue;
@@ -716,7 +736,7 @@ where
         }
         let failure =
             |reason: &str, time: Option<f64>, detail: String| Failure { index, reason: reason.into(), time, detail };
-        let state = match sampler.draw(index) {
+        let drawn = match sampler.draw(index) {
             Ok(s) => s,
             Err(e) => {
                 outcome.fail(failure("sampler", None, e.to_string()), progress);
@@ -724,118 +744,178 @@ where
                 continue;
             }
         };
-        let finite = state.q.iter().chain(state.p.iter()).chain(state.j.iter()).all(|v| v.is_finite())
-            && state.orientation.coords.iter().all(|v| v.is_finite());
+        let finite = drawn.q.iter().chain(drawn.p.iter()).chain(drawn.j.iter()).all(|v| v.is_finite())
+            && drawn.orientation.coords.iter().all(|v| v.is_finite());
         if !finite {
-            let detail = format!("the drawn state is not finite: {state:?}");
+            let detail = format!("the drawn state is not finite: {drawn:?}");
             outcome.fail(failure("invalid initial state", Some(0.0), detail), progress);
             progress.done();
             continue;
         }
-        // The sampled state is the template: frozen coordinates stay at its values.
-        let mut system = ReducedSystem::from_body(plan.molecule, plan.reduction, &state).with_min_pivot(plan.min_pivot);
-        // A state at a singular geometry starts in the Cartesian chart when the plan switches
-        // (the chart integrator checks it: an `InvalidInput` there is an invalid initial state).
-        if let Err(e) = system.reduce_body(&state, &mut y0)
-            && !switching
-        {
-            outcome.fail(failure("invalid initial state", Some(0.0), e.to_string()), progress);
-            progress.done();
-            continue;
-        }
-        let csv = match &plan.keep {
-            Some((k, dir)) if index % k == 0 => {
-                let dir = dir.join(index.to_string());
-                let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
-                match std::fs::create_dir_all(&dir)
-                    .map_err(|e| e.to_string())
-                    .and_then(|()| TrajectoryCsv::create(&dir, &plan.molecule.coordinates(), unit, false))
-                {
-                    Ok(c) => Some(c),
-                    Err(e) => {
-                        outcome.fail(failure("output", Some(0.0), e), progress);
-                        progress.done();
-                        continue;
+        // The pair estimator's forward run, kept while the backward one runs.
+        let mut forward: Option<(usize, Option<Stop>, Stats, ChartReport)> = None;
+        for pass in 0..passes {
+            // Pass 1 (pair estimator only) runs backward in time: the state with its momenta reversed.
+            let state = if pass == 0 { drawn } else { super::pair::reversed(&drawn) };
+            let failure = |reason: &str, time: Option<f64>, detail: String| {
+                let detail = if pass == 0 { detail } else { format!("backward in time (t is -t): {detail}") };
+                failure(reason, time, detail)
+            };
+            let out = if pass == 0 { &mut buffer } else { &mut backward };
+            // The sampled state is the template: frozen coordinates stay at its values.
+            let mut system =
+                ReducedSystem::from_body(plan.molecule, plan.reduction, &state).with_min_pivot(plan.min_pivot);
+            // A state at a singular geometry starts in the Cartesian chart when the plan switches
+            // (the chart integrator checks it: an `InvalidInput` there is an invalid initial state).
+            if let Err(e) = system.reduce_body(&state, &mut y0)
+                && !switching
+            {
+                outcome.fail(failure("invalid initial state", Some(0.0), e.to_string()), progress);
+                break;
+            }
+            let csv = match &plan.keep {
+                Some((k, dir)) if index % k == 0 && pass == 0 => {
+                    let dir = dir.join(index.to_string());
+                    let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
+                    match std::fs::create_dir_all(&dir)
+                        .map_err(|e| e.to_string())
+                        .and_then(|()| TrajectoryCsv::create(&dir, &plan.molecule.coordinates(), unit, false))
+                    {
+                        Ok(c) => Some(c),
+                        Err(e) => {
+                            outcome.fail(failure("output", Some(0.0), e), progress);
+                            break;
+                        }
                     }
                 }
-            }
-            _ => None,
-        };
-        let mut watch = Watch {
-            system,
-            plan,
-            buffer: &mut buffer,
-            needs_potential,
-            needs_dipole,
-            k: 0,
-            initial_energy: 0.0,
-            stop,
-            failure: None,
-            interrupted: false,
-            csv,
-            cartesian: if switching { CartesianSystem::new(plan.molecule).ok() } else { None },
-            last_q: state.q,
-            stopped: None,
-        };
-        let mut chart_report = ChartReport::default();
-        let result = match &mut integrator {
-            Integrator::Charts(charts) => charts
-                .integrate(
-                    &system,
-                    0.0,
-                    ChartStart::Fresh(&state),
-                    plan.t_end,
-                    plan.interval,
-                    &mut watch,
-                    &mut chart_report,
-                )
-                .map(|()| chart_report.stats)
-                .map_err(|e| match e {
-                    // The settings were checked when the integrators were made: what is left is
-                    // a start that neither chart can hold.
-                    SolveError::InvalidInput(why) => ("invalid initial state", why, Some(0.0)),
-                    e => solve_reason(&e, chart_reason),
-                }),
-            other => other
-                .integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch)
-                .map_err(|e| solve_reason(&e, hamiltonian_reason)),
-        };
-        if let Some(csv) = &mut watch.csv
-            && let Err(e) = csv.flush()
-        {
-            watch.failure.get_or_insert(("output", plan.t_end, e));
-        }
-        // A kept trajectory's chart switches beside its trajectory.csv.
-        if switching
-            && watch.csv.is_some()
-            && let Some((_, dir)) = &plan.keep
-            && let Err(e) = write_chart_report(&dir.join(index.to_string()), &chart_report, plan.time_scale)
-        {
-            watch.failure.get_or_insert(("output", plan.t_end, e));
-        }
-        let (k, interrupted, observed, stopped) = (watch.k, watch.interrupted, watch.failure.take(), watch.stopped);
-        match (result, observed) {
-            (Err((reason, detail, time)), _) => {
-                outcome.fail(failure(reason, time, detail), progress);
-            }
-            (Ok(_), Some((reason, t, detail))) => outcome.fail(failure(reason, Some(t), detail), progress),
-            (Ok(_), None) if interrupted => {
-                outcome.interrupted += 1;
-                continue;
-            }
-            (Ok(_), None) if k != n_times && stopped.is_none() => {
-                let detail = format!("{k} output times observed, {n_times} expected");
-                outcome.fail(failure("output", Some(plan.t_end), detail), progress);
-            }
-            (Ok(stats), None) => {
-                outcome.completed += 1;
-                outcome.steps += stats.steps;
-                outcome.rhs_evaluations += stats.rhs_evals;
-                if switching {
-                    outcome.charts.add(index, &chart_report);
+                _ => None,
+            };
+            // A kept trajectory of a molecule with a dipole surface also writes dipole.csv.
+            let dipole = match (&csv, &plan.keep) {
+                (Some(_), Some((_, dir))) if plan.molecule.has_dipole() => {
+                    match crate::output::DipoleCsv::create(&dir.join(index.to_string())) {
+                        Ok(d) => Some(d),
+                        Err(e) => {
+                            outcome.fail(failure("output", Some(0.0), e), progress);
+                            break;
+                        }
+                    }
                 }
-                outcome.count_lifetime(plan, index, k, stopped);
-                fold(plan, &mut outcome.statistics, &buffer, k, workspace.as_mut(), &mut series, &mut correlation);
+                _ => None,
+            };
+            let mut watch = Watch {
+                system,
+                plan,
+                buffer: out,
+                needs_potential,
+                needs_dipole: needs_dipole || dipole.is_some(),
+                k: 0,
+                initial_energy: 0.0,
+                stop,
+                failure: None,
+                interrupted: false,
+                csv,
+                dipole,
+                cartesian: if switching { CartesianSystem::new(plan.molecule).ok() } else { None },
+                last_q: state.q,
+                stopped: None,
+            };
+            let mut chart_report = ChartReport::default();
+            let result = match &mut integrator {
+                Integrator::Charts(charts) => charts
+                    .integrate(
+                        &system,
+                        0.0,
+                        ChartStart::Fresh(&state),
+                        plan.t_end,
+                        plan.interval,
+                        &mut watch,
+                        &mut chart_report,
+                    )
+                    .map(|()| chart_report.stats)
+                    .map_err(|e| match e {
+                        // The settings were checked when the integrators were made: what is left is
+                        // a start that neither chart can hold.
+                        SolveError::InvalidInput(why) => ("invalid initial state", why, Some(0.0)),
+                        e => solve_reason(&e, chart_reason),
+                    }),
+                other => other
+                    .integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch)
+                    .map_err(|e| solve_reason(&e, hamiltonian_reason)),
+            };
+            if let Some(csv) = &mut watch.csv
+                && let Err(e) = csv.flush()
+            {
+                watch.failure.get_or_insert(("output", plan.t_end, e));
+            }
+            if let Some(d) = &mut watch.dipole
+                && let Err(e) = d.flush()
+            {
+                watch.failure.get_or_insert(("output", plan.t_end, e));
+            }
+            // A kept trajectory's chart switches beside its trajectory.csv.
+            if switching
+                && watch.csv.is_some()
+                && let Some((_, dir)) = &plan.keep
+                && let Err(e) = write_chart_report(&dir.join(index.to_string()), &chart_report, plan.time_scale)
+            {
+                watch.failure.get_or_insert(("output", plan.t_end, e));
+            }
+            let (k, interrupted, observed, stopped) = (watch.k, watch.interrupted, watch.failure.take(), watch.stopped);
+            match (result, observed) {
+                (Err((reason, detail, time)), _) => {
+                    outcome.fail(failure(reason, time, detail), progress);
+                    break;
+                }
+                (Ok(_), Some((reason, t, detail))) => {
+                    outcome.fail(failure(reason, Some(t), detail), progress);
+                    break;
+                }
+                (Ok(_), None) if interrupted => {
+                    outcome.interrupted += 1;
+                    continue 'trajectories;
+                }
+                (Ok(_), None) if k != n_times && stopped.is_none() => {
+                    let detail = format!("{k} output times observed, {n_times} expected");
+                    outcome.fail(failure("output", Some(plan.t_end), detail), progress);
+                    break;
+                }
+                (Ok(stats), None) if pass + 1 < passes => forward = Some((k, stopped, stats, chart_report)),
+                (Ok(stats), None) => {
+                    // The backward run's work and chart switches count with the forward run's.
+                    let (k, stopped, stats, chart_report, back) = match forward.take() {
+                        Some((kf, sf, mut total, mut report)) => {
+                            total.steps += stats.steps;
+                            total.rhs_evals += stats.rhs_evals;
+                            report.switches += chart_report.switches;
+                            report.cartesian_time += chart_report.cartesian_time;
+                            (kf, sf, total, report, Some(k))
+                        }
+                        None => (k, stopped, stats, chart_report, None),
+                    };
+                    outcome.completed += 1;
+                    outcome.steps += stats.steps;
+                    outcome.rhs_evaluations += stats.rhs_evals;
+                    if switching {
+                        outcome.charts.add(index, &chart_report);
+                    }
+                    outcome.count_lifetime(plan, index, k, stopped);
+                    match back {
+                        Some(kb) => {
+                            fold(plan, &mut outcome.statistics, &buffer, k, None, &mut series, &mut correlation);
+                            super::pair::fold_pair(plan, &mut outcome.statistics, &buffer, k, &backward, kb);
+                        }
+                        None => fold(
+                            plan,
+                            &mut outcome.statistics,
+                            &buffer,
+                            k,
+                            workspace.as_mut(),
+                            &mut series,
+                            &mut correlation,
+                        ),
+                    }
+                }
             }
         }
         progress.done();

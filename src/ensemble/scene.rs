@@ -53,6 +53,8 @@ pub struct EnsembleScene {
     pub max_memory_gb: (f64, Option<Range<usize>>),
     /// The cap on the estimated disk use, GB (`ensemble.max_disk_gb`), and where it is written.
     pub max_disk_gb: (f64, Option<Range<usize>>),
+    /// The `[spectrum]` table ([`super::spectrum_scene`]).
+    pub spectrum: super::spectrum_scene::SpectrumScene,
     method_span: Range<usize>,
     trajectories_span: Range<usize>,
 }
@@ -571,6 +573,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         statistics,
         max_memory_gb,
         max_disk_gb,
+        spectrum: super::spectrum_scene::parse_spectrum(&src)?,
         method_span: e.method.span(),
         trajectories_span: e.trajectories.span(),
     })
@@ -762,6 +765,7 @@ impl EnsembleScene {
         for c in &self.statistics.correlations {
             correlations.push(index_of(lookup(c)?));
         }
+        self.spectrum.check(&src, &quantities, &correlations)?;
         let bound = Bound { spec, description, quantities, n_means, histograms, correlations };
         self.check_resources(&bound, scene, times.len(), 2 * N + 8)?;
         Ok(bound)

@@ -22,8 +22,18 @@ use crate::runtime::spectrum::{QuantumCorrection, Spectrum};
 /// The grid is this many times finer than 1/(2T) (zero padding; interpolation only).
 pub const PADDING: usize = 4;
 
-/// The highest wavenumber written, cm⁻¹ (also limited by the output interval's Nyquist limit).
-pub const MAX_WAVENUMBER: f64 = 5000.0;
+/// The highest wavenumber written by default, cm⁻¹ (`[spectrum] max_wavenumber`; also limited by
+/// the output interval's Nyquist limit).
+pub const MAX_WAVENUMBER: f64 = super::spectrum_scene::DEFAULT_MAX_WAVENUMBER;
+
+/// Loschmidt's number, the number density of an ideal gas at 273.15 K and 101 325 Pa (one
+/// amagat), per cm³ (CODATA 2018).
+pub const LOSCHMIDT_PER_CM3: f64 = 2.686_780_111e19;
+
+/// Whether the plan correlates the three lab-frame dipole components (and so has a spectrum).
+pub fn dipole_correlated<M, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>) -> bool {
+    (0..3).all(|axis| plan.correlations.iter().any(|&qi| plan.quantities[qi] == Quantity::LabDipole(axis)))
+}
 
 /// The summed dipole autocorrelation ⟨μ_lab(0)·μ_lab(τ)⟩ (e²·bohr²) per lag, if the plan
 /// correlates all three components and some trajectory completed: the lags on the uniform grid
@@ -47,8 +57,11 @@ pub fn dipole_correlation<M, const N: usize, const NA: usize>(
 
 /// The spectrum of the plan's dipole correlation, if it has one.
 pub fn spectrum<M, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>, acc: &Accumulators) -> Option<Spectrum> {
+    if plan.spectrum.pair() {
+        return super::pair::spectrum(plan, acc);
+    }
     let c = dipole_correlation(plan, acc)?;
-    Some(Spectrum::from_correlation(&c, plan.interval, MAX_WAVENUMBER, PADDING))
+    Some(Spectrum::from_correlation(&c, plan.interval, plan.spectrum.max_wavenumber, PADDING))
 }
 
 /// Writes `spectrum.csv` (wavenumber, line shape and, with a temperature, the cross section
@@ -68,12 +81,33 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     for (c, _) in QuantumCorrection::ALL.iter().zip(&sigmas) {
         header.push(format!("sigma_{}_cm2", c.name()));
     }
+    // The binary absorption coefficient α/(ρ_A ρ_B) = σ V n₀² (cm⁻¹ amagat⁻²) of a pair
+    // ensemble with its pair volume V (docs/src/reference/equations.md, section 13).
+    let binary: Vec<Vec<f64>> = match plan.spectrum.pair_volume {
+        Some(v) => {
+            let volume_cm3 = v * (crate::runtime::units::BOHR_IN_ANGSTROM * 1e-8).powi(3);
+            let scale = volume_cm3 * LOSCHMIDT_PER_CM3 * LOSCHMIDT_PER_CM3;
+            sigmas.iter().map(|sigma| sigma.iter().map(|x| x * scale).collect()).collect()
+        }
+        None => Vec::new(),
+    };
+    for (c, _) in QuantumCorrection::ALL.iter().zip(&binary) {
+        header.push(format!("alpha_over_rho2_{}_cm-1_amagat-2", c.name()));
+    }
     let mut f = OutputFile::create(dir, "spectrum.csv")?;
-    f.line(&format!("# resolution (FWHM) {:?} cm-1, Hann taper over T = {:?} a.u.", s.resolution(), s.length))?;
+    if plan.spectrum.pair() {
+        f.line(&format!(
+            "# pair estimator: <mu(0).mu(tau)> for tau in [-T; T] with T = {:?} a.u.; flat-top window (1 for |tau| <= \
+             T/2; cos^2 taper to 0 at T); the lineshape is the spectral density per pair of the sampled region",
+            plan.interval * plan.correlation_lags().saturating_sub(1) as f64
+        ))?;
+    } else {
+        f.line(&format!("# resolution (FWHM) {:?} cm-1, Hann taper over T = {:?} a.u.", s.resolution(), s.length))?;
+    }
     f.line(&header.join(","))?;
     for j in 0..s.wavenumber.len() {
         let mut row = format!("{:?},{:?}", s.wavenumber[j], s.lineshape[j]);
-        for sigma in &sigmas {
+        for sigma in sigmas.iter().chain(&binary) {
             row.push_str(&format!(",{:?}", sigma[j]));
         }
         f.line(&row)?;

@@ -434,6 +434,7 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
         time_scale: 1.0,
         lanes: false,
         stops: Vec::new(),
+        spectrum: Default::default(),
     };
     let sampler = Gaussian::new(31);
     let stop = AtomicBool::new(false);
@@ -501,6 +502,7 @@ fn a_block_on_lanes_has_the_scalar_outcome_to_round_off() {
         time_scale: 1.0,
         lanes,
         stops: Vec::new(),
+        spectrum: Default::default(),
     };
     let sampler = Troubled(Gaussian::new(37));
     let stop = AtomicBool::new(false);

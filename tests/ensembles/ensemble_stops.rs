@@ -332,7 +332,7 @@ fn a_short_last_interval_is_left_out_of_the_correlations() {
     }
     // The spectrum is that of the 11 whole lags: its taper length is 11 outputs' worth.
     let spectrum = std::fs::read_to_string(file(&report, "spectrum.csv")).unwrap();
-    let axes = ["mu_x", "mu_y", "mu_z"].map(|q| column(&h, &format!("{q}_C_e*bohr^2")));
+    let axes = ["mu_x", "mu_y", "mu_z"].map(|q| column(&h, &format!("{q}_C_(e*bohr)^2")));
     let c: Vec<f64> = rows.iter().map(|r| axes.iter().fold(0.0, |sum, &j| sum + r[j])).collect();
     let expected = rovib::runtime::spectrum::Spectrum::from_correlation(&c, 10.0, 5000.0, 4);
     assert!(spectrum.starts_with(&format!("# resolution (FWHM) {:?} cm-1", expected.resolution())), "{spectrum:.80}");

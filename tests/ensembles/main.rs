@@ -14,6 +14,7 @@ mod ensemble_scene;
 mod ensemble_stops;
 mod fuzz;
 mod linear_scenes;
+mod pair_ensemble;
 mod sampling;
 mod scene_limits;
 mod spectrum;

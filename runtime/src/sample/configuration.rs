@@ -626,6 +626,47 @@ where
         log_t.is_finite().then_some((Point { q: *q, u, chol, kinetic, j_dir: *j_dir }, log_t))
     }
 
+    /// `ln ∫ e^{−U(q)/kT} √det M(q) dq` over the region (U from the potential's own zero) and the
+    /// standard error of the estimate relative to the integral, for the Boltzmann target with
+    /// the metric factor (None for any other target): importance sampling with the proposal the
+    /// rejection uses, `∫ t dq = C · E_φ[t/φ̃]`, where φ̃ is the unnormalised proposal and `C`
+    /// its normaliser (a Gaussian's `(2π)^{d/2} det l` times the uniform angles' widths, or the
+    /// box volume), from `points` proposals of `rng`.
+    pub fn log_integral(&self, rng: &mut TrajectoryRng, points: usize) -> Option<(f64, f64)> {
+        let Target::Boltzmann { kt, metric: true } = self.target else { return None };
+        let log_c = match &self.proposal {
+            Proposal::Gaussian { l, uniform, .. } => (0..N)
+                .map(|k| {
+                    if uniform[k] {
+                        (self.high[k] - self.low[k]).ln()
+                    } else {
+                        l[(k, k)].abs().ln() + 0.5 * std::f64::consts::TAU.ln()
+                    }
+                })
+                .sum::<f64>(),
+            Proposal::Uniform => (0..N).map(|k| (self.high[k] - self.low[k]).ln()).sum::<f64>(),
+        };
+        // Ratios relative to the envelope (at most 1 where the envelope holds): no overflow.
+        let (mut sum, mut sum2) = (0.0, 0.0);
+        for _ in 0..points {
+            let (x, q) = self.propose(rng);
+            let r = match self.evaluate(&q, &Vector3::z()) {
+                Some((_, log_t)) => (log_t - self.log_proposal(&x) - self.log_bound).exp(),
+                None => 0.0,
+            };
+            sum += r;
+            sum2 += r * r;
+        }
+        let n = points.max(2) as f64;
+        let mean = sum / n;
+        if mean.is_nan() || mean <= 0.0 {
+            return None;
+        }
+        let variance = (sum2 / n - mean * mean).max(0.0) * n / (n - 1.0);
+        let log = log_c + mean.ln() + self.log_bound - self.u_shift / kt;
+        Some((log, (variance / n).sqrt() / mean))
+    }
+
     /// One configuration from the trajectory's stream.
     pub fn draw(&self, rng: &mut TrajectoryRng) -> Result<Point<N>, SampleError> {
         for _ in 0..MAX_TRIES {

@@ -69,7 +69,18 @@ pub trait Sampler<const N: usize>: Sync {
     /// The initial state of trajectory `index`: q (bohr, rad), p (ħ/bohr, ħ), the orientation
     /// (body → lab) and the body-frame angular momentum J (ħ).
     fn draw(&self, index: u64) -> Result<BodyState<N>, SampleError>;
+
+    /// The configurational integral of the sampled region, `(ln Z, relative standard error)`,
+    /// where the sampler knows it (the thermal one: [`Thermal::configurational_integral_with`] with
+    /// [`INTEGRAL_POINTS`] points); None otherwise.
+    fn configurational_integral(&self) -> Option<(f64, f64)> {
+        None
+    }
 }
+
+/// The proposals of the importance-sampling estimate of a thermal sampler's configurational
+/// integral (relative standard error ~ 1/√(acceptance · points)).
+pub const INTEGRAL_POINTS: usize = 1 << 16;
 
 /// How the bounded region of configuration space is chosen for a distribution that is not
 /// normalisable otherwise (a Morse well at a finite temperature).

@@ -38,6 +38,7 @@ use crate::molecule::Molecule;
 /// The thermal sampler.
 pub struct Thermal<'m, M: ?Sized, const N: usize, const NA: usize> {
     configuration: Configuration<'m, M, N, NA>,
+    molecule: &'m M,
     kt: f64,
     seed: u64,
 }
@@ -89,7 +90,24 @@ where
         }
         let configuration =
             Configuration::new(molecule, Target::Boltzmann { kt, metric }, bounds, centre, hessian, kt)?;
-        Ok(Self { configuration, kt, seed })
+        Ok(Self { configuration, molecule, kt, seed })
+    }
+
+    /// The configurational integral of the region with the centre of mass fixed, in Cartesian
+    /// measure: `Z = ∫ e^{−U/kT} Π d³x_i δ³(X_cm)` (bohr^(3·atoms − 3); U from the potential's own
+    /// zero), as `(ln Z, relative standard error)`. From `Π d³x_i = (M^{3/2} / Π m_i^{3/2}) √det M(q)
+    /// sin β d³X dφ dβ dψ dq` (the kinetic metric is the mass-weighted Cartesian one in these
+    /// coordinates) and `∫ sin β = 8π²`: `Z = 8π² (M^{3/2} / Π m_i^{3/2}) ∫ e^{−U/kT} √det M dq`,
+    /// the integral by importance sampling ([`Configuration::log_integral`]) with `points`
+    /// proposals from a stream of its own (the ensemble's seed, the last stream index).
+    /// None for [`Self::without_metric_factor`].
+    pub fn configurational_integral_with(&self, points: usize) -> Option<(f64, f64)> {
+        let mut rng = stream(self.seed, u64::MAX);
+        let (log, relative) = self.configuration.log_integral(&mut rng, points)?;
+        let masses = self.molecule.masses();
+        let total: f64 = masses.iter().sum();
+        let log_mass = 1.5 * total.ln() - 1.5 * masses.iter().map(|m| m.ln()).sum::<f64>();
+        Some(((8.0 * std::f64::consts::PI.powi(2)).ln() + log_mass + log, relative))
     }
 
     /// The estimated acceptance rate of the configuration's rejection sampling.
@@ -111,5 +129,9 @@ where
         let z2 = SVector::<f64, N>::from_fn(|_, _| rng.sample::<f64, _>(StandardNormal) * s);
         let (j, p) = point.chol.apply(&z1, &z2);
         Ok(BodyState { q: point.q, p, orientation, j })
+    }
+
+    fn configurational_integral(&self) -> Option<(f64, f64)> {
+        self.configurational_integral_with(super::INTEGRAL_POINTS)
     }
 }
