@@ -17,6 +17,7 @@ pub mod plot;
 pub mod restart;
 pub mod scene;
 pub mod start;
+pub mod surfaces;
 
 pub use rovib_runtime as runtime;
 
