@@ -85,20 +85,20 @@ fn the_c_surface_is_the_definitions_surface_pointwise() {
             let q = SVector::from([r, theta]);
             let (mut g1, mut g2) = (SVector::zeros(), SVector::zeros());
             let (u1, u2) = (c.energy_gradient(&q, &mut g1), dsl.energy_gradient(&q, &mut g2));
-            assert!((u1 - u2).abs() <= 1e-15 * u2.abs().max(1e-6), "U at {q:?}: C {u1:e}, definition {u2:e}");
+            assert!((u1 - u2).abs() <= 1e-13 * u2.abs().max(1e-6), "U at {q:?}: C {u1:e}, definition {u2:e}");
             assert!((u1 - c.energy(&q)).abs() == 0.0);
             for k in 0..2 {
-                assert!((g1[k] - g2[k]).abs() <= 1e-14 * g2.norm().max(1e-6), "dU/dq{k} at {q:?}: {g1:?} {g2:?}");
+                assert!((g1[k] - g2[k]).abs() <= 1e-12 * g2.norm().max(1e-6), "dU/dq{k} at {q:?}: {g1:?} {g2:?}");
             }
             let (mut m1, mut m2) = (Vector3::zeros(), Vector3::zeros());
             let composed = WithPotential { molecule: Arn2, potential: c };
             composed.dipole(&q, &mut m1);
             Arn2.dipole(&q, &mut m2);
-            assert!((m1 - m2).norm() <= 1e-15 * m2.norm().max(1e-12), "mu at {q:?}: {m1:?} {m2:?}");
+            assert!((m1 - m2).norm() <= 1e-13 * m2.norm().max(1e-12), "mu at {q:?}: {m1:?} {m2:?}");
             let (mut d1, mut d2) = (SMatrix::<f64, 3, 2>::zeros(), SMatrix::<f64, 3, 2>::zeros());
             composed.dipole_jacobian(&q, &mut d1);
             Arn2.dipole_jacobian(&q, &mut d2);
-            assert!((d1 - d2).norm() <= 1e-14 * d2.norm().max(1e-12), "dmu at {q:?}: {d1:?} {d2:?}");
+            assert!((d1 - d2).norm() <= 1e-12 * d2.norm().max(1e-12), "dmu at {q:?}: {d1:?} {d2:?}");
         }
     }
 }
@@ -213,9 +213,7 @@ fn library_keys_are_refused_at_their_place() {
     let e = file_error(run_scene(&dir, SCENE, "library = \"libarn2.so\"\nparameters = { a = 1 }"));
     assert!(e.line == line + 1 && e.message.contains("replaces"), "{e}");
     // Another molecule's coordinates: water has three.
-    let water = SCENE
-        .replace("arn2", "h2o")
-        .replace("q = { R = 6.9, theta = 80 }\np = { R = 0, theta = 1.5 }\n", "");
+    let water = SCENE.replace("arn2", "h2o").replace("q = { R = 6.9, theta = 80 }\np = { R = 0, theta = 1.5 }\n", "");
     let e = file_error(run_scene(&dir, &water, "library = \"libarn2.so\""));
     assert!(e.message.contains("takes 2 coordinates, but the molecule has 3"), "{e}");
 }

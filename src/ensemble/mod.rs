@@ -290,8 +290,8 @@ impl Visit<'_, '_> {
 
 /// Runs the ensemble of `scene` for molecule `m` with initial states from `sampler` instead of
 /// the scene's method (the method's parameters are still checked); `description` says how the
-/// states are drawn, for summary.json. The scene's `[potential] library` or `[potential.parameters]` apply to the
-/// trajectories and statistics (the sampler is the caller's).
+/// states are drawn, for summary.json. The scene's `[potential] library` or
+/// `[potential.parameters]` apply to the trajectories and statistics (the sampler is the caller's).
 pub fn run_with_sampler<M, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
