@@ -81,7 +81,7 @@ fn the_c_surface_is_the_definitions_surface_pointwise() {
     let dsl = PotentialOf::<_, 3>(Arn2);
     // Every spline interval, the tail, both sides of each knot, and angles across [0, π].
     for r in [4.5, 5.0, 5.5, 6.0, 6.54, 6.999, 7.0, 7.5, 8.2, 9.7, 10.5, 11.9, 12.0, 14.0] {
-        for theta in [0.0, 0.3, 1.0, 1.5707963267948966, 2.2, 3.0, std::f64::consts::PI] {
+        for theta in [0.0, 0.3, 1.0, std::f64::consts::FRAC_PI_2, 2.2, 3.0, std::f64::consts::PI] {
             let q = SVector::from([r, theta]);
             let (mut g1, mut g2) = (SVector::zeros(), SVector::zeros());
             let (u1, u2) = (c.energy_gradient(&q, &mut g1), dsl.energy_gradient(&q, &mut g2));
