@@ -217,3 +217,34 @@ fn library_keys_are_refused_at_their_place() {
     let e = file_error(run_scene(&dir, &water, "library = \"libarn2.so\""));
     assert!(e.message.contains("takes 2 coordinates, but the molecule has 3"), "{e}");
 }
+
+#[test]
+fn an_ensemble_on_a_library_runs_one_trajectory_at_a_time_and_says_so() {
+    let dir = tmp("ensemble");
+    shared_library(&dir, &[]);
+    let text = format!(
+        "molecule = \"arn2\"\n[ensemble]\ntrajectories = 8\nseed = 4\nmethod = \"thermal\"\ntemperature = 10\nregion = {{ energy_cap = 0.0002 }}\n\
+         [statistics]\nmeans = [\"R\"]\n[run]\nend = 400\noutput_interval = 100\n[potential]\nlibrary = \"{}\"\n",
+        dir.join("libarn2.so").display()
+    );
+    let scene = rovib::scene::parse_scene("ensemble.toml", &text).unwrap();
+    let mut options = rovib::ensemble::EnsembleOptions::new(dir.join("out"));
+    options.threads = Some(2);
+    let with_library = rovib::ensemble::run_ensemble(&scene, &options).unwrap();
+    assert_eq!(with_library.outcome.completed, 8);
+    assert!(with_library.lanes_note.as_deref().is_some_and(|n| n.contains("one trajectory at a time")));
+    let summary = std::fs::read_to_string(dir.join("out/summary.json")).unwrap();
+    assert!(summary.contains("\"lanes_note\": \"arn2 has no lane form"), "{summary}");
+    // The same ensemble on the definition's potential (on lanes): the same means to round-off.
+    let plain = rovib::scene::parse_scene("ensemble.toml", text.split("[potential]").next().unwrap()).unwrap();
+    let generated = rovib::ensemble::run_ensemble(&plain, &{
+        let mut o = rovib::ensemble::EnsembleOptions::new(dir.join("out-plain"));
+        o.threads = Some(2);
+        o
+    })
+    .unwrap();
+    for k in 0..5 {
+        let (a, b) = (with_library.mean("R", k).unwrap().0, generated.mean("R", k).unwrap().0);
+        assert!((a - b).abs() < 1e-9, "mean R at output {k}: {a} vs {b}");
+    }
+}
