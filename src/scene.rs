@@ -197,6 +197,10 @@ pub struct Scene {
     /// `[potential.parameters]`: values that replace the definition's compiled-in parameters
     /// for this run (names checked against the molecule when the run starts).
     pub parameters: Vec<Named<f64>>,
+    /// `[potential] library`: a shared library with the C ABI of `ffi/include/rovib_surface.h`
+    /// whose potential replaces the molecule's, as written (its place for errors) and resolved
+    /// against the scene file's directory (see `crate::surfaces`).
+    pub library: Option<(Spanned<String>, std::path::PathBuf)>,
     /// Stop conditions: the run stops (status "stopped") at the first output time at which a
     /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
     /// molecule when the run starts).
@@ -232,7 +236,8 @@ struct RawScene {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawScenePotential {
-    parameters: RawTable<f64>,
+    parameters: Option<RawTable<f64>>,
+    library: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Default)]
@@ -512,10 +517,15 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         },
         euler_unwrapped: run.euler_unwrapped,
         cartesian_fallback: run.cartesian_fallback.unwrap_or(true),
-        parameters: match &raw.potential {
-            Some(p) => named_numbers(&src, &p.parameters, "potential.parameters")?,
+        parameters: match raw.potential.as_ref().and_then(|p| p.parameters.as_ref()) {
+            Some(table) => named_numbers(&src, table, "potential.parameters")?,
             None => Vec::new(),
         },
+        library: crate::surfaces::scene_library(
+            &src,
+            raw.potential.as_ref().and_then(|p| p.library.as_ref()),
+            raw.potential.as_ref().and_then(|p| p.parameters.as_ref()).map(|t| t.span()),
+        )?,
         stop_outside: match &run.stop_outside {
             None => Vec::new(),
             Some(table) => table

@@ -220,9 +220,13 @@ pub fn start_energy_warning(name: &str, h0: f64, u_ref: f64) -> Option<String> {
 impl MoleculeVisitor for Run<'_> {
     type Output = Result<RunReport, Error>;
 
-    /// With the scene's `[potential.parameters]` the molecule runs with them (the run-time
-    /// path), else with its compiled-in constants.
+    /// With the scene's `[potential] library` the molecule runs on that potential; with its
+    /// `[potential.parameters]` on its own with them (the run-time path), else with its
+    /// compiled-in constants.
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {
+            return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: surface });
+        }
         match scene_parameters(&m, self.scene)? {
             Some(values) => self.go(WithParameters { molecule: m, values }),
             None => self.go(m),

@@ -25,6 +25,7 @@ pub mod polarization;
 pub mod sample;
 pub mod special;
 pub mod spectrum;
+pub mod surface;
 pub mod transcendental;
 pub mod units;
 

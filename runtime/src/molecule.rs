@@ -5,6 +5,11 @@
 //! runtime (G matrices, Hamilton's equations, integrators, frames) is generic over this trait,
 //! so a hand-written implementation works just as well as a generated one.
 //!
+//! The potential and the dipole are also parts of their own ([`crate::surface`]): a
+//! [`crate::surface::Potential`] from outside (a shared library, C compiled at build time)
+//! composed with a generated molecule's kinematics by [`crate::surface::WithPotential`] is a
+//! full `Molecule`, with no method written by hand.
+//!
 //! # Conventions
 //!
 //! * Atomic units: q in bohr or radians, positions in bohr, masses in electron masses,

@@ -174,6 +174,9 @@ pub struct EnsembleReport {
     pub threads: usize,
     /// Why fewer threads run than were asked for, if so (also printed, and in summary.json).
     pub threads_note: Option<String>,
+    /// Why trajectories run one at a time although lanes were asked for, if so (also printed,
+    /// and in summary.json).
+    pub lanes_note: Option<String>,
     /// Processes (MPI ranks; 1 without MPI).
     pub ranks: usize,
     /// Blocks each process ran in this run (rank 0 first).
@@ -277,12 +280,16 @@ struct Visit<'a, 'l> {
 impl MoleculeVisitor for Visit<'_, '_> {
     type Output = Result<Option<EnsembleReport>, Error>;
 
-    /// With the scene's `[potential.parameters]` every trajectory, the sampler and the
-    /// statistics use the potential with them (as `rovib run` does), else the compiled-in one.
+    /// With the scene's `[potential] library` every trajectory, the sampler and the statistics
+    /// use that potential; with its `[potential.parameters]` the molecule's own with them (as
+    /// `rovib run` does), else the compiled-in one.
     fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
     where
         M: Molecule<N, NA> + Copy + Send + Sync + 'static,
     {
+        if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {
+            return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: surface });
+        }
         match crate::parameters::scene_parameters(&m, self.scene)? {
             Some(values) => self.go(crate::parameters::WithParameters { molecule: m, values }),
             None => self.go(m),
@@ -311,8 +318,8 @@ impl Visit<'_, '_> {
 
 /// Runs the ensemble of `scene` for molecule `m` with initial states from `sampler` instead of
 /// the scene's method (the method's parameters are still checked); `description` says how the
-/// states are drawn, for summary.json. The scene's `[potential.parameters]` apply to the
-/// trajectories and statistics (the sampler is the caller's).
+/// states are drawn, for summary.json. The scene's `[potential] library` or
+/// `[potential.parameters]` apply to the trajectories and statistics (the sampler is the caller's).
 pub fn run_with_sampler<M, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
@@ -323,6 +330,10 @@ pub fn run_with_sampler<M, const N: usize, const NA: usize>(
 where
     M: Molecule<N, NA> + Sync + Clone,
 {
+    if let Some(surface) = crate::surfaces::scene_surface(m, scene)? {
+        let m = crate::runtime::surface::WithPotential { molecule: m.clone(), potential: surface };
+        return run_with_sampler_as_given(&m, scene, sampler, description, options);
+    }
     if let Some(values) = crate::parameters::scene_parameters(m, scene)? {
         let m = crate::parameters::WithParameters { molecule: m.clone(), values };
         return run_with_sampler_as_given(&m, scene, sampler, description, options);
@@ -444,6 +455,18 @@ where
     {
         eprintln!("note: {note}");
     }
+    let lanes_note = (options.lanes && !crate::runtime::hamiltonian::lanes::available(m)).then(|| {
+        format!(
+            "{} has no lane form here (a potential from a shared library, or a large molecule): one trajectory \
+             at a time on each thread",
+            m.name()
+        )
+    });
+    if let Some(note) = &lanes_note
+        && !worker
+    {
+        eprintln!("note: {note}");
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -518,6 +541,7 @@ where
         wall_time,
         threads,
         threads_note,
+        lanes_note,
         ranks,
         blocks_by_rank,
         resumed,

@@ -312,6 +312,7 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         "sampler": report.sampler,
         "threads": report.threads,
         "threads_note": report.threads_note,
+        "lanes_note": report.lanes_note,
         "ranks": report.ranks,
         "blocks_by_rank": report.blocks_by_rank,
         "resumed_trajectories": report.resumed,

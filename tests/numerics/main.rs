@@ -22,3 +22,4 @@ mod lanes;
 mod linear_charts;
 mod molecules;
 mod stability;
+mod surfaces;

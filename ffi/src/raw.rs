@@ -1,0 +1,155 @@
+//! Every `unsafe` of rovib: loading a shared library, looking up its functions, and calling
+//! foreign functions (loaded, or compiled in by the build script).
+//!
+//! What makes each call sound, besides the library keeping to `include/rovib_surface.h` (which
+//! nothing can check): the pointers passed are to slices whose lengths are checked against the
+//! coordinate count the library declared, and a loaded library outlives its function pointers
+//! (they are only reachable through a borrow of [`Loaded`]).
+#![allow(unsafe_code)]
+
+use std::ffi::c_int;
+use std::path::Path;
+
+use crate::SurfaceError;
+
+type CountFn = unsafe extern "C" fn() -> c_int;
+type EnergyFn = unsafe extern "C" fn(*const f64) -> f64;
+type GradientFn = unsafe extern "C" fn(*const f64, *mut f64) -> f64;
+type DipoleFn = unsafe extern "C" fn(*const f64, *mut f64);
+
+/// A surface's functions, for `coordinates` coordinates.
+#[derive(Copy, Clone, Debug)]
+pub(crate) struct Functions {
+    pub coordinates: usize,
+    energy: EnergyFn,
+    gradient: GradientFn,
+    dipole: Option<(DipoleFn, DipoleFn)>,
+}
+
+impl Functions {
+    pub fn has_dipole(&self) -> bool {
+        self.dipole.is_some()
+    }
+
+    /// U(q).
+    pub fn energy(&self, q: &[f64]) -> f64 {
+        assert_eq!(q.len(), self.coordinates, "a surface is called with its own number of coordinates");
+        // SAFETY: q holds the `coordinates` values the function reads.
+        unsafe { (self.energy)(q.as_ptr()) }
+    }
+
+    /// ∂U/∂q into `grad`; returns U.
+    pub fn gradient(&self, q: &[f64], grad: &mut [f64]) -> f64 {
+        assert!(q.len() == self.coordinates && grad.len() == self.coordinates, "one value per coordinate");
+        // SAFETY: q and grad hold the `coordinates` values the function reads and writes.
+        unsafe { (self.gradient)(q.as_ptr(), grad.as_mut_ptr()) }
+    }
+
+    /// μ(q) into `mu` (3 values); `false` without a dipole surface.
+    pub fn dipole(&self, q: &[f64], mu: &mut [f64; 3]) -> bool {
+        assert_eq!(q.len(), self.coordinates, "one value per coordinate");
+        let Some((f, _)) = self.dipole else { return false };
+        // SAFETY: q holds `coordinates` values, mu the 3 the function writes.
+        unsafe { f(q.as_ptr(), mu.as_mut_ptr()) };
+        true
+    }
+
+    /// ∂μ/∂q into `dmu` (3 × coordinates, column k = ∂μ/∂q_k); `false` without a dipole.
+    pub fn dipole_jacobian(&self, q: &[f64], dmu: &mut [f64]) -> bool {
+        assert!(q.len() == self.coordinates && dmu.len() == 3 * self.coordinates, "3 values per coordinate");
+        let Some((_, f)) = self.dipole else { return false };
+        // SAFETY: q holds `coordinates` values, dmu the 3 × coordinates the function writes.
+        unsafe { f(q.as_ptr(), dmu.as_mut_ptr()) };
+        true
+    }
+}
+
+/// A loaded shared library and its functions (valid while the library is loaded).
+#[derive(Debug)]
+pub(crate) struct Loaded {
+    functions: Functions,
+    // Dropped last: unloads the library.
+    _library: libloading::Library,
+}
+
+impl Loaded {
+    pub fn functions(&self) -> &Functions {
+        &self.functions
+    }
+
+    /// Loads `path`, checks its ABI version and coordinate count, and calls its init function.
+    pub fn load(path: &Path) -> Result<Self, SurfaceError> {
+        let shown = path.display().to_string();
+        // SAFETY: loading runs the library's initialisers; the user named this library as a
+        // surface, and rovib_surface.h asks it to do nothing else on load.
+        let library = unsafe { libloading::Library::new(path) }
+            .map_err(|e| SurfaceError::Load { source_name: shown.clone(), message: e.to_string() })?;
+        let missing = |symbol: &'static str| SurfaceError::Missing { source_name: shown.clone(), symbol };
+        // SAFETY (each `get`): the types are the prototypes of rovib_surface.h.
+        let count = |name: &'static str| -> Result<c_int, SurfaceError> {
+            let f = unsafe { library.get::<CountFn>(name.as_bytes()) }.map_err(|_| missing(name))?;
+            // SAFETY: takes no arguments.
+            Ok(unsafe { f() })
+        };
+        let abi = count("rovib_surface_abi")?;
+        if abi != crate::ABI_VERSION {
+            return Err(SurfaceError::Abi { source_name: shown, found: abi });
+        }
+        let coordinates = count("rovib_surface_coordinates")?;
+        let coordinates = usize::try_from(coordinates)
+            .map_err(|_| SurfaceError::BadCount { source_name: shown.clone(), found: coordinates })?;
+        let energy = *unsafe { library.get::<EnergyFn>(b"rovib_surface_energy") }
+            .map_err(|_| missing("rovib_surface_energy"))?;
+        let gradient = *unsafe { library.get::<GradientFn>(b"rovib_surface_gradient") }
+            .map_err(|_| missing("rovib_surface_gradient"))?;
+        let mu = unsafe { library.get::<DipoleFn>(b"rovib_surface_dipole") }.ok().map(|s| *s);
+        let dmu = unsafe { library.get::<DipoleFn>(b"rovib_surface_dipole_jacobian") }.ok().map(|s| *s);
+        let dipole = match (mu, dmu) {
+            (Some(a), Some(b)) => Some((a, b)),
+            (None, None) => None,
+            (Some(_), None) => {
+                return Err(SurfaceError::HalfDipole {
+                    source_name: shown,
+                    present: "rovib_surface_dipole",
+                    missing: "rovib_surface_dipole_jacobian",
+                });
+            }
+            (None, Some(_)) => {
+                return Err(SurfaceError::HalfDipole {
+                    source_name: shown,
+                    present: "rovib_surface_dipole_jacobian",
+                    missing: "rovib_surface_dipole",
+                });
+            }
+        };
+        if let Ok(init) = unsafe { library.get::<CountFn>(b"rovib_surface_init") } {
+            // SAFETY: takes no arguments; called once, before any other surface function.
+            let code = unsafe { init() };
+            if code != 0 {
+                return Err(SurfaceError::Init { source_name: shown, code });
+            }
+        }
+        Ok(Self { functions: Functions { coordinates, energy, gradient, dipole }, _library: library })
+    }
+}
+
+// The surfaces the build script compiles in (ffi/surfaces/*.c, each with its own prefix).
+unsafe extern "C" {
+    fn arn2_spline_coordinates() -> c_int;
+    fn arn2_spline_energy(q: *const f64) -> f64;
+    fn arn2_spline_gradient(q: *const f64, grad: *mut f64) -> f64;
+    fn arn2_spline_dipole(q: *const f64, mu: *mut f64);
+    fn arn2_spline_dipole_jacobian(q: *const f64, dmu: *mut f64);
+}
+
+/// The compiled-in `ffi/surfaces/arn2_spline.c`.
+pub(crate) fn arn2_spline() -> Functions {
+    // SAFETY: takes no arguments.
+    let coordinates = unsafe { arn2_spline_coordinates() } as usize;
+    Functions {
+        coordinates,
+        energy: arn2_spline_energy,
+        gradient: arn2_spline_gradient,
+        dipole: Some((arn2_spline_dipole, arn2_spline_dipole_jacobian)),
+    }
+}
