@@ -53,7 +53,10 @@ pub fn scene_surface<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let Some((written, path)) = &scene.library else { return Ok(None) };
     let at = |message: String, help: &str| scene.source().error(written.span(), message, help);
     let library = SharedLibrary::load(path).map_err(|e| {
-        at(e.to_string(), "build it with `gcc -O2 -shared -fPIC -o libsurf.so surf.c -lm` (docs/src/howto/outside-surfaces.md)")
+        at(
+            e.to_string(),
+            "build it with `gcc -O2 -shared -fPIC -o libsurf.so surf.c -lm` (docs/src/howto/outside-surfaces.md)",
+        )
     })?;
     let library: &'static SharedLibrary = Box::leak(Box::new(library));
     let surface = library.surface::<N>().map_err(|e| {
