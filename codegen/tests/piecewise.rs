@@ -106,7 +106,7 @@ fn jumps_at_branch_boundaries_are_reported() {
     let at_r6 = note("`R < 6.0`");
     let reported = |key: &str| -> f64 {
         let tail = &at_r6[at_r6.find(key).unwrap_or_else(|| panic!("{key} in {at_r6}")) + key.len()..];
-        tail.split(|ch: char| ch == ' ' || ch == ',').next().unwrap().parse().unwrap()
+        tail.split([' ', ',']).next().unwrap().parse().unwrap()
     };
     let c = reported("theta = ").cos();
     let p2 = 1.5 * c * c - 0.5;
