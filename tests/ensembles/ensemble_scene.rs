@@ -102,7 +102,7 @@ fn a_key_of_another_method() {
 #[test]
 fn unknown_key() {
     let e = error("[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperture = 300");
-    check(&e, 5, "unknown field `temperture`", "\"Ensembles\"");
+    check(&e, 5, "unknown field `temperture`", "docs/src/reference/ensemble.md");
 }
 
 #[test]
