@@ -98,7 +98,7 @@ where
     /// zero), as `(ln Z, relative standard error)`. From `Π d³x_i = (M^{3/2} / Π m_i^{3/2}) √det M(q)
     /// sin β d³X dφ dβ dψ dq` (the kinetic metric is the mass-weighted Cartesian one in these
     /// coordinates) and `∫ sin β = 8π²`: `Z = 8π² (M^{3/2} / Π m_i^{3/2}) ∫ e^{−U/kT} √det M dq`,
-    /// the integral by importance sampling ([`Configuration::log_integral`]) with `points`
+    /// the integral by importance sampling (`Configuration::log_integral`) with `points`
     /// proposals from a stream of its own (the ensemble's seed, the last stream index).
     /// None for [`Self::without_metric_factor`].
     pub fn configurational_integral_with(&self, points: usize) -> Option<(f64, f64)> {
