@@ -1,7 +1,7 @@
 //! Log-log line plots as SVG, for work-precision diagrams, drawn with `plotters` (its SVG
 //! backend only: no fonts, no system libraries).
 //!
-//! Measured against the hand-written SVG code this replaced (issue 16; BENCHMARKS.md, "Plots"):
+//! Measured against the hand-written SVG code this replaced (BENCHMARKS.md; history: "Plots"):
 //! 87 lines of code instead of 153 for three small crates (plotters, plotters-backend,
 //! plotters-svg) and files about twice as large. The linear-axis ensemble panels
 //! (`crate::ensemble::plot`) are drawn with plotters too.

@@ -448,7 +448,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     };
 
     // A frozen coordinate has zero velocity; a velocity or momentum given for it would leak
-    // into the others through the metric (issue 11): refuse it where it is written.
+    // into the others through the metric: refuse it where it is written.
     if let Initial::Internal { momenta, .. } = &initial {
         let (given, what) = match momenta {
             Momenta::P(p) => (p, "p"),

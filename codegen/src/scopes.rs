@@ -9,7 +9,7 @@
 //! crashes too, only `line-tables-only` or `RUST_MIN_STACK=16777216` get through
 //! (docs/src/history/benchmarks.md, "Large molecules, third step"). Release builds carry no debug information
 //! and never hit it.
-//! This is how the test profile overflowed for the dense forms of ethane (issue 17).
+//! This is how the test profile overflowed for the dense forms of ethane.
 //!
 //! [`nest`] keeps the chain short without changing what is computed: a function with more than
 //! [`FLAT_LETS`] `let`s has its statements grouped into blocks of at most [`CHUNK_LETS`] `let`s,

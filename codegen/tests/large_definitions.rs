@@ -174,7 +174,7 @@ fn assert_short_scope_chains(m: &GeneratedMolecule) {
     assert!(depth <= MAX_LET_DEPTH, "{}: a chain of {depth} nested let scopes (at most {MAX_LET_DEPTH})", m.name);
 }
 
-/// Hexane (20 atoms, 54 coordinates, issue 17's largest test molecule): its production function
+/// Hexane (20 atoms, 54 coordinates, the largest test molecule): its production function
 /// has 4 244 temporaries, which in one flat chain crash rustc in the test profile; grouped, the
 /// deepest chain is a few hundred.
 #[test]

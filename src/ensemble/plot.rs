@@ -2,7 +2,7 @@
 //! error as a band, and histograms as bars. (`crate::plot` draws log-log work-precision
 //! diagrams; ensemble means can be negative or zero, so they need linear axes.)
 //!
-//! Measured against the hand-written SVG this replaced (issue 16, BENCHMARKS.md "Plots"): see
+//! Measured against the hand-written SVG this replaced (BENCHMARKS.md; history: "Plots"): see
 //! there for lines of code and file sizes.
 
 #![cfg_attr(not(feature = "svg"), allow(dead_code))]

@@ -272,7 +272,7 @@ fn lab_frame_errors_name_the_atoms() {
     let e = scene_error(&scene("positions = { O = [0, 0, 0], H1 = [0.9, 0, 0], H2 = [0, 0.9, 0] }\nq = { r1 = 1.0 }"));
     assert!(e.message.starts_with("the initial condition mixes the lab form"), "{}", e.message);
     // Collinear atoms: the metric is singular there, but water's coordinates have closed forms,
-    // so this is a start in the Cartesian chart (issue 13), taken as given, not an error.
+    // so this is a start in the Cartesian chart, taken as given, not an error.
     let linear = parse_scene("s.toml", &scene("positions = { O = [0, 0, 0], H1 = [0.9, 0, 0], H2 = [-0.9, 0, 0] }"));
     let start = initial_state(&H2o, &linear.unwrap()).expect("a linear start");
     assert!(start.lab_start.is_some() && (start.body.q[2] - std::f64::consts::PI).abs() < 1e-12);

@@ -1,4 +1,4 @@
-//! trajectory.csv's columns: names that cannot collide with any coordinate's (issue 11, item 6),
+//! trajectory.csv's columns: names that cannot collide with any coordinate's,
 //! their units in trajectory.units.json, and the unwrapped Euler angles against a closed form.
 
 use std::path::PathBuf;

@@ -474,7 +474,7 @@ fn hostile_scene(seed: u64) -> String {
 proptest! {
     #![proptest_config(config(cases(2000), 19))]
 
-    /// Scenes built from edge numbers and hostile names (issue 11, item 12): no panic; every
+    /// Scenes built from edge numbers and hostile names: no panic; every
     /// scene the parser accepts has integrator settings the solver accepts, finite non-zero
     /// times in atomic units, an output count within its limit and, for fixed steps, a step
     /// count within max_steps; bound to water, it starts a run or gives a located error.

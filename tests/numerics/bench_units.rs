@@ -1,4 +1,4 @@
-//! `rovib bench` reports fixed step sizes in the scene's time unit (issue 16), with the value in
+//! `rovib bench` reports fixed step sizes in the scene's time unit, with the value in
 //! atomic units beside it. Checked against CODATA's atomic unit of time, not against our own
 //! conversion: 1 a.u. = ħ/E_h = 2.4188843265857e-17 s.
 

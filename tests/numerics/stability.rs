@@ -628,7 +628,7 @@ fn gauss_legendre_energy_error_stays_bounded_over_1e5_steps() {
     // At a step 4x smaller the truncation error is below round-off, and compensated summation
     // is what keeps the energy error at the round-off level.
     let (with, without) = compensation_pair(3, 1.0, 100_000);
-    // Measured (sparse kinetic code, issue 17): compensated 1.8e-15 → 3.8e-15, uncompensated
+    // Measured (sparse kinetic code): compensated 1.8e-15 → 3.8e-15, uncompensated
     // 4.3e-14 → 2.7e-14. Whether the uncompensated error visibly grows within 10^5 steps depends
     // on the round-off pattern of the generated expressions (it grew 4.2e-14 → 1.1e-13 with the
     // dense code), so growth is shown by the 10^6-step run, not asserted here.
