@@ -5,10 +5,9 @@
 //! keep the compiled-in constants (folded into the generated code), see BENCHMARKS.md for what
 //! the run-time path costs.
 
+use crate::runtime::Molecule;
 use crate::runtime::diagnostic::FileError;
-use crate::runtime::lanes::{KineticLanes, Real};
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
-use crate::runtime::{Atom, Coordinate, KineticMatrices, Molecule};
 use crate::scene::Scene;
 use crate::scene::did_you_mean;
 
@@ -53,67 +52,7 @@ pub fn scene_parameters<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for WithParameters<M> {
-    fn name(&self) -> &'static str {
-        self.molecule.name()
-    }
-
-    fn source(&self) -> &'static str {
-        self.molecule.source()
-    }
-
-    fn atoms(&self) -> [Atom; NA] {
-        self.molecule.atoms()
-    }
-
-    fn coordinates(&self) -> [Coordinate; N] {
-        self.molecule.coordinates()
-    }
-
-    fn positions(&self, q: &SVector<f64, N>, r: &mut SMatrix<f64, 3, NA>) {
-        self.molecule.positions(q, r)
-    }
-
-    fn positions_jacobian(&self, q: &SVector<f64, N>, dr: &mut [SMatrix<f64, 3, NA>; N]) {
-        self.molecule.positions_jacobian(q, dr)
-    }
-
-    fn kinetic(&self, q: &SVector<f64, N>, k: &mut KineticMatrices<N>) {
-        self.molecule.kinetic(q, k)
-    }
-
-    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]) {
-        self.molecule.kinetic_jacobian(q, dk)
-    }
-
-    fn kinetic_energy_gradient(
-        &self,
-        q: &SVector<f64, N>,
-        omega: &Vector3<f64>,
-        qdot: &SVector<f64, N>,
-        grad: &mut SVector<f64, N>,
-    ) -> f64 {
-        self.molecule.kinetic_energy_gradient(q, omega, qdot, grad)
-    }
-
-    fn kinetic_and_gradient<E>(
-        &self,
-        q: &SVector<f64, N>,
-        k: &mut KineticMatrices<N>,
-        velocities: impl FnOnce(&KineticMatrices<N>) -> Result<(Vector3<f64>, SVector<f64, N>), E>,
-        grad: &mut SVector<f64, N>,
-    ) -> Result<(Vector3<f64>, SVector<f64, N>, f64), E> {
-        self.molecule.kinetic_and_gradient(q, k, velocities, grad)
-    }
-
-    fn kinetic_and_gradient_lanes<T: Real>(
-        &self,
-        q: &[T; N],
-        k: &mut KineticLanes<T, N>,
-        velocities: impl FnOnce(&KineticLanes<T, N>) -> ([T; 3], [T; N]),
-        grad: &mut [T; N],
-    ) -> ([T; 3], [T; N], T) {
-        self.molecule.kinetic_and_gradient_lanes(q, k, velocities, grad)
-    }
+    crate::runtime::forward_kinematics!(molecule);
 
     // `potential_gradient_lanes` is deliberately not forwarded: the molecule's lane-generic
     // potential has the compiled-in parameters folded in, so the trait's default (lane by lane

@@ -343,6 +343,77 @@ pub trait MoleculeVisitor {
         M: Molecule<N, NA> + Copy + Send + Sync + 'static;
 }
 
+/// The kinematic methods of a [`Molecule`] wrapper, forwarded to the wrapped molecule in field
+/// `$field`: name, source, atoms, coordinates, positions and their Jacobian, the kinetic matrices
+/// and their derivatives (also on lanes). For a type that replaces only the potential (or its
+/// parameters) and keeps the generated kinematics; write it inside the `impl Molecule` block.
+#[macro_export]
+macro_rules! forward_kinematics {
+    ($field:ident) => {
+        fn name(&self) -> &'static str {
+            self.$field.name()
+        }
+        fn source(&self) -> &'static str {
+            self.$field.source()
+        }
+        fn atoms(&self) -> [$crate::molecule::Atom; NA] {
+            self.$field.atoms()
+        }
+        fn coordinates(&self) -> [$crate::molecule::Coordinate; N] {
+            self.$field.coordinates()
+        }
+        fn positions(&self, q: &$crate::nalgebra::SVector<f64, N>, r: &mut $crate::nalgebra::SMatrix<f64, 3, NA>) {
+            self.$field.positions(q, r)
+        }
+        fn positions_jacobian(
+            &self,
+            q: &$crate::nalgebra::SVector<f64, N>,
+            dr: &mut [$crate::nalgebra::SMatrix<f64, 3, NA>; N],
+        ) {
+            self.$field.positions_jacobian(q, dr)
+        }
+        fn kinetic(&self, q: &$crate::nalgebra::SVector<f64, N>, k: &mut $crate::molecule::KineticMatrices<N>) {
+            self.$field.kinetic(q, k)
+        }
+        fn kinetic_jacobian(
+            &self,
+            q: &$crate::nalgebra::SVector<f64, N>,
+            dk: &mut [$crate::molecule::KineticMatrices<N>; N],
+        ) {
+            self.$field.kinetic_jacobian(q, dk)
+        }
+        fn kinetic_energy_gradient(
+            &self,
+            q: &$crate::nalgebra::SVector<f64, N>,
+            omega: &$crate::nalgebra::Vector3<f64>,
+            qdot: &$crate::nalgebra::SVector<f64, N>,
+            grad: &mut $crate::nalgebra::SVector<f64, N>,
+        ) -> f64 {
+            self.$field.kinetic_energy_gradient(q, omega, qdot, grad)
+        }
+        fn kinetic_and_gradient<E>(
+            &self,
+            q: &$crate::nalgebra::SVector<f64, N>,
+            k: &mut $crate::molecule::KineticMatrices<N>,
+            velocities: impl FnOnce(
+                &$crate::molecule::KineticMatrices<N>,
+            ) -> Result<($crate::nalgebra::Vector3<f64>, $crate::nalgebra::SVector<f64, N>), E>,
+            grad: &mut $crate::nalgebra::SVector<f64, N>,
+        ) -> Result<($crate::nalgebra::Vector3<f64>, $crate::nalgebra::SVector<f64, N>, f64), E> {
+            self.$field.kinetic_and_gradient(q, k, velocities, grad)
+        }
+        fn kinetic_and_gradient_lanes<T: $crate::lanes::Real>(
+            &self,
+            q: &[T; N],
+            k: &mut $crate::lanes::KineticLanes<T, N>,
+            velocities: impl FnOnce(&$crate::lanes::KineticLanes<T, N>) -> ([T; 3], [T; N]),
+            grad: &mut [T; N],
+        ) -> ([T; 3], [T; N], T) {
+            self.$field.kinetic_and_gradient_lanes(q, k, velocities, grad)
+        }
+    };
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

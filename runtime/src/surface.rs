@@ -18,8 +18,8 @@
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
-use crate::lanes::{KineticLanes, Real};
-use crate::molecule::{Atom, Coordinate, KineticMatrices, Molecule};
+use crate::lanes::Real;
+use crate::molecule::{Coordinate, Molecule};
 
 /// A potential energy surface over `N` internal coordinates (atomic units: q in bohr or
 /// radians, U in hartree), in the coordinate order of the molecule it is composed with.
@@ -123,48 +123,8 @@ where
     M: Molecule<N, NA>,
     P: Potential<N>,
 {
-    fn name(&self) -> &'static str {
-        self.molecule.name()
-    }
-    fn source(&self) -> &'static str {
-        self.molecule.source()
-    }
-    fn atoms(&self) -> [Atom; NA] {
-        self.molecule.atoms()
-    }
-    fn coordinates(&self) -> [Coordinate; N] {
-        self.molecule.coordinates()
-    }
-    fn positions(&self, q: &SVector<f64, N>, r: &mut SMatrix<f64, 3, NA>) {
-        self.molecule.positions(q, r)
-    }
-    fn positions_jacobian(&self, q: &SVector<f64, N>, dr: &mut [SMatrix<f64, 3, NA>; N]) {
-        self.molecule.positions_jacobian(q, dr)
-    }
-    fn kinetic(&self, q: &SVector<f64, N>, k: &mut KineticMatrices<N>) {
-        self.molecule.kinetic(q, k)
-    }
-    fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]) {
-        self.molecule.kinetic_jacobian(q, dk)
-    }
-    fn kinetic_energy_gradient(
-        &self,
-        q: &SVector<f64, N>,
-        omega: &Vector3<f64>,
-        qdot: &SVector<f64, N>,
-        grad: &mut SVector<f64, N>,
-    ) -> f64 {
-        self.molecule.kinetic_energy_gradient(q, omega, qdot, grad)
-    }
-    fn kinetic_and_gradient<E>(
-        &self,
-        q: &SVector<f64, N>,
-        k: &mut KineticMatrices<N>,
-        velocities: impl FnOnce(&KineticMatrices<N>) -> Result<(Vector3<f64>, SVector<f64, N>), E>,
-        grad: &mut SVector<f64, N>,
-    ) -> Result<(Vector3<f64>, SVector<f64, N>, f64), E> {
-        self.molecule.kinetic_and_gradient(q, k, velocities, grad)
-    }
+    crate::forward_kinematics!(molecule);
+
     fn potential(&self, q: &SVector<f64, N>) -> f64 {
         self.potential.energy(q)
     }
@@ -173,15 +133,6 @@ where
     }
     fn has_lane_forms(&self) -> bool {
         self.molecule.has_lane_forms() && self.potential.has_lane_form()
-    }
-    fn kinetic_and_gradient_lanes<T: Real>(
-        &self,
-        q: &[T; N],
-        k: &mut KineticLanes<T, N>,
-        velocities: impl FnOnce(&KineticLanes<T, N>) -> ([T; 3], [T; N]),
-        grad: &mut [T; N],
-    ) -> ([T; 3], [T; N], T) {
-        self.molecule.kinetic_and_gradient_lanes(q, k, velocities, grad)
     }
     fn potential_gradient_lanes<T: Real>(&self, q: &[T; N], grad: &mut [T; N]) -> T {
         self.potential.energy_gradient_lanes(q, grad)
