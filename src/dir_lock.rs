@@ -13,6 +13,8 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use nix::errno::Errno;
+
+use crate::error::Error;
 use nix::fcntl::{Flock, FlockArg};
 
 /// The lock file's name inside an output directory.
@@ -27,7 +29,7 @@ pub struct DirLock {
 
 impl DirLock {
     /// Locks `dir` (which must exist) for this process, or says who holds it.
-    pub fn acquire(dir: &Path) -> Result<Self, String> {
+    pub fn acquire(dir: &Path) -> Result<Self, Error> {
         let path = dir.join(LOCK_FILE);
         // A holder that ends removes the file while still holding its lock: a file opened just
         // before that is then locked but no longer the one at `path`; open again.
@@ -38,11 +40,11 @@ impl DirLock {
                 .create(true)
                 .truncate(false)
                 .open(&path)
-                .map_err(|e| format!("cannot create {}: {e}", path.display()))?;
+                .map_err(|e| Error::io("cannot create", &path, e))?;
             let mut file = match Flock::lock(file, FlockArg::LockExclusiveNonblock) {
                 Ok(f) => f,
                 Err((_, Errno::EWOULDBLOCK)) => return Err(held_by(dir, &path)),
-                Err((_, e)) => return Err(format!("cannot lock {}: {e}", path.display())),
+                Err((_, e)) => return Err(Error::io("cannot lock", &path, e.into())),
             };
             if !same_file(&file, &path) {
                 continue;
@@ -50,10 +52,10 @@ impl DirLock {
             file.set_len(0)
                 .and_then(|()| writeln!(*file, "{}", std::process::id()))
                 .and_then(|()| file.sync_all())
-                .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+                .map_err(|e| Error::io("cannot write", &path, e))?;
             return Ok(DirLock { path, _file: file });
         }
-        Err(format!("cannot lock {}: other runs keep replacing it; try again", path.display()))
+        Err(Error::unusable(path, ": other runs keep replacing this lock file; try again"))
     }
 }
 
@@ -66,16 +68,10 @@ fn same_file(file: &File, path: &Path) -> bool {
     }
 }
 
-/// The message for a directory that is locked.
-fn held_by(dir: &Path, path: &Path) -> String {
-    let pid = std::fs::read_to_string(path).ok().and_then(|s| s.trim().parse::<u32>().ok());
-    let by = pid.map_or(String::new(), |pid| format!(" (process {pid})"));
-    format!(
-        "{} is in use by another run{by}, which holds the lock {}; wait for it to end or choose another --out \
-         directory",
-        dir.display(),
-        path.display()
-    )
+/// The error for a directory that is locked, naming the holder if its lock file says.
+fn held_by(dir: &Path, path: &Path) -> Error {
+    let holder = std::fs::read_to_string(path).ok().and_then(|s| s.trim().parse::<u32>().ok());
+    Error::Locked { dir: dir.to_owned(), lock: path.to_owned(), holder }
 }
 
 impl Drop for DirLock {
@@ -103,6 +99,7 @@ mod tests {
         let d = dir("twice");
         let first = DirLock::acquire(&d).unwrap();
         let e = DirLock::acquire(&d).unwrap_err();
+        let e = e.to_string();
         assert!(e.contains("in use by another run") && e.contains(&std::process::id().to_string()), "{e}");
         drop(first);
         assert!(!d.join(LOCK_FILE).exists());

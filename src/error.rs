@@ -24,6 +24,30 @@ pub enum Error {
         /// The operating system's error.
         source: std::io::Error,
     },
+    /// A file that exists but cannot be used as asked: an output that cannot be continued (cut,
+    /// changed, another run's), a restart file that is not one. `why` follows the path.
+    #[error("{}{why}", path.display())]
+    Unusable {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it and what to do, starting with the separator (": …", " has …").
+        why: String,
+    },
+    /// Another run holds the lock of the output folder (`dir_lock`).
+    #[error(
+        "{} is in use by another run{}, which holds the lock {}; wait for it to end or choose another output directory",
+        dir.display(),
+        holder.map_or(String::new(), |pid| format!(" (process {pid})")),
+        lock.display()
+    )]
+    Locked {
+        /// The output folder.
+        dir: PathBuf,
+        /// Its lock file.
+        lock: PathBuf,
+        /// The process id written in the lock file, if it could be read.
+        holder: Option<u32>,
+    },
     /// The stop flag ended the run; the outputs up to the last whole record are in `out_dir`.
     #[error("{message}")]
     Interrupted {
@@ -49,6 +73,12 @@ impl From<String> for Error {
     }
 }
 
+impl From<&str> for Error {
+    fn from(m: &str) -> Self {
+        Error::Message(m.to_owned())
+    }
+}
+
 impl From<crate::start::StartError> for Error {
     fn from(e: crate::start::StartError) -> Self {
         match e {
@@ -59,6 +89,11 @@ impl From<crate::start::StartError> for Error {
 }
 
 impl Error {
+    /// A file that cannot be used as asked; `why` follows its path (": …", " has …").
+    pub fn unusable(path: impl Into<PathBuf>, why: impl Into<String>) -> Self {
+        Error::Unusable { path: path.into(), why: why.into() }
+    }
+
     /// An error from anything displayable, prefixed with context.
     pub fn context(context: impl fmt::Display, e: impl fmt::Display) -> Self {
         Error::Message(format!("{context}: {e}"))

@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 
+use crate::error::Error;
 use crate::runtime::Coordinate;
 use crate::runtime::integrate::{Method, Stats};
 use crate::runtime::nalgebra::Vector3;
@@ -32,21 +33,21 @@ pub struct OutputFile {
 
 impl OutputFile {
     /// Creates (truncates) `dir/name`.
-    pub fn create(dir: &Path, name: &str) -> Result<Self, String> {
+    pub fn create(dir: &Path, name: &str) -> Result<Self, Error> {
         let path = dir.join(name);
-        let file = File::create(&path).map_err(|e| format!("cannot create {}: {e}", path.display()))?;
+        let file = File::create(&path).map_err(|e| Error::io("cannot create", &path, e))?;
         Ok(OutputFile { path, out: BufWriter::new(file) })
     }
 
     /// Opens `dir/name` to append to it (a resumed run), after checking that its first line is
     /// `first_line` (the header this run would write), that it ends with a whole line and that
     /// it has `lines` lines (what the run being continued wrote, no more and no less).
-    pub fn append(dir: &Path, name: &str, first_line: &str, lines: usize) -> Result<Self, String> {
+    pub fn append(dir: &Path, name: &str, first_line: &str, lines: usize) -> Result<Self, Error> {
         use std::io::{BufRead as _, Read as _};
         let path = dir.join(name);
         // Read a line at a time, each of at most MAX_LINE_BYTES, and stop past `lines`: memory
         // stays bounded whatever the file is (a link to /dev/zero, a huge file).
-        let file = File::open(&path).map_err(|e| format!("cannot read {} to continue it: {e}", path.display()))?;
+        let file = File::open(&path).map_err(|e| Error::io("cannot read (to continue it)", &path, e))?;
         let mut reader = std::io::BufReader::new(file);
         let mut line = Vec::new();
         let mut found_lines = 0;
@@ -55,63 +56,72 @@ impl OutputFile {
             let read = (&mut reader)
                 .take(MAX_LINE_BYTES + 1)
                 .read_until(b'\n', &mut line)
-                .map_err(|e| format!("cannot read {} to continue it: {e}", path.display()))?;
+                .map_err(|e| Error::io("cannot read (to continue it)", &path, e))?;
             if read == 0 {
                 break;
             }
             if !line.ends_with(b"\n") {
                 if line.len() as u64 > MAX_LINE_BYTES {
-                    return Err(format!(
-                        "{}: line {} is longer than {MAX_LINE_BYTES} bytes, the most a line of this output can be: it \
-                         is not this run's file (resume into the directory of the run that wrote the restart file)",
-                        path.display(),
-                        found_lines + 1
+                    return Err(Error::unusable(
+                        path,
+                        format!(
+                            ": line {} is longer than {MAX_LINE_BYTES} bytes, the most a line of this output can be: \
+                             it is not this run's file (resume into the directory of the run that wrote the restart \
+                             file)",
+                            found_lines + 1
+                        ),
                     ));
                 }
-                return Err(format!("{} ends inside a line; it was cut and cannot be continued", path.display()));
+                return Err(Error::unusable(path, " ends inside a line; it was cut and cannot be continued"));
             }
             if found_lines == 0 {
                 let found = String::from_utf8_lossy(&line);
                 let found = found.trim_end_matches('\n').trim_end_matches('\r');
                 if found != first_line {
-                    return Err(format!(
-                        "{} starts with `{found}`, not `{first_line}` as this run writes it: it is not this run's \
-                         (resume into the directory of the run that wrote the restart file)",
-                        path.display()
+                    return Err(Error::unusable(
+                        &path,
+                        format!(
+                            " starts with `{found}`, not `{first_line}` as this run writes it: it is not this run's \
+                             (resume into the directory of the run that wrote the restart file)"
+                        ),
                     ));
                 }
             }
             found_lines += 1;
             if found_lines > lines {
-                return Err(format!(
-                    "{} has more than the {lines} lines the run that wrote the restart file left: it was changed or \
-                     already continued",
-                    path.display()
+                return Err(Error::unusable(
+                    path,
+                    format!(
+                        " has more than the {lines} lines the run that wrote the restart file left: it was changed \
+                         or already continued"
+                    ),
                 ));
             }
         }
         if found_lines != lines {
-            return Err(format!(
-                "{} has {found_lines} lines, but the run that wrote the restart file left {lines}: it was changed or \
-                 already continued",
-                path.display()
+            return Err(Error::unusable(
+                path,
+                format!(
+                    " has {found_lines} lines, but the run that wrote the restart file left {lines}: it was changed \
+                     or already continued"
+                ),
             ));
         }
         let file = std::fs::OpenOptions::new()
             .append(true)
             .open(&path)
-            .map_err(|e| format!("cannot open {} to continue it: {e}", path.display()))?;
+            .map_err(|e| Error::io("cannot open (to continue it)", &path, e))?;
         Ok(OutputFile { path, out: BufWriter::new(file) })
     }
 
     /// Writes one line (a newline is added).
-    pub fn line(&mut self, text: &str) -> Result<(), String> {
-        writeln!(self.out, "{text}").map_err(|e| format!("cannot write {}: {e}", self.path.display()))
+    pub fn line(&mut self, text: &str) -> Result<(), Error> {
+        writeln!(self.out, "{text}").map_err(|e| Error::io("cannot write", &self.path, e))
     }
 
     /// Flushes the buffer to disk.
-    pub fn flush(&mut self) -> Result<(), String> {
-        self.out.flush().map_err(|e| format!("cannot write {}: {e}", self.path.display()))
+    pub fn flush(&mut self) -> Result<(), Error> {
+        self.out.flush().map_err(|e| Error::io("cannot write", &self.path, e))
     }
 
     /// The file's path.
@@ -213,7 +223,7 @@ impl TrajectoryCsv {
         coordinates: &[Coordinate],
         time_unit: &str,
         euler_unwrapped: bool,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, Error> {
         let columns = trajectory_columns(coordinates, time_unit, euler_unwrapped);
         let units = json!({
             "file": "trajectory.csv",
@@ -238,7 +248,7 @@ impl TrajectoryCsv {
         time_unit: &str,
         last_euler: Option<([f64; 2], [f64; 2])>,
         rows: usize,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, Error> {
         let euler_unwrapped = last_euler.is_some();
         let columns = trajectory_columns(coordinates, time_unit, euler_unwrapped);
         let header: Vec<&str> = columns.iter().map(|(n, _)| n.as_str()).collect();
@@ -263,7 +273,7 @@ impl TrajectoryCsv {
         pe: [f64; 3],
         j: [f64; 3],
         energy: f64,
-    ) -> Result<(), String> {
+    ) -> Result<(), Error> {
         use std::fmt::Write as _;
         self.row.clear();
         let _ = write!(self.row, "{t:?}");
@@ -286,7 +296,7 @@ impl TrajectoryCsv {
     }
 
     /// Flushes to disk.
-    pub fn flush(&mut self) -> Result<(), String> {
+    pub fn flush(&mut self) -> Result<(), Error> {
         self.file.flush()
     }
 }
@@ -305,20 +315,20 @@ const DIPOLE_HEADER: &str = "t,mu_x,mu_y,mu_z";
 
 impl DipoleCsv {
     /// Creates the file and writes the header.
-    pub fn create(dir: &Path) -> Result<Self, String> {
+    pub fn create(dir: &Path) -> Result<Self, Error> {
         let mut file = OutputFile::create(dir, "dipole.csv")?;
         file.line(DIPOLE_HEADER)?;
         Ok(DipoleCsv { file, row: String::new() })
     }
 
     /// Opens an existing `dipole.csv` holding `rows` rows to append to it (a resumed run).
-    pub fn append(dir: &Path, rows: usize) -> Result<Self, String> {
+    pub fn append(dir: &Path, rows: usize) -> Result<Self, Error> {
         let file = OutputFile::append(dir, "dipole.csv", DIPOLE_HEADER, rows + 1)?;
         Ok(DipoleCsv { file, row: String::new() })
     }
 
     /// Writes one row: time and μ_lab in e·bohr, with full round-trip precision.
-    pub fn row(&mut self, t: f64, mu: &Vector3<f64>) -> Result<(), String> {
+    pub fn row(&mut self, t: f64, mu: &Vector3<f64>) -> Result<(), Error> {
         use std::fmt::Write as _;
         self.row.clear();
         let _ = write!(self.row, "{t:?},{:?},{:?},{:?}", mu[0], mu[1], mu[2]);
@@ -329,7 +339,7 @@ impl DipoleCsv {
     }
 
     /// Flushes to disk.
-    pub fn flush(&mut self) -> Result<(), String> {
+    pub fn flush(&mut self) -> Result<(), Error> {
         self.file.flush()
     }
 }
@@ -366,7 +376,7 @@ impl LabXyz {
         elements: Vec<&'static str>,
         masses: Vec<f64>,
         time_unit: &'static str,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, Error> {
         Ok(LabXyz { file: OutputFile::create(dir, "lab.xyz")?, elements, masses, time_unit, line: String::new() })
     }
 
@@ -377,7 +387,7 @@ impl LabXyz {
         masses: Vec<f64>,
         time_unit: &'static str,
         frames: usize,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, Error> {
         let file = OutputFile::append(dir, "lab.xyz", &elements.len().to_string(), frames * (elements.len() + 2))?;
         Ok(LabXyz { file, elements, masses, time_unit, line: String::new() })
     }
@@ -390,7 +400,7 @@ impl LabXyz {
         energy: f64,
         potential: f64,
         atoms: impl IntoIterator<Item = ([f64; 3], [f64; 3])>,
-    ) -> Result<(), String> {
+    ) -> Result<(), Error> {
         use std::fmt::Write as _;
         self.file.line(&self.elements.len().to_string())?;
         self.file.line(&format!(
@@ -420,7 +430,7 @@ impl LabXyz {
     }
 
     /// Flushes to disk.
-    pub fn flush(&mut self) -> Result<(), String> {
+    pub fn flush(&mut self) -> Result<(), Error> {
         self.file.flush()
     }
 }
@@ -440,18 +450,32 @@ pub fn energy_scale(h0: f64) -> f64 {
 /// `|H − H(0)| / max(|H(0)|, ENERGY_SCALE_FLOOR)` exceeds `max_energy_error` or is NaN (a
 /// non-finite energy is a runaway too). The message gives the absolute change, which is what
 /// `summary.json` reports as `max_abs_energy_error_hartree`, and the scale it was divided by.
-pub fn energy_guard(h0: f64, h: f64, max_energy_error: f64) -> Result<(), String> {
-    let change = (h - h0).abs();
-    let scale = energy_scale(h0);
-    let drift = change / scale;
+pub fn energy_guard(h0: f64, h: f64, max_energy_error: f64) -> Result<(), EnergyDrift> {
+    let drift = (h - h0).abs() / energy_scale(h0);
     if drift.is_nan() || drift > max_energy_error {
-        return Err(format!(
-            "the energy changed by {change:.3e} hartree from H(0) = {h0} hartree, {drift:.1e} relative to \
-             max(|H(0)|, {ENERGY_SCALE_FLOOR:e} hartree) = {scale:e} hartree, more than run.max_energy_error = \
-             {max_energy_error:e} (the step is too large or the tolerances too loose for this motion; reduce them)"
-        ));
+        return Err(EnergyDrift { h0, h, max_energy_error });
     }
     Ok(())
+}
+
+/// An energy that moved more than `run.max_energy_error` allows ([`energy_guard`]); its message
+/// gives the absolute change and the scale it was divided by.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "the energy changed by {:.3e} hartree from H(0) = {h0} hartree, {:.1e} relative to max(|H(0)|, \
+     {ENERGY_SCALE_FLOOR:e} hartree) = {:e} hartree, more than run.max_energy_error = {max_energy_error:e} (the \
+     step is too large or the tolerances too loose for this motion; reduce them)",
+    (h - h0).abs(),
+    (h - h0).abs() / energy_scale(*h0),
+    energy_scale(*h0)
+)]
+pub struct EnergyDrift {
+    /// H at the start, hartree.
+    pub h0: f64,
+    /// H when the guard tripped, hartree.
+    pub h: f64,
+    /// The allowed relative change.
+    pub max_energy_error: f64,
 }
 
 /// Conservation diagnostics accumulated over the output times.
@@ -534,7 +558,7 @@ pub const RUN_FILES: [&str; 6] =
 /// and `summary.json` and `restart.json` in any case (they are written at the end, atomically,
 /// and only a run that ends well writes `restart.json`), so that no file of an earlier run
 /// remains looking like this run's. Missing files are fine.
-pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), String> {
+pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), Error> {
     for name in RUN_FILES {
         if name != "summary.json" && name != RESTART_FILE && keep.contains(&name) {
             continue;
@@ -543,7 +567,7 @@ pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), String> {
         match std::fs::remove_file(&path) {
             Ok(()) => {}
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(format!("cannot remove {} left by an earlier run: {e}", path.display())),
+            Err(e) => return Err(Error::io("cannot remove (left by an earlier run)", path, e)),
         }
     }
     Ok(())
@@ -551,13 +575,13 @@ pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), String> {
 
 /// Writes `summary.json` (pretty-printed) atomically: to `summary.json.tmp`, flushed and synced,
 /// then renamed over `summary.json`, so a reader never sees a half-written summary.
-pub fn write_summary(dir: &Path, summary: &Value) -> Result<PathBuf, String> {
+pub fn write_summary(dir: &Path, summary: &Value) -> Result<PathBuf, Error> {
     write_atomically(dir, "summary.json", summary)
 }
 
 /// Writes `value` (pretty-printed JSON) to `dir/name` atomically: to `name.tmp`, flushed and
 /// synced, then renamed over `name`.
-pub fn write_atomically(dir: &Path, name: &str, value: &Value) -> Result<PathBuf, String> {
+pub fn write_atomically(dir: &Path, name: &str, value: &Value) -> Result<PathBuf, Error> {
     let tmp = dir.join(format!("{name}.tmp"));
     let path = dir.join(name);
     let write = || -> std::io::Result<()> {
@@ -565,8 +589,8 @@ pub fn write_atomically(dir: &Path, name: &str, value: &Value) -> Result<PathBuf
         writeln!(file, "{}", serde_json::to_string_pretty(value).expect("a JSON value serialises"))?;
         file.sync_all()
     };
-    write().map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, &path).map_err(|e| format!("cannot rename {} to {}: {e}", tmp.display(), path.display()))?;
+    write().map_err(|e| Error::io("cannot write", &tmp, e))?;
+    std::fs::rename(&tmp, &path).map_err(|e| Error::io(format!("cannot rename {} to", tmp.display()), &path, e))?;
     Ok(path)
 }
 
@@ -669,5 +693,61 @@ fn method_json(method: &Method) -> Value {
             json!({"name": "gauss-legendre", "stages": o.stages, "step_au": o.step, "compensated": o.compensated})
         }
         Method::Rk4(o) => json!({"name": "rk4", "step_au": o.step}),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn folder(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("rovib-output-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// A file to continue that is cut, foreign, longer or shorter than the restart file says is
+    /// refused with `Error::Unusable` naming it; the right one is continued.
+    #[test]
+    fn an_output_that_cannot_be_continued_is_a_typed_error_naming_the_file() {
+        let d = folder("append");
+        let cases = [
+            ("t,x\n1,2\n1,", "ends inside a line"),
+            ("s,y\n1,2\n", "starts with `s,y`"),
+            ("t,x\n1,2\n3,4\n", "more than the 2 lines"),
+            ("t,x\n", "has 1 lines"),
+        ];
+        for (text, why) in cases {
+            std::fs::write(d.join("f.csv"), text).unwrap();
+            match OutputFile::append(&d, "f.csv", "t,x", 2) {
+                Err(e @ Error::Unusable { .. }) => {
+                    let m = e.to_string();
+                    assert!(m.starts_with(&d.join("f.csv").display().to_string()) && m.contains(why), "{m}");
+                }
+                Err(e) => panic!("{text:?}: {e:?}"),
+                Ok(_) => panic!("{text:?} was continued"),
+            }
+        }
+        std::fs::write(d.join("f.csv"), "t,x\n1,2\n").unwrap();
+        let mut f = OutputFile::append(&d, "f.csv", "t,x", 2).unwrap();
+        f.line("3,4").unwrap();
+        f.flush().unwrap();
+        assert_eq!(std::fs::read_to_string(d.join("f.csv")).unwrap(), "t,x\n1,2\n3,4\n");
+        match OutputFile::append(&d, "missing.csv", "t,x", 2) {
+            Err(Error::Io { path, .. }) => assert_eq!(path, d.join("missing.csv")),
+            other => panic!("{:?}", other.err()),
+        }
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// The guard trips past the allowed change (and on NaN), and its message gives the change.
+    #[test]
+    fn the_energy_guard_reports_the_change_and_its_scale() {
+        assert!(energy_guard(-1.0, -1.0 + 0.9e-6, 1e-6).is_ok());
+        let e = energy_guard(-1.0, -1.0 + 2e-6, 1e-6).unwrap_err();
+        assert_eq!(e, EnergyDrift { h0: -1.0, h: -1.0 + 2e-6, max_energy_error: 1e-6 });
+        assert!(e.to_string().contains("changed by 2.000e-6 hartree"), "{e}");
+        assert!(energy_guard(-1.0, f64::NAN, 1e-6).is_err());
     }
 }

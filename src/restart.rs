@@ -24,6 +24,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::error::Error;
 use crate::output::Conservation;
 use crate::runtime::integrate::Dop853Resume;
 
@@ -132,31 +133,35 @@ impl Dop853Point {
 
 impl Restart {
     /// Reads `dir/restart.json`.
-    pub fn read(dir: &Path) -> Result<Self, String> {
+    pub fn read(dir: &Path) -> Result<Self, Error> {
         let path = dir.join(RESTART_FILE);
         if !path.exists() {
-            return Err(format!(
-                "cannot read {}: it does not exist; only a run that completed or was interrupted, with \"restart\" \
-                 in its outputs, can be continued",
-                path.display()
+            return Err(Error::unusable(
+                path,
+                " does not exist: only a run that completed or was interrupted, with \"restart\" in its outputs, can \
+                 be continued",
             ));
         }
-        let text = crate::runtime::diagnostic::read_text_capped(&path, MAX_RESTART_BYTES)?;
-        let restart: Restart =
-            serde_json::from_str(&text).map_err(|e| format!("{} is not a rovib restart file: {e}", path.display()))?;
+        let text = crate::runtime::diagnostic::read_text_capped(&path, MAX_RESTART_BYTES).map_err(Error::Message)?;
+        let restart: Restart = serde_json::from_str(&text)
+            .map_err(|e| Error::unusable(&path, format!(" is not a rovib restart file: {e}")))?;
         if restart.format != FORMAT {
-            return Err(format!("{} has format `{}`, this rovib reads `{FORMAT}`", path.display(), restart.format));
+            return Err(Error::unusable(
+                path,
+                format!(" has format `{}`, this rovib reads `{FORMAT}`", restart.format),
+            ));
         }
         let finite = restart.y.iter().all(|v| v.is_finite()) && restart.t_au.is_finite();
         if !finite {
-            return Err(format!("{} holds a non-finite state", path.display()));
+            return Err(Error::unusable(path, " holds a non-finite state"));
         }
         Ok(restart)
     }
 
     /// Writes `dir/restart.json` atomically.
-    pub fn write(&self, dir: &Path) -> Result<std::path::PathBuf, String> {
-        let value = serde_json::to_value(self).map_err(|e| format!("cannot write {RESTART_FILE}: {e}"))?;
+    pub fn write(&self, dir: &Path) -> Result<std::path::PathBuf, Error> {
+        let value = serde_json::to_value(self)
+            .map_err(|e| Error::unusable(dir.join(RESTART_FILE), format!(" cannot be written: {e}")))?;
         crate::output::write_atomically(dir, RESTART_FILE, &value)
     }
 }

@@ -234,7 +234,37 @@ impl MoleculeVisitor for Run<'_> {
     }
 }
 
+/// Where a run starts: the integrated system and its flat state, the centre of mass, the
+/// time (a.u.) and body state, and a lab-frame start at a linear geometry (which begins in the
+/// Cartesian chart as given).
+struct Begin<'m, M, const N: usize, const NA: usize> {
+    system: ReducedSystem<'m, M, N, NA>,
+    y0: Vec<f64>,
+    com: (Vector3<f64>, Vector3<f64>),
+    t0: f64,
+    body: BodyState<N>,
+    lab: Option<Vec<f64>>,
+}
+
+/// The output files a run writes as it goes (each only if the scene asks for it).
+struct Writers {
+    trajectory: Option<TrajectoryCsv>,
+    lab: Option<LabXyz>,
+    dipole: Option<DipoleCsv>,
+}
+
+/// What the integration gave: its statistics and DOP853 continuation point, or its error; the
+/// time it took; the chart switches (if the run could switch); right-hand sides evaluated.
+struct Integrated {
+    result: Result<(Stats, Option<Dop853Resume>), SolveError<ChartError>>,
+    wall_time: f64,
+    charts: Option<ChartReport>,
+    evaluations: u64,
+}
+
 impl Run<'_> {
+    /// The run: its start, its output folder (locked, cleared of an earlier run's files), the
+    /// integration with its recorder, then the restart file, the summary and the report.
     fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, Error> {
         let scene = self.scene;
         if scene.outputs.dipole && !m.has_dipole() {
@@ -248,54 +278,91 @@ impl Run<'_> {
             )));
         }
         let mut warnings = Vec::new();
-        // Where the run starts: the scene's initial state, or the restart file's state.
-        // A lab-form start at a linear geometry: started in the Cartesian chart as given.
-        let mut lab_start: Option<Vec<f64>> = None;
-        let (system, y0, com, t0, start_body) = match self.resume {
-            None => {
-                let start = initial_state(&m, scene)?;
-                // Fails before anything is written if the initial state is not valid, unless the
-                // run can start in the Cartesian chart (a linear start, `crate::runtime::charts`).
-                lab_start = start.lab_start.clone();
-                let (system, y0) = match production_system(&m, scene, &start.body) {
-                    Ok(s) => s,
-                    Err(e) => match production_system_unchecked(&m, scene, &start.body) {
-                        Ok(s) if uses_charts(scene, &s.0) => s,
-                        _ => return Err(e.into()),
-                    },
-                };
-                if let Some(q_ref) = m.reference_geometry() {
-                    let h0 = match system.energy(&y0) {
-                        Ok(h) => h,
-                        Err(_) if uses_charts(scene, &system) => lab_start
-                            .clone()
-                            .or_else(|| charts::to_cartesian(&m, &start.body).ok())
-                            .and_then(|y| CartesianSystem::new(&m).ok()?.energy(&y).ok())
-                            .ok_or_else(|| Error::Message("the initial state: no finite energy".into()))?,
-                        Err(e) => return Err(Error::context("the initial state", e)),
-                    };
-                    warnings.extend(start_energy_warning(m.name(), h0, m.potential(&q_ref)));
-                }
-                (system, y0, (start.com_position, start.com_velocity), 0.0, start.body)
-            }
-            Some(r) => {
-                let (system, y0) = resumed_system(&m, scene, r)?;
-                let body = restart_body(r)?;
-                (
-                    system,
-                    y0,
-                    (Vector3::from(r.com_position_bohr), Vector3::from(r.com_velocity_bohr_per_au)),
-                    r.t_au,
-                    body,
-                )
-            }
-        };
-        let layout = layout(system.reduction(), &m);
+        let begin = self.begin(&m, &mut warnings)?;
+        let layout = layout(begin.system.reduction(), &m);
         let stops = stop_conditions(&m, scene)?;
 
         // One run per directory, then no file of an earlier run may remain looking like this one's.
         let _lock = DirLock::acquire(self.out_dir)?;
         crate::ensemble::output::clear_for_run(self.out_dir)?;
+        let writers = self.open_writers(&m)?;
+        let records = self.resume.map_or(0, |r| r.outputs_done + 1);
+        let Run { scene, out_dir, stop, progress, resume } = self;
+        let mut recorder = Recorder::<M, N, NA> {
+            system: begin.system,
+            writers,
+            diagnostics: scene.outputs.summary || scene.outputs.restart,
+            conservation: resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
+            initial_energy: resume.and_then(|r| r.conservation.initial_energy),
+            max_energy_error: scene.max_energy_error,
+            layout: layout.clone(),
+            time_scale: scene.time_unit.in_au(),
+            time_unit: scene.time_unit.name(),
+            com: begin.com,
+            progress: progress,
+            total: (scene.t_end / scene.output_interval).ceil() as u64 + 1,
+            stop: stop,
+            interrupted: false,
+            t_reached: None,
+            error: None,
+            // A fixed-step continuation starts the solver at the last output time, which the
+            // first run already wrote.
+            skip_first: resume.is_some() && !dop853_continues(scene, resume),
+            records,
+            last_y: begin.y0.clone(),
+            last_y_valid: true,
+            last_q: begin.body.q,
+            cartesian: CartesianSystem::new(&m).ok(),
+            stops,
+            stopped: None,
+        };
+        let integrated = integrate_run(scene, resume, &begin, &mut recorder);
+        Finish { scene, out_dir, resume }.finish(&m, begin, recorder, integrated, &layout, warnings)
+    }
+
+    /// The start: the scene's initial state (checked before anything is written, unless it is
+    /// a linear start the Cartesian chart can take) or the restart file's state; a warning if
+    /// it lies far above the reference geometry's energy.
+    fn begin<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
+        &self,
+        m: &'m M,
+        warnings: &mut Vec<String>,
+    ) -> Result<Begin<'m, M, N, NA>, Error> {
+        let scene = self.scene;
+        let Some(r) = self.resume else {
+            let start = initial_state(m, scene)?;
+            let lab = start.lab_start.clone();
+            let (system, y0) = match production_system(m, scene, &start.body) {
+                Ok(s) => s,
+                Err(e) => match production_system_unchecked(m, scene, &start.body) {
+                    Ok(s) if uses_charts(scene, &s.0) => s,
+                    _ => return Err(e.into()),
+                },
+            };
+            if let Some(q_ref) = m.reference_geometry() {
+                let h0 = match system.energy(&y0) {
+                    Ok(h) => h,
+                    Err(_) if uses_charts(scene, &system) => lab
+                        .clone()
+                        .or_else(|| charts::to_cartesian(m, &start.body).ok())
+                        .and_then(|y| CartesianSystem::new(m).ok()?.energy(&y).ok())
+                        .ok_or_else(|| Error::Message("the initial state: no finite energy".into()))?,
+                    Err(e) => return Err(Error::context("the initial state", e)),
+                };
+                warnings.extend(start_energy_warning(m.name(), h0, m.potential(&q_ref)));
+            }
+            let com = (start.com_position, start.com_velocity);
+            return Ok(Begin { system, y0, com, t0: 0.0, body: start.body, lab });
+        };
+        let (system, y0) = resumed_system(m, scene, r)?;
+        let com = (Vector3::from(r.com_position_bohr), Vector3::from(r.com_velocity_bohr_per_au));
+        Ok(Begin { system, y0, com, t0: r.t_au, body: restart_body(r)?, lab: None })
+    }
+
+    /// Removes the files of an earlier run this one will not write, then creates (or, when
+    /// resuming, checks and opens for appending) the ones it writes as it goes.
+    fn open_writers<M: Molecule<N, NA>, const N: usize, const NA: usize>(&self, m: &M) -> Result<Writers, Error> {
+        let (scene, dir) = (self.scene, self.out_dir);
         let mut keep = Vec::new();
         if scene.outputs.trajectory {
             keep.extend(["trajectory.csv", TRAJECTORY_UNITS_FILE]);
@@ -306,104 +373,63 @@ impl Run<'_> {
         if scene.outputs.dipole {
             keep.push("dipole.csv");
         }
-        remove_stale_outputs(self.out_dir, &keep)?;
-
+        remove_stale_outputs(dir, &keep)?;
         let coordinates = m.coordinates();
         let elements: Vec<&'static str> = m.atoms().iter().map(|a| a.element).collect();
         let masses: Vec<f64> = m.atoms().iter().map(|a| a.mass_da).collect();
         let unit = scene.time_unit.name();
-        let records = self.resume.map_or(0, |r| r.outputs_done + 1);
-        let (trajectory, lab) = match self.resume {
-            None => (
-                scene
-                    .outputs
+        let outputs = &scene.outputs;
+        Ok(match self.resume {
+            None => Writers {
+                trajectory: outputs
                     .trajectory
-                    .then(|| TrajectoryCsv::create(self.out_dir, &coordinates, unit, scene.euler_unwrapped))
+                    .then(|| TrajectoryCsv::create(dir, &coordinates, unit, scene.euler_unwrapped))
                     .transpose()?,
-                scene.outputs.lab.then(|| LabXyz::create(self.out_dir, elements, masses, unit)).transpose()?,
-            ),
-            Some(r) => (
-                scene
-                    .outputs
-                    .trajectory
-                    .then(|| {
-                        TrajectoryCsv::append(self.out_dir, &coordinates, unit, r.euler_unwrapped, records as usize)
-                    })
-                    .transpose()?,
-                scene
-                    .outputs
-                    .lab
-                    .then(|| LabXyz::append(self.out_dir, elements, masses, unit, records as usize))
-                    .transpose()?,
-            ),
-        };
-        let mut recorder = Recorder::<M, N, NA> {
-            system,
-            trajectory,
-            lab,
-            diagnostics: scene.outputs.summary || scene.outputs.restart,
-            conservation: self.resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
-            initial_energy: self.resume.and_then(|r| r.conservation.initial_energy),
-            dipole: match (scene.outputs.dipole, self.resume) {
-                (false, _) => None,
-                (true, None) => Some(DipoleCsv::create(self.out_dir)?),
-                (true, Some(_)) => Some(DipoleCsv::append(self.out_dir, records as usize)?),
+                lab: outputs.lab.then(|| LabXyz::create(dir, elements, masses, unit)).transpose()?,
+                dipole: outputs.dipole.then(|| DipoleCsv::create(dir)).transpose()?,
             },
-            max_energy_error: scene.max_energy_error,
-            layout: layout.clone(),
-            time_scale: scene.time_unit.in_au(),
-            time_unit: scene.time_unit.name(),
-            com,
-            progress: self.progress,
-            total: (scene.t_end / scene.output_interval).ceil() as u64 + 1,
-            stop: self.stop,
-            interrupted: false,
-            t_reached: None,
-            error: None,
-            // A fixed-step continuation starts the solver at the last output time, which the
-            // first run already wrote.
-            skip_first: self.resume.is_some() && !dop853_continues(scene, self.resume),
-            records,
-            last_y: y0.clone(),
-            last_y_valid: true,
-            last_q: start_body.q,
-            cartesian: CartesianSystem::new(&m).ok(),
-            stops,
-            stopped: None,
-        };
-        let mut counted = Counted { inner: system, evaluations: 0 };
-        let begin = Instant::now();
-        let switching = uses_charts(scene, &system);
-        let mut chart_report = None;
-        let result = if switching {
-            let mut report = ChartReport::default();
-            let r = integrate_charts(
-                &system,
-                scene,
-                t0,
-                &start_body,
-                lab_start.as_deref(),
-                self.resume,
-                &mut recorder,
-                &mut report,
-            );
-            counted.evaluations = report.stats.rhs_evals;
-            let out = r.map(|()| (report.stats, report.resume.clone()));
-            chart_report = Some(report);
-            out
-        } else {
-            integrate(&mut counted, scene, t0, &y0, self.resume, &mut recorder)
-                .map_err(|e| charts::map_error(e, ChartError::Internal))
-        };
-        let wall_time = begin.elapsed().as_secs_f64();
+            Some(r) => {
+                let records = (r.outputs_done + 1) as usize;
+                Writers {
+                    trajectory: outputs
+                        .trajectory
+                        .then(|| TrajectoryCsv::append(dir, &coordinates, unit, r.euler_unwrapped, records))
+                        .transpose()?,
+                    lab: outputs.lab.then(|| LabXyz::append(dir, elements, masses, unit, records)).transpose()?,
+                    dipole: outputs.dipole.then(|| DipoleCsv::append(dir, records)).transpose()?,
+                }
+            }
+        })
+    }
+}
+
+/// The part of a run that writes its ending: the scene, the output folder, the restart file it continues.
+struct Finish<'a> {
+    scene: &'a Scene,
+    out_dir: &'a Path,
+    resume: Option<&'a Restart>,
+}
+
+impl Finish<'_> {
+    /// After the integration: flushes the files, writes the restart file and the summary, and
+    /// reports the run, or the first thing that went wrong (a failed record, the solver's error,
+    /// a failed flush, in that order), or the interruption.
+    fn finish<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+        self,
+        m: &M,
+        begin: Begin<'_, M, N, NA>,
+        mut recorder: Recorder<'_, M, N, NA>,
+        integrated: Integrated,
+        layout: &str,
+        warnings: Vec<String>,
+    ) -> Result<RunReport, Error> {
+        let scene = self.scene;
+        let Integrated { result, wall_time, charts: chart_report, evaluations } = integrated;
         // Keep everything written so far, whatever happened.
         let flushed = recorder.flush();
-
-        // The first error is the one reported: a failed record (which stops the solver) comes
-        // before the solver's own error, and both before a failure to flush at the end.
         let (stats, point, failure) = match result {
             Ok((stats, point)) => (Some(stats), point, recorder.error.take().map(|e| format!("the run stopped: {e}"))),
-            Err(e) => (None, None, Some(format!("the run stopped: {}", describe_failure(&e, scene, &layout)))),
+            Err(e) => (None, None, Some(format!("the run stopped: {}", describe_failure(&e, scene, layout)))),
         };
         let failure = failure.or_else(|| flushed.err().map(|e| format!("the run stopped: {e}")));
         let interrupted = recorder.interrupted && failure.is_none();
@@ -425,10 +451,10 @@ impl Run<'_> {
             && failure.is_none()
             && let Some(t) = recorder.t_reached
         {
-            let restart = recorder.restart(scene, t, point.as_ref(), &layout);
+            let restart = recorder.restart(scene, t, point.as_ref(), layout);
             match restart.and_then(|r| r.write(self.out_dir)) {
                 Ok(path) => files.push(path),
-                Err(e) => summary_error = Some(e),
+                Err(e) => summary_error = Some(e.to_string()),
             }
         }
         if scene.outputs.summary {
@@ -439,21 +465,21 @@ impl Run<'_> {
                 interrupted,
                 stopped: stopped.as_ref(),
                 t_reached,
-                state_layout: &layout,
-                zero_angular_momentum: system.reduction().rotation != RotationPart::Free,
+                state_layout: layout,
+                zero_angular_momentum: begin.system.reduction().rotation != RotationPart::Free,
                 stats,
-                rhs_evaluations: counted.evaluations,
+                rhs_evaluations: evaluations,
                 wall_time,
                 conservation: &recorder.conservation,
-                com_position: com.0,
-                com_velocity: com.1,
+                com_position: begin.com.0,
+                com_velocity: begin.com.1,
                 resumed_from: self.resume.map(|r| r.t),
                 warnings: &warnings,
-                charts: switching.then(|| charts_json(chart_report.as_ref(), scene)),
+                charts: chart_report.is_some().then(|| charts_json(chart_report.as_ref(), scene)),
             };
             match write_summary(self.out_dir, &summary.to_json()) {
                 Ok(path) => files.push(path),
-                Err(e) => summary_error = summary_error.or(Some(e)),
+                Err(e) => summary_error = summary_error.or(Some(e.to_string())),
             }
         }
         let where_ = format!("output so far is in {}", self.out_dir.display());
@@ -498,6 +524,37 @@ impl Run<'_> {
             stopped,
         })
     }
+}
+
+/// Integrates from `begin` with the chart switch where the run can switch
+/// ([`uses_charts`]), else in the internal chart, handing each output time to `recorder`.
+fn integrate_run<M: Molecule<N, NA>, O: ChartObserver + Observer, const N: usize, const NA: usize>(
+    scene: &Scene,
+    resume: Option<&Restart>,
+    begin: &Begin<'_, M, N, NA>,
+    recorder: &mut O,
+) -> Integrated {
+    let clock = Instant::now();
+    if uses_charts(scene, &begin.system) {
+        let mut report = ChartReport::default();
+        let r = integrate_charts(
+            &begin.system,
+            scene,
+            begin.t0,
+            &begin.body,
+            begin.lab.as_deref(),
+            resume,
+            recorder,
+            &mut report,
+        );
+        let result = r.map(|()| (report.stats, report.resume.clone()));
+        let evaluations = report.stats.rhs_evals;
+        return Integrated { result, wall_time: clock.elapsed().as_secs_f64(), charts: Some(report), evaluations };
+    }
+    let mut counted = Counted { inner: begin.system, evaluations: 0 };
+    let result = integrate(&mut counted, scene, begin.t0, &begin.y0, resume, recorder)
+        .map_err(|e| charts::map_error(e, ChartError::Internal));
+    Integrated { result, wall_time: clock.elapsed().as_secs_f64(), charts: None, evaluations: counted.evaluations }
 }
 
 /// Whether the run switches to the Cartesian chart at singular geometries: DOP853, a molecule
@@ -721,9 +778,7 @@ fn layout<M: Molecule<N, NA>, const N: usize, const NA: usize>(r: &Reduction<N>,
 struct Recorder<'m, M, const N: usize, const NA: usize> {
     /// A copy of the integrated system, to expand states and evaluate H at output times.
     system: ReducedSystem<'m, M, N, NA>,
-    trajectory: Option<TrajectoryCsv>,
-    lab: Option<LabXyz>,
-    dipole: Option<DipoleCsv>,
+    writers: Writers,
     diagnostics: bool,
     conservation: Conservation,
     /// H at the first output time, for the energy guard.
@@ -766,7 +821,7 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
-    fn record(&mut self, t: f64, state: ChartState<'_>) -> Result<(), String> {
+    fn record(&mut self, t: f64, state: ChartState<'_>) -> Result<(), Error> {
         let t_out = t / self.time_scale;
         let at = |e: &dyn std::fmt::Display, y: &[f64], layout: &str| {
             format!("{e} at t = {t_out} {}; state {layout} = {y:?}", self.time_unit)
@@ -804,11 +859,11 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
         }
         energy_guard(h0, energy, self.max_energy_error).map_err(|e| at(&e, y, layout))?;
-        if let Some(csv) = &mut self.trajectory {
+        if let Some(csv) = &mut self.writers.trajectory {
             let (euler, pe) = (phase.euler.into(), phase.pe.into());
             csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, body.j.into(), energy)?;
         }
-        if let Some(xyz) = &mut self.lab {
+        if let Some(xyz) = &mut self.writers.lab {
             let com = CentreOfMass { position: self.com.0 + self.com.1 * t, velocity: self.com.1 };
             let lab: LabState<NA> = match cartesian {
                 None => to_lab_body(self.system.molecule(), &body, &com).map_err(|e| at(&e, y, layout))?,
@@ -825,7 +880,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
             xyz.frame(t_out, energy, potential, atoms)?;
         }
-        if let Some(csv) = &mut self.dipole {
+        if let Some(csv) = &mut self.writers.dipole {
             let mut mu = Vector3::zeros();
             self.system.molecule().dipole(&body.q, &mut mu);
             csv.row(t_out, &(rotation * mu))?;
@@ -856,9 +911,10 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
 
     /// The restart file for a run that reached output time `t` (a.u.), with DOP853's
     /// continuation point if it has one.
-    fn restart(&self, scene: &Scene, t: f64, point: Option<&Dop853Resume>, layout: &str) -> Result<Restart, String> {
+    fn restart(&self, scene: &Scene, t: f64, point: Option<&Dop853Resume>, layout: &str) -> Result<Restart, Error> {
         if !self.last_y_valid {
-            return Err("cannot write the restart file: the last output is at a linear geometry, which internal                         coordinates cannot hold (continue from an earlier time or run longer)"
+            return Err("cannot write the restart file: the last output is at a linear geometry, which internal \
+                 coordinates cannot hold (continue from an earlier time or run longer)"
                 .into());
         }
         let body = self.system.expand_body(&self.last_y).map_err(|e| format!("cannot write the restart file: {e}"))?;
@@ -889,18 +945,18 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             com_position_bohr: self.com.0.into(),
             com_velocity_bohr_per_au: self.com.1.into(),
             conservation: self.conservation.clone(),
-            euler_unwrapped: self.trajectory.as_ref().and_then(TrajectoryCsv::last_unwrapped),
+            euler_unwrapped: self.writers.trajectory.as_ref().and_then(TrajectoryCsv::last_unwrapped),
         })
     }
 
-    fn flush(&mut self) -> Result<(), String> {
-        if let Some(csv) = &mut self.trajectory {
+    fn flush(&mut self) -> Result<(), Error> {
+        if let Some(csv) = &mut self.writers.trajectory {
             csv.flush()?;
         }
-        if let Some(xyz) = &mut self.lab {
+        if let Some(xyz) = &mut self.writers.lab {
             xyz.flush()?;
         }
-        if let Some(csv) = &mut self.dipole {
+        if let Some(csv) = &mut self.writers.dipole {
             csv.flush()?;
         }
         Ok(())
@@ -932,7 +988,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> ChartObserver for Reco
                 ControlFlow::Continue(())
             }
             Err(e) => {
-                self.error = Some(e);
+                self.error = Some(e.to_string());
                 ControlFlow::Break(())
             }
         }

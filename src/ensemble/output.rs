@@ -49,7 +49,7 @@ pub const KEPT_FOLDER: &str = "trajectories";
 /// outputs ([`ENSEMBLE_FILES`]), a `rovib run`'s (trajectory.csv, lab.xyz, dipole.csv,
 /// restart.json, …) and, unless `resume` (whose resumed blocks' kept trajectories stay), the
 /// kept trajectories (the numbered folders in `trajectories/`). Missing files are fine.
-pub fn remove_stale_outputs(dir: &Path, resume: bool) -> Result<(), String> {
+pub fn remove_stale_outputs(dir: &Path, resume: bool) -> Result<(), Error> {
     remove_files(dir, &ENSEMBLE_FILES)?;
     crate::output::remove_stale_outputs(dir, &[])?;
     if !resume {
@@ -60,13 +60,13 @@ pub fn remove_stale_outputs(dir: &Path, resume: bool) -> Result<(), String> {
 
 /// For `rovib run` into `dir`: refuses a folder with an unfinished ensemble's checkpoint (its
 /// finished blocks would be lost), else removes an ensemble's outputs and kept trajectories.
-pub fn clear_for_run(dir: &Path) -> Result<(), String> {
+pub fn clear_for_run(dir: &Path) -> Result<(), Error> {
     let checkpoint = dir.join(super::CHECKPOINT_FILE);
     if checkpoint.exists() {
-        return Err(format!(
-            "{} holds the finished blocks of an ensemble that did not complete; continue it with              `rovib ensemble SCENE --out {} --resume`, delete the file, or choose another --out directory",
-            checkpoint.display(),
-            dir.display()
+        return Err(Error::unusable(
+            checkpoint,
+            " holds the finished blocks of an ensemble that did not complete: resume that ensemble into this folder \
+             (`rovib ensemble SCENE --out DIR --resume`), delete the file, or choose another output folder",
         ));
     }
     let files: Vec<&str> = ENSEMBLE_FILES.iter().copied().filter(|&f| f != "summary.json").collect();
@@ -74,13 +74,13 @@ pub fn clear_for_run(dir: &Path) -> Result<(), String> {
     remove_kept(dir)
 }
 
-fn remove_files(dir: &Path, names: &[&str]) -> Result<(), String> {
+fn remove_files(dir: &Path, names: &[&str]) -> Result<(), Error> {
     for name in names {
         let path = dir.join(name);
         match std::fs::remove_file(&path) {
             Ok(()) => {}
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(format!("cannot remove {} left by an earlier run: {e}", path.display())),
+            Err(e) => return Err(Error::io("cannot remove (left by an earlier run)", path, e)),
         }
     }
     Ok(())
@@ -88,7 +88,7 @@ fn remove_files(dir: &Path, names: &[&str]) -> Result<(), String> {
 
 /// Removes the numbered folders in `dir/trajectories` (what `keep_trajectories` writes), then
 /// the folder if it is left empty; anything else in it is left alone.
-fn remove_kept(dir: &Path) -> Result<(), String> {
+fn remove_kept(dir: &Path) -> Result<(), Error> {
     let kept = dir.join(KEPT_FOLDER);
     let Ok(entries) = std::fs::read_dir(&kept) else { return Ok(()) };
     for entry in entries.flatten() {
@@ -96,7 +96,7 @@ fn remove_kept(dir: &Path) -> Result<(), String> {
         let numbered = name.to_str().is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()));
         if numbered && entry.file_type().is_ok_and(|t| t.is_dir()) {
             std::fs::remove_dir_all(entry.path())
-                .map_err(|e| format!("cannot remove {} left by an earlier run: {e}", entry.path().display()))?;
+                .map_err(|e| Error::io("cannot remove (left by an earlier run)", entry.path(), e))?;
         }
     }
     let _ = std::fs::remove_dir(&kept);
@@ -110,7 +110,7 @@ pub fn write_running(
     molecule: &str,
     requested: u64,
     resume: bool,
-) -> Result<PathBuf, String> {
+) -> Result<PathBuf, Error> {
     write_summary(
         dir,
         &json!({
@@ -134,7 +134,7 @@ pub fn write_failed(
     requested: u64,
     error: &str,
     checkpoint: Option<&Path>,
-) -> Result<PathBuf, String> {
+) -> Result<PathBuf, Error> {
     write_summary(
         dir,
         &json!({

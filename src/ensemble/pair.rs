@@ -197,7 +197,7 @@ where
 
 /// Writes `moments.csv`: M0 and M2 from the sampled phase space (with standard errors) and from
 /// the spectrum, for a plan whose spectrum exists.
-pub fn write_moments(phase: &PhaseSpace, spectrum: Option<&Spectrum>, dir: &Path) -> Result<PathBuf, String> {
+pub fn write_moments(phase: &PhaseSpace, spectrum: Option<&Spectrum>, dir: &Path) -> Result<PathBuf, crate::Error> {
     let (s0, s2) = spectrum.map_or((f64::NAN, f64::NAN), spectral_moments);
     let mut f = OutputFile::create(dir, "moments.csv")?;
     f.line("moment,unit,phase_space,phase_space_stderr,spectrum")?;

@@ -639,7 +639,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
         let h0 = self.initial_energy;
         // The same guard as `rovib run`'s, with the same absolute floor (`output::energy_guard`).
         if let Err(e) = crate::output::energy_guard(h0, h, self.plan.max_energy_error) {
-            self.failure = Some(("energy guard", t, e));
+            self.failure = Some(("energy guard", t, e.to_string()));
             return ControlFlow::Break(());
         }
         let u = if self.needs_potential { self.plan.molecule.potential(&body.q) } else { f64::NAN };
@@ -656,7 +656,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
         if let Some(d) = &mut self.dipole
             && let Err(e) = d.row(t / self.plan.time_scale, &mu)
         {
-            self.failure = Some(("output", t, e));
+            self.failure = Some(("output", t, e.to_string()));
             return ControlFlow::Break(());
         }
         if let Some(csv) = &mut self.csv {
@@ -671,7 +671,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
                 body.j.into(),
                 h,
             ) {
-                self.failure = Some(("output", t, e));
+                self.failure = Some(("output", t, e.to_string()));
                 return ControlFlow::Break(());
             }
         }
@@ -778,12 +778,12 @@ where
                     let dir = dir.join(index.to_string());
                     let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
                     match std::fs::create_dir_all(&dir)
-                        .map_err(|e| e.to_string())
+                        .map_err(|e| crate::Error::io("cannot create", &dir, e))
                         .and_then(|()| TrajectoryCsv::create(&dir, &plan.molecule.coordinates(), unit, false))
                     {
                         Ok(c) => Some(c),
                         Err(e) => {
-                            outcome.fail(failure("output", Some(0.0), e), progress);
+                            outcome.fail(failure("output", Some(0.0), e.to_string()), progress);
                             break;
                         }
                     }
@@ -796,7 +796,7 @@ where
                     match crate::output::DipoleCsv::create(&dir.join(index.to_string())) {
                         Ok(d) => Some(d),
                         Err(e) => {
-                            outcome.fail(failure("output", Some(0.0), e), progress);
+                            outcome.fail(failure("output", Some(0.0), e.to_string()), progress);
                             break;
                         }
                     }
@@ -846,12 +846,12 @@ where
             if let Some(csv) = &mut watch.csv
                 && let Err(e) = csv.flush()
             {
-                watch.failure.get_or_insert(("output", plan.t_end, e));
+                watch.failure.get_or_insert(("output", plan.t_end, e.to_string()));
             }
             if let Some(d) = &mut watch.dipole
                 && let Err(e) = d.flush()
             {
-                watch.failure.get_or_insert(("output", plan.t_end, e));
+                watch.failure.get_or_insert(("output", plan.t_end, e.to_string()));
             }
             // A kept trajectory's chart switches beside its trajectory.csv.
             if switching
@@ -859,7 +859,7 @@ where
                 && let Some((_, dir)) = &plan.keep
                 && let Err(e) = write_chart_report(&dir.join(index.to_string()), &chart_report, plan.time_scale)
             {
-                watch.failure.get_or_insert(("output", plan.t_end, e));
+                watch.failure.get_or_insert(("output", plan.t_end, e.to_string()));
             }
             let (k, interrupted, observed, stopped) = (watch.k, watch.interrupted, watch.failure.take(), watch.stopped);
             match (result, observed) {
@@ -925,7 +925,7 @@ where
 
 /// Writes `charts.json` (switches, time in the Cartesian chart in the scene's unit, the chart at
 /// the end) of one kept trajectory into `dir`.
-fn write_chart_report(dir: &std::path::Path, r: &ChartReport, time_scale: f64) -> Result<(), String> {
+fn write_chart_report(dir: &std::path::Path, r: &ChartReport, time_scale: f64) -> Result<(), crate::Error> {
     let json = serde_json::json!({
         "switches": r.switches,
         "cartesian_time": r.cartesian_time / time_scale,
