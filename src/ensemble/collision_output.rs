@@ -112,7 +112,8 @@ where
         *outcome.failed.entry(f.reason.clone()).or_default() += 1;
     }
     outcome.first_failures = report.failures.iter().take(LISTED_FAILURES).cloned().collect();
-    outcome.interrupted = ensemble.trajectories - outcome.completed - report.failures.len() as u64;
+    // Cut short by the interrupt, or never started.
+    outcome.interrupted = ensemble.trajectories.saturating_sub(outcome.completed + report.failures.len() as u64);
     write_summary(dir, scene, ensemble, c, &report, &description, status, wall, threads).map_err(Error::Message)?;
     files.push(dir.join("summary.json"));
     let ensemble_report = EnsembleReport {
@@ -247,7 +248,8 @@ fn write_histograms(dir: &std::path::Path, report: &CollisionReport, c: &Collisi
     let areas: Vec<f64> = c.strata.iter().map(|s| s.area()).collect();
     let mut f = OutputFile::create(dir, "collision_histograms.csv")?;
     f.line("quantity,unit,low,high,probability,density")?;
-    let series: [(&str, &str, &dyn Fn(&Record) -> f64); 5] = [
+    type Series<'a> = (&'a str, &'a str, &'a dyn Fn(&Record) -> f64);
+    let series: [Series<'_>; 5] = [
         ("delta_e", "hartree", &|r: &Record| r.delta_e()),
         ("deflection", "rad", &|r: &Record| r.deflection),
         ("lifetime", "au", &|r: &Record| r.lifetime),
@@ -316,6 +318,7 @@ fn write_summary(
         "seed": ensemble.seed,
         "trajectories": ensemble.trajectories,
         "completed": report.records.len(),
+        "interrupted_or_not_run": ensemble.trajectories.saturating_sub((report.records.len() + report.failures.len()) as u64),
         "failed": failed,
         "first_failures": first,
         "r0_bohr": c.r0,

@@ -93,6 +93,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
     }
 }
 
+/// The reason of a trajectory cut short by an interrupt (counted apart from failures).
+const INTERRUPTED: &str = "interrupted";
+
 /// What a collision ensemble produced (besides its files).
 #[derive(Clone, Debug)]
 pub struct CollisionReport {
@@ -100,6 +103,8 @@ pub struct CollisionReport {
     pub records: Vec<Record>,
     /// Failed trajectories (the first [`super::runner::LISTED_FAILURES`] listed in summary.json).
     pub failures: Vec<Failure>,
+    /// Trajectories cut short or not started because of an interrupt.
+    pub interrupted: u64,
     /// Trajectories per stratum, as allocated.
     pub stratum_counts: Vec<u64>,
     /// The reduction (cross sections, energy-transfer moments).
@@ -130,7 +135,7 @@ where
     })?;
     let reduction = crate::start::frozen_reduction(m, scene)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let n_threads = threads.or(options.threads).unwrap_or(cores).clamp(1, trajectories.min(256) as usize);
+    let n_threads = options.threads.or(threads).unwrap_or(cores).clamp(1, trajectories.min(256) as usize);
     let next = AtomicU64::new(0);
     let start = Instant::now();
     let results: Vec<Vec<Result<Record, Failure>>> = std::thread::scope(|s| {
@@ -154,9 +159,11 @@ where
     let wall = start.elapsed().as_secs_f64();
     let mut records = Vec::new();
     let mut failures = Vec::new();
+    let mut interrupted = 0;
     for r in results.into_iter().flatten() {
         match r {
             Ok(rec) => records.push(rec),
+            Err(f) if f.reason == INTERRUPTED => interrupted += 1,
             Err(f) => failures.push(f),
         }
     }
@@ -164,7 +171,7 @@ where
     failures.sort_by_key(|f| f.index);
     let counts = sampler.stratum_counts();
     let summary = fin::summarise(&records, &sampler.spec().strata, c.stratified);
-    Ok((CollisionReport { records, failures, stratum_counts: counts, summary }, wall, n_threads))
+    Ok((CollisionReport { records, failures, interrupted, stratum_counts: counts, summary }, wall, n_threads))
 }
 
 /// Draws, integrates and reduces trajectory `index`.
@@ -189,7 +196,7 @@ where
         .map_err(|e| fail("invalid integrator settings", None, e.to_string()))?;
     let fragments = &sampler.spec().fragments;
     let mut watch = Watch {
-        system: system.clone(),
+        system,
         molecule: m,
         fragments,
         masses: m.masses(),
@@ -221,7 +228,7 @@ where
         return Err(fail(reason, Some(t), detail));
     }
     if watch.interrupted {
-        return Err(fail("interrupted", Some(watch.t), "stopped before the end".into()));
+        return Err(fail(INTERRUPTED, Some(watch.t), "stopped before the end".into()));
     }
     let end = watch.body.ok_or_else(|| fail("output", None, "no output time observed".into()))?;
     let lab0 = lab_of_body_any(m, &state, &CentreOfMass::AT_REST)

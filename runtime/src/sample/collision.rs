@@ -103,6 +103,10 @@ pub struct CollisionSpec {
     pub trajectories: u64,
 }
 
+/// A fragment's atoms about its centre of mass and their velocities (lab orientation), bohr and
+/// bohr per a.u. of time.
+pub type FragmentAtoms = (Vec<Vector3<f64>>, Vec<Vector3<f64>>);
+
 /// What was drawn for one trajectory besides its state.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Drawn {
@@ -420,7 +424,7 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Collision<'m, M, N
     }
 
     /// Draws fragment `k`: positions and velocities about its centre of mass, lab orientation.
-    fn fragment(&self, k: usize, rng: &mut TrajectoryRng) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+    fn fragment(&self, k: usize, rng: &mut TrajectoryRng) -> FragmentAtoms {
         let atoms = &self.spec.fragments[k];
         let masses: Vec<f64> = atoms.iter().map(|&i| self.masses[i]).collect();
         let mut y = self.shapes[k].clone();
@@ -517,7 +521,7 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Collision<'m, M, N
     /// Places the fragments (atoms about their centres, lab orientation) at separation r0 with
     /// impact parameter `b` and relative energy `energy`: B at `(0, b, −√(r0² − b²))` from A,
     /// moving along +z relative to A; the centre of mass at rest at the origin.
-    pub fn place(&self, fragments: &[(Vec<Vector3<f64>>, Vec<Vector3<f64>>); 2], b: f64, energy: f64) -> LabState<NA> {
+    pub fn place(&self, fragments: &[FragmentAtoms; 2], b: f64, energy: f64) -> LabState<NA> {
         let ma: f64 = self.spec.fragments[0].iter().map(|&i| self.masses[i]).sum();
         let mb: f64 = self.spec.fragments[1].iter().map(|&i| self.masses[i]).sum();
         let total = ma + mb;
