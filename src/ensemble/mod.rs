@@ -23,6 +23,10 @@
 //! is removed when the ensemble completes.
 
 pub mod checkpoint;
+pub mod collision_final;
+pub mod collision_output;
+pub mod collision_run;
+pub mod collision_scene;
 pub mod lanes;
 pub mod lifetimes;
 #[cfg(feature = "mpi")]
@@ -302,6 +306,12 @@ impl Visit<'_, '_> {
     where
         M: Molecule<N, NA> + Sync,
     {
+        if let MethodSpec::Collision(c) = &self.ensemble.method {
+            if !matches!(self.link, Link::Alone) {
+                return Err(Error::Message("a collision ensemble runs in one process (no MPI)".into()));
+            }
+            return collision_output::run_and_write(&m, self.scene, self.ensemble, c, self.options).map(|r| Some(r.0));
+        }
         let times = output_times(self.scene.t_end, self.scene.output_interval);
         let bound = self.ensemble.bind(&m, self.scene, &times)?;
         let sampler = sample::sampler(&m, &bound.spec, self.ensemble.seed).map_err(|e| {

@@ -30,7 +30,7 @@ pub const MAX_BINS: usize = 1_000_000;
 pub const MAX_OUTPUT_TIMES: usize = 1_000_000;
 
 /// The sampling methods, as spelt in scenes.
-pub const METHODS: [&str; 4] = ["thermal", "microcanonical", "normal-modes", "file"];
+pub const METHODS: [&str; 5] = ["thermal", "microcanonical", "normal-modes", "file", "collision"];
 
 /// A parsed `[ensemble]` (with `[statistics]`), in atomic units, names not yet bound.
 #[derive(Clone, Debug)]
@@ -92,6 +92,8 @@ pub enum MethodSpec {
         /// Where `file = ...` is written.
         span: Range<usize>,
     },
+    /// Collisions of two fragments (`[collision]`, run by `super::collision_run`).
+    Collision(Box<super::collision_scene::CollisionScene>),
 }
 
 /// `region = { energy_cap = ..., limits = { name = [lo, hi] } }`, cap in hartree, limits in the
@@ -312,6 +314,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         "thermal" => &["temperature", "energy_unit", "region"],
         "microcanonical" => &["energy", "energy_unit", "angular_momentum", "region"],
         "normal-modes" => &["energy", "energy_unit", "quanta", "mode_energies", "temperature", "j"],
+        "collision" => &[],
         _ => &["file"],
     };
     let given: [(&str, Option<Range<usize>>); 9] = [
@@ -483,6 +486,16 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
                 }
             };
             MethodSpec::NormalModes { energies, rotation }
+        }
+        "collision" => {
+            if let Some(k) = &e.keep_trajectories {
+                return Err(src.error(
+                    k.span(),
+                    "`keep_trajectories` does not apply to a collision ensemble (it writes final_states.csv)",
+                    "remove keep_trajectories; run one collision with `rovib run` and [initial] positions to see its path",
+                ));
+            }
+            MethodSpec::Collision(Box::new(super::collision_scene::parse_collision(scene, e.method.span())?))
         }
         _ => {
             let file = e.file.as_ref().ok_or_else(|| needs("file", "a path relative to the scene"))?;
@@ -733,6 +746,13 @@ impl EnsembleScene {
                     ));
                 }
                 (Spec::States(states), format!("{} states from {}", self.trajectories, path.display()))
+            }
+            MethodSpec::Collision(_) => {
+                return Err(src.error(
+                    self.method_span.clone(),
+                    "a collision ensemble runs through `rovib ensemble` (its own runner), not with another sampler",
+                    "run the scene with `rovib ensemble`",
+                ));
             }
         };
 

@@ -7,6 +7,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod collisions;
 mod ensemble;
 mod ensemble_fuzz;
 mod ensemble_samplers;

@@ -39,6 +39,7 @@ use crate::hamiltonian::HamiltonianError;
 use crate::hamiltonian::fast::{BodyState, MetricFactor};
 use crate::molecule::{KineticMatrices, Molecule};
 
+pub mod collision;
 pub mod configuration;
 pub mod microcanonical;
 pub mod normal_modes;
