@@ -86,9 +86,9 @@ where
     let (report, wall, threads) = run(m, scene, ensemble.trajectories, ensemble.seed, ensemble.threads, c, options)?;
     let dir = &options.out_dir;
     let mut files = Vec::new();
-    write_final_states(dir, &report.records).map_err(Error::Message)?;
+    write_final_states(dir, &report.records)?;
     files.push(dir.join("final_states.csv"));
-    write_histograms(dir, &report, c).map_err(Error::Message)?;
+    write_histograms(dir, &report, c)?;
     files.push(dir.join("collision_histograms.csv"));
 
     let interrupted = options.stop.load(std::sync::atomic::Ordering::Relaxed);
@@ -114,7 +114,7 @@ where
     outcome.first_failures = report.failures.iter().take(LISTED_FAILURES).cloned().collect();
     // Cut short by the interrupt, or never started.
     outcome.interrupted = ensemble.trajectories.saturating_sub(outcome.completed + report.failures.len() as u64);
-    write_summary(dir, scene, ensemble, c, &report, &description, status, wall, threads).map_err(Error::Message)?;
+    write_summary(dir, scene, ensemble, c, &report, &description, status, wall, threads)?;
     files.push(dir.join("summary.json"));
     let ensemble_report = EnsembleReport {
         status,
@@ -165,7 +165,7 @@ fn describe(c: &CollisionScene) -> String {
     format!("collisions: {b}, {energy}, r0 = {} bohr, A: {}, B: {}, random orientations", c.r0, frag(0), frag(1))
 }
 
-fn write_final_states(dir: &std::path::Path, records: &[Record]) -> Result<(), String> {
+fn write_final_states(dir: &std::path::Path, records: &[Record]) -> Result<(), Error> {
     let mut f = OutputFile::create(dir, "final_states.csv")?;
     f.line(FINAL_STATES_HEADER)?;
     for r in records {
@@ -244,7 +244,7 @@ fn histogram(
     (0..bins).map(|k| (lo + k as f64 * width, lo + (k + 1) as f64 * width, w[k])).collect()
 }
 
-fn write_histograms(dir: &std::path::Path, report: &CollisionReport, c: &CollisionScene) -> Result<(), String> {
+fn write_histograms(dir: &std::path::Path, report: &CollisionReport, c: &CollisionScene) -> Result<(), Error> {
     let areas: Vec<f64> = c.strata.iter().map(|s| s.area()).collect();
     let mut f = OutputFile::create(dir, "collision_histograms.csv")?;
     f.line("quantity,unit,low,high,probability,density")?;
@@ -280,7 +280,7 @@ fn write_summary(
     status: Status,
     wall: f64,
     threads: usize,
-) -> Result<(), String> {
+) -> Result<(), Error> {
     let s = &report.summary;
     let mut failed = serde_json::Map::new();
     for f in &report.failures {

@@ -66,7 +66,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Watch<'_,
             self.h0 = h;
         }
         if let Err(e) = crate::output::energy_guard(self.h0, h, self.max_energy_error) {
-            self.failure = Some(("energy guard", t, e));
+            self.failure = Some(("energy guard", t, e.to_string()));
             return ControlFlow::Break(());
         }
         // R is the same in the body frame as in the lab frame.
