@@ -41,6 +41,7 @@ __all__ = [
     "to_lab",
     "sample",
     "with_initial",
+    "positions",
     "BOHR_IN_ANGSTROM",
     "AU_TIME_IN_FS",
 ]
@@ -284,14 +285,32 @@ def _run_in_memory(scene, potential) -> Trajectory:
     return t
 
 
+def positions(name: str, q) -> Tuple[np.ndarray, np.ndarray]:
+    """The atoms' positions of molecule ``name`` at ``q`` (bohr, rad) in its definition's frame,
+    shape (atoms, 3) in bohr, and their derivatives by each coordinate, shape (coordinates,
+    atoms, 3) in bohr per bohr or rad: the generated kinematics' ``positions`` and
+    ``positions_jacobian``."""
+    return _rovib.positions(name, _vec(q))
+
+
 def with_initial(scene: Dict[str, Any], q=None, p=None, euler=None, pe=None, j=None) -> Dict[str, Any]:
     """A copy of the dict ``scene`` whose ``[initial]`` table holds the given arrays: ``q`` and
     ``p`` one value per coordinate in the molecule's order (named for the table), ``euler``,
-    ``pe`` and ``j`` three values each. The values are read as the scene reads ``[initial]``:
-    in its ``[units]`` (atomic without one: bohr, rad, ħ/bohr, ħ); ``j`` is the body-frame
-    angular momentum. Keys not given keep the scene's values."""
+    ``pe`` and ``j`` three values each, all in atomic units (bohr, rad, ħ/bohr, ħ; ``j`` is the
+    body-frame angular momentum), as :func:`sample` and :func:`from_lab` return them. A scene
+    reads ``[initial]`` in its ``[units]``, else in each coordinate's declared unit, so the
+    scene must say ``units = {"length": "bohr", "angle": "rad"}`` (else this raises). Keys not
+    given keep the scene's values."""
     if not isinstance(scene, dict):
         raise RovibError("error: with_initial takes a scene as a dict (the keys of a scene file)")
+    units = scene.get("units") or {}
+    if (q is not None or p is not None or euler is not None) and (
+        units.get("length") != "bohr" or units.get("angle") != "rad"
+    ):
+        raise RovibError(
+            "error: with_initial takes atomic units, but the scene reads [initial] in "
+            f"{units or 'each coordinate declared unit'}: give it units = {{\"length\": \"bohr\", \"angle\": \"rad\"}}"
+        )
     names = molecule_info(scene["molecule"])["coordinates"]["names"]
     initial = dict(scene.get("initial") or {})
     for key, values in (("q", q), ("p", p)):

@@ -11,7 +11,7 @@ from typing import Any, Dict
 
 import numpy as np
 
-from . import BOHR_IN_ANGSTROM, evaluate, from_lab, molecule_info, to_lab
+from . import BOHR_IN_ANGSTROM, from_lab, molecule_info, positions, to_lab
 
 
 def to_atoms(name: str, state: Dict[str, Any]):
@@ -47,35 +47,25 @@ def from_atoms(name: str, atoms, initial_q=None) -> Dict[str, Any]:
     return from_lab(name, atoms.get_positions(), velocities, initial_q)
 
 
-def calculator_potential(name: str, calculator, step: float = 1e-6):
+def calculator_potential(name: str, calculator):
     """A potential ``f(q) -> (U, dU/dq)`` for ``rovib.run(scene, potential=f)`` from an ASE
-    calculator: the atoms (the molecule's elements, in its order) stand at the body-frame
-    positions of ``q`` (``rovib.evaluate(name, q)["positions"]``; the energy of an isolated
-    molecule does not depend on its orientation), ``U`` is the calculator's energy in hartree
-    and ``dU/dq = −Σ F · ∂x/∂q`` with ``∂x/∂q`` by central differences of the positions (step
-    ``step · max(1, |q_k|)``), in hartree per bohr or rad."""
+    calculator: the atoms (the molecule's elements, in its order) stand at the positions the
+    definition gives for ``q`` (:func:`rovib.positions`; the energy of an isolated molecule does
+    not depend on its orientation or place), ``U`` is the calculator's energy in hartree and
+    ``dU/dq = −Σ F · ∂x/∂q`` with the generated Jacobian ``∂x/∂q``, in hartree per bohr or rad."""
     from ase import Atoms, units
 
     info = molecule_info(name)
     atoms = Atoms(symbols=info["atoms"]["elements"], masses=info["atoms"]["masses_da"])
     atoms.calc = calculator
 
-    def positions(q):
-        """Body-frame positions at q, Å."""
-        return np.asarray(evaluate(name, q=q)["positions"]) * BOHR_IN_ANGSTROM
-
     def f(q):
-        q = np.asarray(q, dtype=float)
-        atoms.positions = positions(q)
+        x, dx = positions(name, q)
+        atoms.positions = x * BOHR_IN_ANGSTROM
         energy = atoms.get_potential_energy()
+        # eV/Å times Å per unit of q.
         forces = atoms.get_forces()
-        grad = np.empty(len(q))
-        for k in range(len(q)):
-            h = step * max(1.0, abs(q[k]))
-            up, down = q.copy(), q.copy()
-            up[k] += h
-            down[k] -= h
-            grad[k] = -np.sum(forces * (positions(up) - positions(down))) / (2.0 * h)
+        grad = -np.einsum("ai,kai->k", forces, dx * BOHR_IN_ANGSTROM)
         return energy / units.Hartree, grad / units.Hartree
 
     f.__name__ = f"ase_{type(calculator).__name__}"

@@ -461,6 +461,38 @@ fn run_ensemble_scene<'py>(
     Ok(d)
 }
 
+/// The definition's atom positions at `q` and their Jacobian.
+struct PositionsVisitor(Vec<f64>);
+
+impl MoleculeVisitor for PositionsVisitor {
+    /// Positions (x, y, z atom by atom) and per coordinate their derivative, bohr per unit of q.
+    type Output = Result<(usize, Vec<f64>, Vec<f64>), String>;
+
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
+        let meaning = format!("one per coordinate of {}: {}, in bohr or rad", m.name(), names.join(", "));
+        let q = vector::<N>("positions", "q", &meaning, &Some(self.0), SVector::zeros())?;
+        let mut r = SMatrix::<f64, 3, NA>::zeros();
+        let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
+        m.positions(&q, &mut r);
+        m.positions_jacobian(&q, &mut dr);
+        Ok((NA, r.as_slice().to_vec(), dr.iter().flat_map(|d| d.as_slice().iter().copied()).collect()))
+    }
+}
+
+/// The positions of molecule `name`'s atoms at `q` in its definition's frame (bohr, shape
+/// (atoms, 3)) and their derivatives by each coordinate (shape (coordinates, atoms, 3)), as the
+/// generated kinematics computes them.
+#[pyfunction]
+fn positions<'py>(py: Python<'py>, name: &str, q: Vec<f64>) -> PyResult<Bound<'py, PyTuple>> {
+    let (atoms, r, dr) =
+        molecules::visit(name, PositionsVisitor(q)).ok_or_else(|| unknown_molecule(name))?.map_err(message)?;
+    let n = dr.len() / (3 * atoms);
+    let r = PyArray1::from_vec(py, r).reshape([atoms, 3])?;
+    let dr = PyArray1::from_vec(py, dr).reshape([n, atoms, 3])?;
+    PyTuple::new(py, [r.into_any(), dr.into_any()])
+}
+
 /// What `sample` asks for.
 struct SampleVisitor {
     method: String,
@@ -484,7 +516,10 @@ struct Drawn {
 impl MoleculeVisitor for SampleVisitor {
     type Output = Result<Drawn, String>;
 
-    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+    fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
+    where
+        M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+    {
         let region = Region { energy_cap: self.energy_cap, limits: [None; N] };
         let need =
             |v: Option<f64>, key: &str| v.ok_or_else(|| format!("sample: method \"{}\" needs `{key}`", self.method));
@@ -835,6 +870,7 @@ fn _rovib(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run_scene, m)?)?;
     m.add_function(wrap_pyfunction!(run_memory, m)?)?;
     m.add_function(wrap_pyfunction!(sample, m)?)?;
+    m.add_function(wrap_pyfunction!(positions, m)?)?;
     m.add_function(wrap_pyfunction!(resume_scene, m)?)?;
     m.add_function(wrap_pyfunction!(run_ensemble_scene, m)?)?;
     m.add_function(wrap_pyfunction!(from_lab_frame, m)?)?;
