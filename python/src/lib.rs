@@ -717,7 +717,7 @@ fn run_memory<'py>(
     }
     result?;
     let k = records.count;
-    let width = if k == 0 { 0 } else { records.rows.len() / k };
+    let width = records.rows.len().checked_div(k).unwrap_or(0);
     let d = PyDict::new(py);
     d.set_item("rows", PyArray1::from_vec(py, records.rows).reshape([k, width])?)?;
     if records.lab_potential.len() == k && k > 0 {

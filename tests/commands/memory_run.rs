@@ -79,12 +79,10 @@ struct Harmonic {
 impl ExternalPotential for Harmonic {
     fn energy_gradient(&self, q: &[f64], grad: &mut [f64]) -> f64 {
         let n = self.calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let centre = [1.81, 1.81, 1.82];
-        let k = [0.5, 0.5, 0.16];
         let mut u = 0.0;
-        for i in 0..3 {
-            u += 0.5 * k[i] * (q[i] - centre[i]).powi(2);
-            grad[i] = k[i] * (q[i] - centre[i]) * if i == self.wrong { 1.01 } else { 1.0 };
+        for (i, (centre, k)) in [1.81, 1.81, 1.82].into_iter().zip([0.5, 0.5, 0.16]).enumerate() {
+            u += 0.5 * k * (q[i] - centre).powi(2);
+            grad[i] = k * (q[i] - centre) * if i == self.wrong { 1.01 } else { 1.0 };
         }
         if n >= self.fail_after { f64::NAN } else { u }
     }
