@@ -25,6 +25,7 @@ pub mod dir_lock;
 pub mod ensemble;
 pub mod error;
 pub mod freq;
+pub mod memory;
 pub mod molecules;
 pub mod output;
 pub mod parameters;

@@ -10,6 +10,7 @@ use std::time::Instant;
 use crate::Progress;
 use crate::dir_lock::DirLock;
 use crate::error::Error;
+use crate::memory::{External, ExternalPotential, LabRecord, Record, Tap};
 use crate::molecules;
 use crate::output::{
     Conservation, DipoleCsv, LabXyz, RunSummary, TRAJECTORY_UNITS_FILE, TrajectoryCsv, energy_guard,
@@ -120,8 +121,23 @@ impl Simulation {
     /// [`Error::Interrupted`]. A run that fails keeps what it wrote and says where.
     pub fn run(&self, stop: &AtomicBool, progress: &mut dyn FnMut(Progress)) -> Result<RunReport, Error> {
         std::fs::create_dir_all(&self.out_dir).map_err(|e| Error::io("cannot create", &self.out_dir, e))?;
+        self.run_with(stop, progress, None, None)
+    }
+
+    /// [`Simulation::run`], with the records going to `tap` instead of files (then nothing is
+    /// written: `crate::memory`) and the molecule on `potential` if given.
+    pub(crate) fn run_with(
+        &self,
+        stop: &AtomicBool,
+        progress: &mut dyn FnMut(Progress),
+        tap: Option<Tap<'_>>,
+        potential: Option<&dyn ExternalPotential>,
+    ) -> Result<RunReport, Error> {
         let name = self.scene.molecule.get_ref().clone();
-        let visitor = Run { scene: &self.scene, out_dir: &self.out_dir, stop, progress, resume: self.restart.as_ref() };
+        let resume = self.restart.as_ref();
+        // Rebuilt so that the sink's borrow shortens to the visitor's.
+        let tap = tap.map(|t| Tap { sink: t.sink, lab: t.lab, dipole: t.dipole });
+        let visitor = Run { scene: &self.scene, out_dir: &self.out_dir, stop, progress, resume, tap, potential };
         molecules::visit(&name, visitor).ok_or_else(|| {
             let e = Error::unknown_molecule(&name);
             Error::File(self.scene.source().error(
@@ -192,6 +208,10 @@ struct Run<'a> {
     stop: &'a AtomicBool,
     progress: &'a mut dyn FnMut(Progress),
     resume: Option<&'a Restart>,
+    /// Where the records go in a run in memory (then no file is written).
+    tap: Option<Tap<'a>>,
+    /// A potential given at run time, replacing the molecule's.
+    potential: Option<&'a dyn ExternalPotential>,
 }
 
 /// H(0) − U(reference) above which a run warns that it starts far above the reference energy,
@@ -224,6 +244,10 @@ impl MoleculeVisitor for Run<'_> {
     /// `[potential.parameters]` on its own with them (the run-time path), else with its
     /// compiled-in constants.
     fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        if let Some(p) = self.potential {
+            crate::memory::check_external(&m, p)?;
+            return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: External(p) });
+        }
         if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {
             return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: surface });
         }
@@ -267,7 +291,8 @@ impl Run<'_> {
     /// integration with its recorder, then the restart file, the summary and the report.
     fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, Error> {
         let scene = self.scene;
-        if scene.outputs.dipole && !m.has_dipole() {
+        let in_memory = self.tap.is_some();
+        if (scene.outputs.dipole || self.tap.as_ref().is_some_and(|t| t.dipole)) && !m.has_dipole() {
             return Err(Error::File(scene.source().error(
                 scene.molecule.span(),
                 format!("the scene asks for the \"dipole\" output, but molecule `{}` has no dipole surface", m.name()),
@@ -283,15 +308,19 @@ impl Run<'_> {
         let stops = stop_conditions(&m, scene)?;
 
         // One run per directory, then no file of an earlier run may remain looking like this one's.
-        let _lock = DirLock::acquire(self.out_dir)?;
-        crate::ensemble::output::clear_for_run(self.out_dir)?;
-        let writers = self.open_writers(&m)?;
+        let _lock = if in_memory { None } else { Some(DirLock::acquire(self.out_dir)?) };
+        let writers = if in_memory {
+            Writers { trajectory: None, lab: None, dipole: None }
+        } else {
+            crate::ensemble::output::clear_for_run(self.out_dir)?;
+            self.open_writers(&m)?
+        };
         let records = self.resume.map_or(0, |r| r.outputs_done + 1);
-        let Run { scene, out_dir, stop, progress, resume } = self;
+        let Run { scene, out_dir, stop, progress, resume, tap, .. } = self;
         let mut recorder = Recorder::<M, N, NA> {
             system: begin.system,
             writers,
-            diagnostics: scene.outputs.summary || scene.outputs.restart,
+            diagnostics: scene.outputs.summary || scene.outputs.restart || in_memory,
             conservation: resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
             initial_energy: resume.and_then(|r| r.conservation.initial_energy),
             max_energy_error: scene.max_energy_error,
@@ -315,6 +344,8 @@ impl Run<'_> {
             cartesian: CartesianSystem::new(&m).ok(),
             stops,
             stopped: None,
+            // Rebuilt so that the sink's borrow shortens to the recorder's.
+            tap: tap.map(|t| Tap { sink: t.sink, lab: t.lab, dipole: t.dipole }),
         };
         let integrated = integrate_run(scene, resume, &begin, &mut recorder);
         Finish { scene, out_dir, resume }.finish(&m, begin, recorder, integrated, &layout, warnings)
@@ -457,7 +488,8 @@ impl Finish<'_> {
                 Err(e) => summary_error = Some(e.to_string()),
             }
         }
-        if scene.outputs.summary {
+        let in_memory = recorder.tap.is_some();
+        if scene.outputs.summary || in_memory {
             let summary = RunSummary {
                 scene,
                 molecule: m.name(),
@@ -477,12 +509,20 @@ impl Finish<'_> {
                 warnings: &warnings,
                 charts: chart_report.is_some().then(|| charts_json(chart_report.as_ref(), scene)),
             };
-            match write_summary(self.out_dir, &summary.to_json()) {
-                Ok(path) => files.push(path),
-                Err(e) => summary_error = summary_error.or(Some(e.to_string())),
+            match &mut recorder.tap {
+                Some(tap) if failure.is_none() => tap.sink.summary(&summary.to_json()),
+                Some(_) => {}
+                None => match write_summary(self.out_dir, &summary.to_json()) {
+                    Ok(path) => files.push(path),
+                    Err(e) => summary_error = summary_error.or(Some(e.to_string())),
+                },
             }
         }
-        let where_ = format!("output so far is in {}", self.out_dir.display());
+        let where_ = if in_memory {
+            "the records so far were returned".to_owned()
+        } else {
+            format!("output so far is in {}", self.out_dir.display())
+        };
         // The warnings about the scene, which a failed run has no report to carry.
         let notes: String = warnings.iter().map(|w| format!("; warning: {w}")).collect();
         let message = match (failure, interrupted, summary_error) {
@@ -818,6 +858,8 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     stops: Vec<StopCondition>,
     /// The stop condition met, for summary.json.
     stopped: Option<serde_json::Value>,
+    /// Where the records go in a run in memory.
+    tap: Option<Tap<'m>>,
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
@@ -863,7 +905,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             let (euler, pe) = (phase.euler.into(), phase.pe.into());
             csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, body.j.into(), energy)?;
         }
-        if let Some(xyz) = &mut self.writers.lab {
+        let tap_lab = self.tap.as_ref().is_some_and(|t| t.lab);
+        let mut lab_record = None;
+        if self.writers.lab.is_some() || tap_lab {
             let com = CentreOfMass { position: self.com.0 + self.com.1 * t, velocity: self.com.1 };
             let lab: LabState<NA> = match cartesian {
                 None => to_lab_body(self.system.molecule(), &body, &com).map_err(|e| at(&e, y, layout))?,
@@ -877,13 +921,39 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
                 }
             };
             let potential = self.system.molecule().potential(&body.q);
-            let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
-            xyz.frame(t_out, energy, potential, atoms)?;
+            if let Some(xyz) = &mut self.writers.lab {
+                let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
+                xyz.frame(t_out, energy, potential, atoms)?;
+            }
+            lab_record = tap_lab.then_some((lab, potential));
         }
-        if let Some(csv) = &mut self.writers.dipole {
+        let tap_dipole = self.tap.as_ref().is_some_and(|t| t.dipole);
+        let mut dipole_record = None;
+        if self.writers.dipole.is_some() || tap_dipole {
             let mut mu = Vector3::zeros();
             self.system.molecule().dipole(&body.q, &mut mu);
-            csv.row(t_out, &(rotation * mu))?;
+            let mu_lab = rotation * mu;
+            if let Some(csv) = &mut self.writers.dipole {
+                csv.row(t_out, &mu_lab)?;
+            }
+            dipole_record = tap_dipole.then_some(mu_lab.into());
+        }
+        if let Some(tap) = &mut self.tap {
+            tap.sink.record(&Record {
+                t: t_out,
+                q: phase.q.as_slice(),
+                p: phase.p.as_slice(),
+                euler: phase.euler.into(),
+                pe: phase.pe.into(),
+                j: body.j.into(),
+                energy,
+                lab: lab_record.as_ref().map(|(lab, potential)| LabRecord {
+                    positions: lab.positions.as_slice(),
+                    velocities: lab.velocities.as_slice(),
+                    potential: *potential,
+                }),
+                dipole: dipole_record,
+            });
         }
         // A state the internal chart cannot hold (exactly linear) leaves no restart point.
         self.last_y_valid = true;

@@ -8,7 +8,9 @@ the scene's time unit (``units.time``: "au", i.e. ħ/E_h ≈ 0.0242 fs, by defau
 named by their ``time_unit``.
 Errors raise :class:`RovibError` (a ``ValueError``) with the CLI's message. Ctrl-C during a run
 stops it cleanly and raises ``KeyboardInterrupt``; no signal handler is installed. Without an
-``out_dir`` a run writes into a temporary folder that is removed once its results are read.
+``out_dir`` a single run writes nothing: the scene is passed as text and the records come back
+as NumPy arrays (:func:`run`). Ensembles write their outputs into a folder (a temporary one
+without ``out_dir``), see :func:`run_ensemble`.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import json
 import os
 import tempfile
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -37,6 +39,9 @@ __all__ = [
     "resume",
     "from_lab",
     "to_lab",
+    "sample",
+    "with_initial",
+    "positions",
     "BOHR_IN_ANGSTROM",
     "AU_TIME_IN_FS",
 ]
@@ -88,6 +93,11 @@ def _rows(x) -> Optional[List[List[float]]]:
 class Trajectory:
     """A finished run: the columns of ``trajectory.csv`` as NumPy arrays, and ``summary.json``.
 
+    A run in memory (no ``out_dir``) has the same columns and summary, and, when the scene's
+    ``run.outputs`` names "lab" (the default outputs do), ``lab_positions`` and
+    ``lab_velocities`` (Å and Å/fs, shape (records, atoms, 3), as lab.xyz) and ``lab_potential``
+    (hartree); for "dipole", ``dipole`` (e·bohr, shape (records, 3), as dipole.csv).
+
     ``columns`` maps each CSV header name to its array: ``t`` (the scene's time unit,
     ``time_unit``), ``q_NAME``
     (bohr or rad), ``p_NAME`` (ħ/bohr or ħ), ``euler_phi``, ``euler_theta``, ``euler_psi`` (rad),
@@ -102,6 +112,10 @@ class Trajectory:
     summary: Dict[str, Any]
     units: Dict[str, str] = field(default_factory=dict)
     files: List[str] = field(default_factory=list)
+    lab_positions: Optional[np.ndarray] = None
+    lab_velocities: Optional[np.ndarray] = None
+    lab_potential: Optional[np.ndarray] = None
+    dipole: Optional[np.ndarray] = None
 
     @property
     def time_unit(self) -> str:
@@ -217,16 +231,134 @@ def _read_json(path: str):
         return json.load(f)
 
 
-def run(scene: Union[PathLike, Dict[str, Any]], out_dir: Optional[PathLike] = None) -> Trajectory:
-    """Runs a scene exactly as ``rovib run SCENE --out OUT_DIR`` does and reads its outputs.
+def _scene_text(scene) -> Tuple[str, str]:
+    """The TOML text of a scene and the name its messages use: a dict (written as TOML), a TOML
+    text (a str with a line break), or the path of a scene file (read; its folder is where
+    relative paths in it resolve from)."""
+    if isinstance(scene, dict):
+        return "<scene dict>", _rovib.scene_toml(scene)
+    if isinstance(scene, str) and "\n" in scene:
+        return "<scene text>", scene
+    path = os.fspath(scene)
+    with open(path, encoding="utf-8") as f:
+        return path, f.read()
 
-    ``scene`` is a scene file's path or a dict with the same keys (written to
-    ``OUT_DIR/scene.toml``; relative paths inside it then resolve from OUT_DIR). Without
-    ``out_dir`` the run writes into a temporary folder, removed once the results are read. The
-    scene must write "trajectory" (the default outputs do). Ctrl-C stops the run at its next
-    output time and raises ``KeyboardInterrupt`` (with ``out_dir``, the outputs so far stay there
-    and :func:`resume` continues them).
+
+def _unwrapped(angle: np.ndarray) -> np.ndarray:
+    """A continuous angle: each record adds the change since the previous one, taken in (−π, π]
+    (as trajectory.csv's ``euler_*_unwrapped`` columns)."""
+    if len(angle) == 0:
+        return angle.copy()
+    d = np.fmod(np.diff(angle), 2.0 * np.pi)
+    d = np.where(d > np.pi, d - 2.0 * np.pi, np.where(d <= -np.pi, d + 2.0 * np.pi, d))
+    return np.add.accumulate(np.concatenate([angle[:1], d]))
+
+
+def _run_in_memory(scene, potential) -> Trajectory:
+    path, text = _scene_text(scene)
+    out = _rovib.run_memory(path, text, potential)
+    info = molecule_info(out["molecule"])
+    names = info["coordinates"]["names"]
+    units = info["coordinates"]["units"]
+    momentum = {"bohr": "hbar/bohr", "rad": "hbar"}
+    header = [("t", out["time_unit"])]
+    header += [(f"q_{n}", u) for n, u in zip(names, units)]
+    header += [(f"p_{n}", momentum.get(u, "hbar/" + u)) for n, u in zip(names, units)]
+    header += [(f"euler_{a}", "rad") for a in ("phi", "theta", "psi")]
+    header += [(f"pe_{a}", "hbar") for a in ("phi", "theta", "psi")]
+    header += [("Jx", "hbar"), ("Jy", "hbar"), ("Jz", "hbar"), ("H", "hartree")]
+    rows = out["rows"].reshape(-1, len(header))
+    columns = {name: rows[:, j].copy() for j, (name, _) in enumerate(header)}
+    unit_of = dict(header)
+    if out["euler_unwrapped"]:
+        for a in ("phi", "psi"):
+            columns[f"euler_{a}_unwrapped"] = _unwrapped(columns[f"euler_{a}"])
+            unit_of[f"euler_{a}_unwrapped"] = "rad"
+    summary = json.loads(out["summary"]) if out["summary"] else {}
+    t = Trajectory(out_dir=None, columns=columns, summary=summary, units=unit_of)
+    if "lab_positions" in out:
+        t.lab_positions = out["lab_positions"] * BOHR_IN_ANGSTROM
+        t.lab_velocities = out["lab_velocities"] * (BOHR_IN_ANGSTROM / AU_TIME_IN_FS)
+        t.lab_potential = out["lab_potential"]
+    if "dipole" in out:
+        t.dipole = out["dipole"]
+    return t
+
+
+def positions(name: str, q) -> Tuple[np.ndarray, np.ndarray]:
+    """The atoms' positions of molecule ``name`` at ``q`` (bohr, rad) in its definition's frame,
+    shape (atoms, 3) in bohr, and their derivatives by each coordinate, shape (coordinates,
+    atoms, 3) in bohr per bohr or rad: the generated kinematics' ``positions`` and
+    ``positions_jacobian``."""
+    return _rovib.positions(name, _vec(q))
+
+
+def with_initial(scene: Dict[str, Any], q=None, p=None, euler=None, pe=None, j=None) -> Dict[str, Any]:
+    """A copy of the dict ``scene`` whose ``[initial]`` table holds the given arrays: ``q`` and
+    ``p`` one value per coordinate in the molecule's order (named for the table), ``euler``,
+    ``pe`` and ``j`` three values each, all in atomic units (bohr, rad, ħ/bohr, ħ; ``j`` is the
+    body-frame angular momentum), as :func:`sample` and :func:`from_lab` return them. A scene
+    reads ``[initial]`` in its ``[units]``, else in each coordinate's declared unit, so the
+    scene must say ``units = {"length": "bohr", "angle": "rad"}`` (else this raises). Keys not
+    given keep the scene's values."""
+    if not isinstance(scene, dict):
+        raise RovibError("error: with_initial takes a scene as a dict (the keys of a scene file)")
+    units = scene.get("units") or {}
+    if (q is not None or p is not None or euler is not None) and (
+        units.get("length") != "bohr" or units.get("angle") != "rad"
+    ):
+        raise RovibError(
+            "error: with_initial takes atomic units, but the scene reads [initial] in "
+            f"{units or 'each coordinate declared unit'}: give it units = {{\"length\": \"bohr\", \"angle\": \"rad\"}}"
+        )
+    names = molecule_info(scene["molecule"])["coordinates"]["names"]
+    initial = dict(scene.get("initial") or {})
+    for key, values in (("q", q), ("p", p)):
+        if values is not None:
+            a = np.asarray(values, dtype=float).ravel()
+            if a.shape != (len(names),):
+                raise RovibError(
+                    f"error: initial `{key}` has {a.size} values, expected one per coordinate: {', '.join(names)}"
+                )
+            initial[key] = {n: float(v) for n, v in zip(names, a)}
+    for key, values in (("euler", euler), ("pe", pe), ("j", j)):
+        if values is not None:
+            a = np.asarray(values, dtype=float).ravel()
+            if a.shape != (3,):
+                raise RovibError(f"error: initial `{key}` has {a.size} values, expected 3")
+            initial[key] = [float(v) for v in a]
+    out = dict(scene)
+    out["initial"] = initial
+    return out
+
+
+def run(
+    scene: Union[PathLike, str, Dict[str, Any]],
+    out_dir: Optional[PathLike] = None,
+    potential: Optional[Callable[[np.ndarray], Tuple[float, np.ndarray]]] = None,
+) -> Trajectory:
+    """Runs a scene as ``rovib run`` does and returns its records as NumPy arrays.
+
+    ``scene`` is a dict with the keys of a scene file, a scene's TOML text (a str with a line
+    break), or a scene file's path. Without ``out_dir`` nothing is written: the records come
+    back in memory; a scene whose ``run.outputs`` names "restart" is refused there (with the
+    line to change), since a continuation needs restart.json in a folder. With ``out_dir`` the
+    run writes its files there exactly as
+    ``rovib run SCENE --out OUT_DIR`` does (a dict scene as ``OUT_DIR/scene.toml``) and they are
+    read back; :func:`resume` continues it. Ctrl-C stops the run at its next output time and
+    raises ``KeyboardInterrupt``.
+
+    ``potential``: a function ``f(q) -> (U, dU/dq)`` over the molecule's internal coordinates
+    (a NumPy array in bohr and rad, in the order of ``molecule_info(name)["coordinates"]``; U in
+    hartree, dU/dq a sequence of one float per coordinate) that replaces the molecule's
+    potential for this run (in memory only). Its gradient is checked against central
+    differences of U before the run (a mismatch raises :class:`RovibError` naming the
+    coordinate); an exception raised by ``f`` ends the run and is raised from ``run``.
     """
+    if out_dir is None:
+        return _run_in_memory(scene, potential)
+    if potential is not None:
+        raise RovibError("error: a Python potential runs in memory only: call run(scene, potential=f) without out_dir")
 
     def go(out: str) -> Trajectory:
         path = _scene_path(scene, out)
@@ -331,3 +463,27 @@ def to_lab(name: str, state: Dict[str, Any]) -> Tuple[np.ndarray, np.ndarray]:
         _vec(state.get("orientation")),
         _vec(state.get("J")),
     )
+
+
+def sample(
+    name: str,
+    method: str,
+    n: int,
+    seed: int = 0,
+    temperature: Optional[float] = None,
+    energy: Optional[float] = None,
+    angular_momentum: Optional[float] = None,
+    energy_cap: Optional[float] = None,
+) -> Dict[str, np.ndarray]:
+    """``n`` initial states of molecule ``name`` drawn as an ensemble with ``seed`` draws its
+    trajectories 0 to n − 1: ``method="thermal"`` at ``temperature`` (kelvin), or
+    ``"microcanonical"`` at total ``energy`` (hartree, the potential's zero) with optionally a
+    fixed ``angular_momentum`` |J| (ħ); ``energy_cap`` (hartree above the reference geometry's
+    U) bounds the region as ``[ensemble] region.energy_cap`` does.
+
+    Returns NumPy arrays: ``q``, ``p`` (n × coordinates; bohr or rad, ħ/bohr or ħ),
+    ``orientation`` (n × 4, unit quaternions w, x, y, z, body → lab), ``J`` (n × 3, body frame,
+    ħ), ``H`` and ``U`` (n, hartree). A row with ``q``, ``p``, ``orientation`` and ``J`` is a
+    state :func:`to_lab` takes.
+    """
+    return _rovib.sample(name, method, int(n), int(seed), temperature, energy, angular_momentum, energy_cap)

@@ -11,7 +11,7 @@ from typing import Any, Dict
 
 import numpy as np
 
-from . import from_lab, molecule_info, to_lab
+from . import BOHR_IN_ANGSTROM, from_lab, molecule_info, positions, to_lab
 
 
 def to_atoms(name: str, state: Dict[str, Any]):
@@ -45,3 +45,28 @@ def from_atoms(name: str, atoms, initial_q=None) -> Dict[str, Any]:
     if velocities is not None:
         velocities = np.asarray(velocities) * units.fs
     return from_lab(name, atoms.get_positions(), velocities, initial_q)
+
+
+def calculator_potential(name: str, calculator):
+    """A potential ``f(q) -> (U, dU/dq)`` for ``rovib.run(scene, potential=f)`` from an ASE
+    calculator: the atoms (the molecule's elements, in its order) stand at the positions the
+    definition gives for ``q`` (:func:`rovib.positions`; the energy of an isolated molecule does
+    not depend on its orientation or place), ``U`` is the calculator's energy in hartree and
+    ``dU/dq = −Σ F · ∂x/∂q`` with the generated Jacobian ``∂x/∂q``, in hartree per bohr or rad."""
+    from ase import Atoms, units
+
+    info = molecule_info(name)
+    atoms = Atoms(symbols=info["atoms"]["elements"], masses=info["atoms"]["masses_da"])
+    atoms.calc = calculator
+
+    def f(q):
+        x, dx = positions(name, q)
+        atoms.positions = x * BOHR_IN_ANGSTROM
+        energy = atoms.get_potential_energy()
+        # eV/Å times Å per unit of q.
+        forces = atoms.get_forces()
+        grad = -np.einsum("ai,kai->k", forces, dx * BOHR_IN_ANGSTROM)
+        return energy / units.Hartree, grad / units.Hartree
+
+    f.__name__ = f"ase_{type(calculator).__name__}"
+    return f

@@ -10,19 +10,22 @@
 //! scenes, ASE.
 
 use std::path::PathBuf;
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use numpy::{PyArray1, PyArray2};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1};
 use pyo3::create_exception;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 
 use rovib::ensemble::{EnsembleOptions, EnsembleReport};
+use rovib::memory::{ExternalPotential, Record, RecordSink, run_in_memory};
 use rovib::runtime::frames::{from_lab_body, to_lab_body};
 use rovib::runtime::hamiltonian::fast::BodyState;
 use rovib::runtime::hamiltonian::{PhaseState, evaluate as evaluate_state};
 use rovib::runtime::nalgebra::{DMatrix, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
+use rovib::runtime::sample::{Region, Spec, energy as sample_energy, sampler};
 use rovib::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM};
 use rovib::runtime::{CentreOfMass, FitOptions, LabState, Molecule, MoleculeVisitor, to_lab};
 use rovib::{Error, Progress, Simulation, molecules};
@@ -458,6 +461,282 @@ fn run_ensemble_scene<'py>(
     Ok(d)
 }
 
+/// The definition's atom positions at `q` and their Jacobian.
+struct PositionsVisitor(Vec<f64>);
+
+impl MoleculeVisitor for PositionsVisitor {
+    /// Positions (x, y, z atom by atom) and per coordinate their derivative, bohr per unit of q.
+    type Output = Result<(usize, Vec<f64>, Vec<f64>), String>;
+
+    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+        let names: Vec<&str> = m.coordinates().iter().map(|c| c.name).collect();
+        let meaning = format!("one per coordinate of {}: {}, in bohr or rad", m.name(), names.join(", "));
+        let q = vector::<N>("positions", "q", &meaning, &Some(self.0), SVector::zeros())?;
+        let mut r = SMatrix::<f64, 3, NA>::zeros();
+        let mut dr = [SMatrix::<f64, 3, NA>::zeros(); N];
+        m.positions(&q, &mut r);
+        m.positions_jacobian(&q, &mut dr);
+        Ok((NA, r.as_slice().to_vec(), dr.iter().flat_map(|d| d.as_slice().iter().copied()).collect()))
+    }
+}
+
+/// The positions of molecule `name`'s atoms at `q` in its definition's frame (bohr, shape
+/// (atoms, 3)) and their derivatives by each coordinate (shape (coordinates, atoms, 3)), as the
+/// generated kinematics computes them.
+#[pyfunction]
+fn positions<'py>(py: Python<'py>, name: &str, q: Vec<f64>) -> PyResult<Bound<'py, PyTuple>> {
+    let (atoms, r, dr) =
+        molecules::visit(name, PositionsVisitor(q)).ok_or_else(|| unknown_molecule(name))?.map_err(message)?;
+    let n = dr.len() / (3 * atoms);
+    let r = PyArray1::from_vec(py, r).reshape([atoms, 3])?;
+    let dr = PyArray1::from_vec(py, dr).reshape([n, atoms, 3])?;
+    PyTuple::new(py, [r.into_any(), dr.into_any()])
+}
+
+/// What `sample` asks for.
+struct SampleVisitor {
+    method: String,
+    count: u64,
+    seed: u64,
+    temperature: Option<f64>,
+    energy: Option<f64>,
+    angular_momentum: Option<f64>,
+    energy_cap: Option<f64>,
+}
+
+/// States drawn by a sampler, flattened draw by draw: q, p (N each), orientation (w, x, y, z),
+/// J (3), and H, U per draw.
+struct Drawn {
+    n: usize,
+    state: [Vec<f64>; 4],
+    h: Vec<f64>,
+    u: Vec<f64>,
+}
+
+impl MoleculeVisitor for SampleVisitor {
+    type Output = Result<Drawn, String>;
+
+    fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
+    where
+        M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+    {
+        let region = Region { energy_cap: self.energy_cap, limits: [None; N] };
+        let need =
+            |v: Option<f64>, key: &str| v.ok_or_else(|| format!("sample: method \"{}\" needs `{key}`", self.method));
+        let spec = match self.method.as_str() {
+            "thermal" => Spec::Thermal { temperature: need(self.temperature, "temperature")?, region },
+            "microcanonical" => Spec::Microcanonical {
+                energy: need(self.energy, "energy")?,
+                angular_momentum: self.angular_momentum,
+                region,
+            },
+            other => {
+                return Err(format!("sample: unknown method `{other}` (use \"thermal\" or \"microcanonical\")"));
+            }
+        };
+        let draws = sampler(&m, &spec, self.seed).map_err(|e| format!("cannot sample {}: {e}", m.name()))?;
+        let mut out = Drawn { n: N, state: Default::default(), h: Vec::new(), u: Vec::new() };
+        for i in 0..self.count {
+            let b = draws.draw(i).map_err(|e| format!("cannot draw state {i} of {}: {e}", m.name()))?;
+            let o = b.orientation.quaternion();
+            out.state[0].extend_from_slice(b.q.as_slice());
+            out.state[1].extend_from_slice(b.p.as_slice());
+            out.state[2].extend_from_slice(&[o.w, o.i, o.j, o.k]);
+            out.state[3].extend_from_slice(b.j.as_slice());
+            out.h.push(sample_energy(&m, &b).map_err(|e| format!("state {i} of {}: {e}", m.name()))?);
+            out.u.push(m.potential(&b.q));
+        }
+        Ok(out)
+    }
+}
+
+/// States of molecule `name` drawn by the thermal (`temperature`, kelvin) or microcanonical
+/// (`energy`, hartree; optional `angular_momentum`, ħ) sampler with `seed`, draws 0 to `count` −
+/// 1 as an ensemble with that seed would start its trajectories: arrays `q`, `p` (count × N),
+/// `orientation` (count × 4, w x y z), `J` (count × 3, body frame), `H`, `U` (hartree).
+#[pyfunction]
+#[pyo3(signature = (name, method, count, seed, temperature=None, energy=None, angular_momentum=None, energy_cap=None))]
+fn sample<'py>(
+    py: Python<'py>,
+    name: &str,
+    method: String,
+    count: u64,
+    seed: u64,
+    temperature: Option<f64>,
+    energy: Option<f64>,
+    angular_momentum: Option<f64>,
+    energy_cap: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let visitor = SampleVisitor { method, count, seed, temperature, energy, angular_momentum, energy_cap };
+    let drawn =
+        py.detach(|| molecules::visit(name, visitor)).ok_or_else(|| unknown_molecule(name))?.map_err(message)?;
+    let k = count as usize;
+    let d = PyDict::new(py);
+    let [q, p, o, j] = drawn.state;
+    d.set_item("q", PyArray1::from_vec(py, q).reshape([k, drawn.n])?)?;
+    d.set_item("p", PyArray1::from_vec(py, p).reshape([k, drawn.n])?)?;
+    d.set_item("orientation", PyArray1::from_vec(py, o).reshape([k, 4])?)?;
+    d.set_item("J", PyArray1::from_vec(py, j).reshape([k, 3])?)?;
+    d.set_item("H", PyArray1::from_vec(py, drawn.h))?;
+    d.set_item("U", PyArray1::from_vec(py, drawn.u))?;
+    Ok(d)
+}
+
+/// The records of a run in memory, row by row.
+#[derive(Default)]
+struct Records {
+    /// Rows of trajectory.csv's columns: t, q, p, Euler angles, their momenta, J, H.
+    rows: Vec<f64>,
+    /// Lab positions and velocities (bohr, bohr per ħ/E_h; 3 × atoms per record) and U.
+    lab: [Vec<f64>; 2],
+    lab_potential: Vec<f64>,
+    /// Lab-frame dipole, 3 per record.
+    dipole: Vec<f64>,
+    count: usize,
+    summary: Option<String>,
+}
+
+impl RecordSink for Records {
+    fn record(&mut self, r: &Record<'_>) {
+        self.count += 1;
+        self.rows.push(r.t);
+        self.rows.extend_from_slice(r.q);
+        self.rows.extend_from_slice(r.p);
+        for part in [r.euler, r.pe, r.j] {
+            self.rows.extend_from_slice(&part);
+        }
+        self.rows.push(r.energy);
+        if let Some(lab) = &r.lab {
+            self.lab[0].extend_from_slice(lab.positions);
+            self.lab[1].extend_from_slice(lab.velocities);
+            self.lab_potential.push(lab.potential);
+        }
+        if let Some(mu) = r.dipole {
+            self.dipole.extend_from_slice(&mu);
+        }
+    }
+
+    fn summary(&mut self, summary: &serde_json::Value) {
+        self.summary = Some(summary.to_string());
+    }
+}
+
+/// A Python callable `f(q) -> (U, dU/dq)` (NumPy arrays, atomic units) as a potential. The GIL
+/// is taken for each call. The first exception (or a wrong return value) is kept and makes this
+/// and every later call return NaN, which stops the run; the caller then raises the exception.
+struct PyPotential {
+    f: Py<PyAny>,
+    error: Mutex<Option<PyErr>>,
+}
+
+impl PyPotential {
+    fn call(&self, q: &[f64], grad: &mut [f64]) -> PyResult<f64> {
+        Python::attach(|py| {
+            let out = self.f.bind(py).call1((PyArray1::from_slice(py, q),))?;
+            let n = grad.len();
+            let shape = || {
+                PyTypeError::new_err(format!(
+                    "the potential must return (U, dU/dq): a float and {n} floats, got {}",
+                    out.repr().map(|r| r.to_string()).unwrap_or_default()
+                ))
+            };
+            let (u, g): (f64, Bound<'_, PyAny>) = out.extract().map_err(|_| shape())?;
+            match g.extract::<PyReadonlyArray1<'_, f64>>() {
+                Ok(a) => {
+                    let values = a.as_slice()?;
+                    if values.len() != n {
+                        return Err(shape());
+                    }
+                    grad.copy_from_slice(values);
+                }
+                Err(_) => {
+                    let v: Vec<f64> = g.extract().map_err(|_| shape())?;
+                    if v.len() != n {
+                        return Err(shape());
+                    }
+                    grad.copy_from_slice(&v);
+                }
+            }
+            Ok(u)
+        })
+    }
+
+    /// The exception the potential raised, if any (taken).
+    fn take_error(&self) -> Option<PyErr> {
+        self.error.lock().ok()?.take()
+    }
+}
+
+impl ExternalPotential for PyPotential {
+    fn energy_gradient(&self, q: &[f64], grad: &mut [f64]) -> f64 {
+        let failed = self.error.lock().map(|e| e.is_some()).unwrap_or(true);
+        let result = if failed { Ok(f64::NAN) } else { self.call(q, grad) };
+        match result {
+            Ok(u) if !failed => u,
+            other => {
+                if let (Err(e), Ok(mut slot)) = (other, self.error.lock()) {
+                    *slot = Some(e);
+                }
+                grad.fill(f64::NAN);
+                f64::NAN
+            }
+        }
+    }
+
+    fn describe(&self) -> String {
+        let name = Python::attach(|py| {
+            self.f.bind(py).getattr("__name__").and_then(|n| n.extract::<String>()).unwrap_or_else(|_| "f".into())
+        });
+        format!("the Python potential `{name}`")
+    }
+}
+
+/// Runs the scene `text` (named `path` in messages) in memory, optionally on the Python
+/// potential `potential(q) -> (U, dU/dq)`: nothing is written. Returns the records as arrays
+/// (`rows`: the columns of trajectory.csv; `lab_positions`, `lab_velocities` in bohr and bohr
+/// per ħ/E_h, shape (records, atoms, 3), and `lab_potential`, when the scene asks for "lab";
+/// `dipole`, shape (records, 3), for "dipole"), the summary's JSON text, the molecule, the
+/// scene's time unit. A scene naming "restart" in `run.outputs` is refused (a continuation
+/// needs a folder). An exception of the potential is raised as it is.
+#[pyfunction]
+#[pyo3(signature = (path, text, potential=None))]
+fn run_memory<'py>(
+    py: Python<'py>,
+    path: &str,
+    text: &str,
+    potential: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let scene = rovib::scene::parse_scene(path, text).map_err(|e| lib_error(e.into()))?;
+    let potential = potential.map(|f| PyPotential { f, error: Mutex::new(None) });
+    let mut records = Records::default();
+    let result = with_signals(py, |stop, progress| {
+        run_in_memory(path, text, potential.as_ref().map(|p| p as &dyn ExternalPotential), stop, progress, &mut records)
+    });
+    if let Some(e) = potential.as_ref().and_then(PyPotential::take_error) {
+        return Err(e);
+    }
+    result?;
+    let k = records.count;
+    let width = records.rows.len().checked_div(k).unwrap_or(0);
+    let d = PyDict::new(py);
+    d.set_item("rows", PyArray1::from_vec(py, records.rows).reshape([k, width])?)?;
+    if records.lab_potential.len() == k && k > 0 {
+        let atoms = records.lab[0].len() / (3 * k);
+        let [x, v] = records.lab;
+        d.set_item("lab_positions", PyArray1::from_vec(py, x).reshape([k, atoms, 3])?)?;
+        d.set_item("lab_velocities", PyArray1::from_vec(py, v).reshape([k, atoms, 3])?)?;
+        d.set_item("lab_potential", PyArray1::from_vec(py, records.lab_potential))?;
+    }
+    if records.dipole.len() == 3 * k && k > 0 {
+        d.set_item("dipole", PyArray1::from_vec(py, records.dipole).reshape([k, 3])?)?;
+    }
+    d.set_item("summary", records.summary)?;
+    d.set_item("molecule", scene.molecule.get_ref())?;
+    d.set_item("time_unit", scene.time_unit.name())?;
+    d.set_item("euler_unwrapped", scene.euler_unwrapped)?;
+    Ok(d)
+}
+
 /// The phase state (atomic units), centre of mass (bohr, bohr per ħ/E_h) and fit report of
 /// lab-frame positions (Å, one row per atom) and velocities (Å/fs).
 #[pyfunction]
@@ -589,6 +868,9 @@ fn _rovib(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(molecule_info, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(run_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(run_memory, m)?)?;
+    m.add_function(wrap_pyfunction!(sample, m)?)?;
+    m.add_function(wrap_pyfunction!(positions, m)?)?;
     m.add_function(wrap_pyfunction!(resume_scene, m)?)?;
     m.add_function(wrap_pyfunction!(run_ensemble_scene, m)?)?;
     m.add_function(wrap_pyfunction!(from_lab_frame, m)?)?;

@@ -20,6 +20,10 @@ else:  # pragma: no cover
     tomllib = None
 
 
+# What a run in memory can give back (restart.json needs a folder).
+IN_MEMORY = ("trajectory", "summary")
+
+
 def water(end_fs, interval_fs=1.0, outputs=("trajectory", "summary", "restart")):
     """scenes/h2o.toml as a dict, ending at ``end_fs`` with an output every ``interval_fs``."""
     return {
@@ -96,7 +100,7 @@ def rovib_temporary_folders():
 
 def test_runs_without_out_dir_leave_no_temporary_folder():
     before = rovib_temporary_folders()
-    t = rovib.run(water(5.0))
+    t = rovib.run(water(5.0, outputs=IN_MEMORY))
     assert len(t) == 6 and t.out_dir is None
     e = rovib.run_ensemble(water_ensemble(16, 10.0), threads=1)
     assert e.report["completed"] == 16 and e.out_dir is None
@@ -104,20 +108,20 @@ def test_runs_without_out_dir_leave_no_temporary_folder():
         rovib.run({"molecule": "h2o", "initial": {"q": {"nonsense": 1.0}}})
     timer = interrupt_after(0.5)
     with pytest.raises(KeyboardInterrupt):
-        rovib.run(water(9e5))
+        rovib.run(water(9e5, outputs=IN_MEMORY))
     timer.cancel()
     assert rovib_temporary_folders() == before
 
 
 def test_trajectory_and_ensemble_times_are_in_the_scenes_time_unit(tmp_path):
-    t = rovib.run(water(10.0, 0.5))
+    t = rovib.run(water(10.0, 0.5, outputs=IN_MEMORY))
     assert t.time_unit == "fs"
     assert np.allclose(t["t"], np.arange(21) * 0.5, rtol=0, atol=1e-12)
     e = rovib.run_ensemble(water_ensemble(16, 10.0), threads=1)
     assert e.time_unit == "fs"
     assert np.allclose(e.times, np.arange(11) * 1.0, rtol=0, atol=1e-12)
     # An atomic-unit scene: both in au.
-    scene = water(10.0, 0.5)
+    scene = water(10.0, 0.5, outputs=IN_MEMORY)
     del scene["units"]["time"]
     scene["run"]["end"] = 400.0
     scene["run"]["output_interval"] = 100.0

@@ -13,6 +13,7 @@ mod ensemble_cli;
 mod ensemble_resume;
 mod ensemble_xyz;
 mod library_api;
+mod memory_run;
 mod parameters;
 mod restart;
 mod run_safety;

@@ -1,0 +1,191 @@
+//! One trajectory run in memory: the scene given as text, the output records handed to a
+//! [`RecordSink`] instead of files, and optionally a potential given at run time
+//! ([`ExternalPotential`], e.g. a Python function) composed with the molecule's generated
+//! kinematics by [`crate::runtime::surface::WithPotential`].
+//!
+//! [`run_in_memory`] writes nothing: no output folder, no lock, no trajectory.csv, lab.xyz or
+//! dipole.csv (their rows go to the sink), no summary.json (its JSON goes to the sink) and no
+//! restart.json (a scene whose `run.outputs` names "restart" is refused: continuing a run
+//! needs a folder, [`crate::Simulation`]).
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::Progress;
+use crate::error::Error;
+use crate::runtime::molecule::Molecule;
+use crate::runtime::nalgebra::SVector;
+use crate::runtime::surface::{GradientCheck, GradientError, Potential, check_gradient};
+use crate::scene::{Outputs, parse_scene};
+use crate::simulation::{RunReport, Simulation};
+
+/// One output record of a run in memory, in the units of trajectory.csv: the time in the
+/// scene's time unit, everything else in atomic units.
+pub struct Record<'a> {
+    /// Time, in the scene's time unit (`units.time`).
+    pub t: f64,
+    /// The internal coordinates (bohr or rad), in the molecule's order.
+    pub q: &'a [f64],
+    /// Their momenta (ħ/bohr or ħ).
+    pub p: &'a [f64],
+    /// Euler angles φ, θ, ψ (rad, z-x-z).
+    pub euler: [f64; 3],
+    /// Their conjugate momenta (ħ).
+    pub pe: [f64; 3],
+    /// The body-frame angular momentum (ħ).
+    pub j: [f64; 3],
+    /// H (hartree).
+    pub energy: f64,
+    /// The lab frame (the rows of lab.xyz), when the scene's `run.outputs` names "lab".
+    pub lab: Option<LabRecord<'a>>,
+    /// The lab-frame dipole moment (e·bohr, the row of dipole.csv), when `run.outputs` names
+    /// "dipole".
+    pub dipole: Option<[f64; 3]>,
+}
+
+/// The lab frame at one output time.
+pub struct LabRecord<'a> {
+    /// Positions, bohr: x, y, z of each atom in the molecule's order (3 × atoms values).
+    pub positions: &'a [f64],
+    /// Velocities, bohr per ħ/E_h, in the same layout.
+    pub velocities: &'a [f64],
+    /// U at this state, hartree.
+    pub potential: f64,
+}
+
+/// Where a run in memory puts its output.
+pub trait RecordSink: Send {
+    /// One output record (called in time order, after the energy guard accepted it).
+    fn record(&mut self, record: &Record<'_>);
+    /// The run's summary: the JSON summary.json would hold (called once, at the end of a run
+    /// that did not fail).
+    fn summary(&mut self, summary: &serde_json::Value);
+}
+
+/// A potential given at run time over the molecule's internal coordinates (atomic units, the
+/// molecule's coordinate order).
+pub trait ExternalPotential: Sync {
+    /// U(q), with ∂U/∂q written into `grad` (one entry per coordinate). A potential that fails
+    /// returns NaN (the run then stops on a non-finite value) and keeps its own error for the
+    /// caller.
+    fn energy_gradient(&self, q: &[f64], grad: &mut [f64]) -> f64;
+    /// What to call it in messages, e.g. "the Python potential".
+    fn describe(&self) -> String;
+}
+
+/// The sink of a run in memory and what the scene asked of it.
+pub(crate) struct Tap<'a> {
+    pub sink: &'a mut dyn RecordSink,
+    /// Lab-frame records ("lab" in `run.outputs`).
+    pub lab: bool,
+    /// Dipole records ("dipole" in `run.outputs`).
+    pub dipole: bool,
+}
+
+/// An [`ExternalPotential`] as the [`Potential`] of a molecule with `N` coordinates.
+pub(crate) struct External<'a>(pub &'a dyn ExternalPotential);
+
+impl<const N: usize> Potential<N> for External<'_> {
+    fn energy(&self, q: &SVector<f64, N>) -> f64 {
+        let mut grad = [0.0; N];
+        self.0.energy_gradient(q.as_slice(), &mut grad)
+    }
+    fn energy_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64 {
+        self.0.energy_gradient(q.as_slice(), grad.as_mut_slice())
+    }
+}
+
+/// Checks an external potential's gradient against central differences of its energy at the
+/// reference geometry and around it, before the first step (as a scene's `[potential] library`
+/// is checked); the error names the coordinate to fix.
+pub(crate) fn check_external<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    potential: &dyn ExternalPotential,
+) -> Result<(), Error> {
+    let coordinates = m.coordinates();
+    let centre = m.reference_geometry().unwrap_or_else(|| {
+        SVector::from_fn(|k, _| {
+            let (low, high) = coordinates[k].range;
+            if low.is_finite() && high.is_finite() { 0.5 * (low + high) } else { low.max(1.0).min(high) }
+        })
+    });
+    let what = potential.describe();
+    check_gradient(&External(potential), &coordinates, &centre, &GradientCheck::default()).map_err(|e| match &e {
+        GradientError::Mismatch { coordinate, .. } => Error::Message(format!(
+            "the gradient of {what} disagrees with its energy: {e}; fix ∂U/∂{coordinate} (coordinate `{coordinate}` of \
+             {}, in the order {})",
+            m.source(),
+            coordinates.map(|c| c.name).join(", ")
+        )),
+        GradientError::NotFinite { .. } => Error::Message(format!(
+            "{what}: {e}; it must be finite inside the coordinates' ranges around the reference geometry"
+        )),
+    })
+}
+
+/// The scene keys a run in memory reads again for their places.
+#[derive(Deserialize)]
+struct RawScene {
+    run: Option<RawRun>,
+}
+
+#[derive(Deserialize)]
+struct RawRun {
+    outputs: Option<Vec<Spanned<String>>>,
+}
+
+/// Runs the scene `text` (named `path` in messages, and relative paths in it resolve from
+/// `path`'s folder) to its end in memory: every output record goes to `sink`, and with
+/// `potential` the molecule runs on it instead of its own (its gradient checked first). `stop`
+/// and `progress` work as in [`Simulation::run`]. Nothing is written to disk.
+pub fn run_in_memory(
+    path: &str,
+    text: &str,
+    potential: Option<&dyn ExternalPotential>,
+    stop: &AtomicBool,
+    progress: &mut dyn FnMut(Progress),
+    sink: &mut dyn RecordSink,
+) -> Result<RunReport, Error> {
+    let mut scene = parse_scene(path, text)?;
+    let src = scene.source();
+    let outputs = toml::from_str::<RawScene>(text).ok().and_then(|r| r.run?.outputs).unwrap_or_default();
+    if let Some(restart) = outputs.iter().find(|o| o.get_ref() == "restart") {
+        return Err(src
+            .error(
+                restart.span(),
+                "a run in memory writes no restart.json",
+                "remove \"restart\" from run.outputs, or run into a folder (`out_dir`) to continue the run later",
+            )
+            .into());
+    }
+    if potential.is_some() {
+        let what = potential.map(|p| p.describe()).unwrap_or_default();
+        if let Some((library, _)) = &scene.library {
+            return Err(src
+                .error(
+                    library.span(),
+                    format!("the scene names `potential.library`, and {what} is given too"),
+                    "remove `library` from [potential], or give no potential to the call",
+                )
+                .into());
+        }
+        if let Some((name, _)) = scene.parameters.first() {
+            return Err(src
+                .error(
+                    name.span(),
+                    format!(
+                        "`[potential.parameters]` sets the definition's parameters, but {what} replaces that potential"
+                    ),
+                    "remove [potential.parameters], or give no potential to the call",
+                )
+                .into());
+        }
+    }
+    let wanted = scene.outputs;
+    scene.outputs = Outputs { trajectory: false, lab: false, summary: false, restart: false, dipole: false };
+    let tap = Tap { sink, lab: wanted.lab, dipole: wanted.dipole };
+    Simulation::from_scene(scene, PathBuf::new()).run_with(stop, progress, Some(tap), potential)
+}
