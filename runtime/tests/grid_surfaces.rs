@@ -313,7 +313,6 @@ fn malformed_files_are_located_errors() {
 
 #[test]
 fn dipole_columns_are_a_dipole_surface() {
-    use rovib_runtime::surface::Dipole;
     let mut text = String::from("x[angstrom] energy[eV] mu_x[debye] mu_y[debye] mu_z[debye]\n");
     for i in 0..6 {
         let x = 0.5 * i as f64;
