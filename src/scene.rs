@@ -201,6 +201,9 @@ pub struct Scene {
     /// whose potential replaces the molecule's, as written (its place for errors) and resolved
     /// against the scene file's directory (see `crate::surfaces`).
     pub library: Option<(Spanned<String>, std::path::PathBuf)>,
+    /// `[potential] grid` and `outside`: a tabulated surface that replaces the molecule's
+    /// potential (see `crate::surfaces::grid`).
+    pub grid: Option<crate::surfaces::grid::SceneGrid>,
     /// Stop conditions: the run stops (status "stopped") at the first output time at which a
     /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
     /// molecule when the run starts).
@@ -239,6 +242,8 @@ struct RawScene {
 struct RawScenePotential {
     parameters: Option<RawTable<f64>>,
     library: Option<Spanned<String>>,
+    grid: Option<Spanned<String>>,
+    outside: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Default)]
@@ -531,6 +536,13 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         library: crate::surfaces::scene_library(
             &src,
             raw.potential.as_ref().and_then(|p| p.library.as_ref()),
+            raw.potential.as_ref().and_then(|p| p.parameters.as_ref()).map(|t| t.span()),
+        )?,
+        grid: crate::surfaces::grid::scene_grid(
+            &src,
+            raw.potential.as_ref().and_then(|p| p.grid.as_ref()),
+            raw.potential.as_ref().and_then(|p| p.outside.as_ref()),
+            raw.potential.as_ref().and_then(|p| p.library.as_ref()).map(|l| l.span()),
             raw.potential.as_ref().and_then(|p| p.parameters.as_ref()).map(|t| t.span()),
         )?,
         stop_outside: match &run.stop_outside {

@@ -460,7 +460,10 @@ impl Finish<'_> {
         let flushed = recorder.flush();
         let (stats, point, failure) = match result {
             Ok((stats, point)) => (Some(stats), point, recorder.error.take().map(|e| format!("the run stopped: {e}"))),
-            Err(e) => (None, None, Some(format!("the run stopped: {}", describe_failure(&e, scene, layout)))),
+            Err(e) => {
+                let note = crate::surfaces::grid::failure_note(&e, scene);
+                (None, None, Some(format!("the run stopped: {}{note}", describe_failure(&e, scene, layout))))
+            }
         };
         let failure = failure.or_else(|| flushed.err().map(|e| format!("the run stopped: {e}")));
         let interrupted = recorder.interrupted && failure.is_none();

@@ -8,7 +8,7 @@
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use rovib_ffi::{SharedLibrary, Surface};
+use rovib_ffi::SharedLibrary;
 
 use crate::runtime::diagnostic::{FileError, Source};
 use crate::runtime::molecule::Molecule;
@@ -16,6 +16,10 @@ use crate::runtime::nalgebra::SVector;
 use crate::runtime::surface::{GradientCheck, GradientError, check_gradient};
 use crate::scene::Scene;
 use toml::Spanned;
+
+pub mod grid;
+
+pub use grid::ScenePotential;
 
 /// The checked `library` key of a scene's `[potential]` (its place, and the path resolved
 /// against the scene file's directory); `parameters` is the place of `[potential.parameters]`,
@@ -45,11 +49,15 @@ pub fn scene_library(
 }
 
 /// The scene's library surface for molecule `m`, loaded (once per process and library: it
-/// stays loaded until the process ends), counted and gradient-checked; `None` without one.
+/// stays loaded until the process ends), counted and gradient-checked, or its grid surface
+/// (`grid::scene_grid_potential`); `None` without either.
 pub fn scene_surface<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
-) -> Result<Option<Surface<'static, N>>, FileError> {
+) -> Result<Option<ScenePotential<N>>, FileError> {
+    if let Some(grid) = grid::scene_grid_potential(m, scene)? {
+        return Ok(Some(ScenePotential::Grid(grid)));
+    }
     let Some((written, path)) = &scene.library else { return Ok(None) };
     let at = |message: String, help: &str| scene.source().error(written.span(), message, help);
     let library = SharedLibrary::load(path).map_err(|e| {
@@ -86,5 +94,5 @@ pub fn scene_surface<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             "the surface must be finite inside the coordinates' ranges around the reference geometry",
         ),
     })?;
-    Ok(Some(surface))
+    Ok(Some(ScenePotential::Library(surface)))
 }

@@ -16,6 +16,7 @@ pub mod charts;
 pub mod diagnostic;
 pub mod ensemble;
 pub mod frames;
+pub mod grid;
 pub mod hamiltonian;
 pub mod integrate;
 pub mod lanes;

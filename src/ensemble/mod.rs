@@ -467,7 +467,7 @@ where
     }
     let lanes_note = (options.lanes && !crate::runtime::hamiltonian::lanes::available(m)).then(|| {
         format!(
-            "{} has no lane form here (a potential from a shared library, or a large molecule): one trajectory \
+            "{} has no lane form here (a potential from a shared library or a grid file, or a large molecule): one trajectory \
              at a time on each thread",
             m.name()
         )

@@ -17,6 +17,7 @@ mod fast_path;
 mod frames;
 mod freq;
 mod generated_code;
+mod grid_surfaces;
 mod hamiltonian;
 mod lanes;
 mod linear_charts;
