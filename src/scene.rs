@@ -227,6 +227,7 @@ struct RawScene {
     ensemble: Option<toml::Value>,
     statistics: Option<toml::Value>,
     spectrum: Option<toml::Value>,
+    pairs: Option<toml::Value>,
     #[serde(default)]
     integrator: Option<Spanned<RawIntegrator>>,
     run: Spanned<RawRun>,
@@ -379,6 +380,12 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             "a [spectrum] table without an [ensemble] table",
             "add [ensemble] (see the README's \"Ensembles\") or remove [spectrum]; `rovib run` writes dipole.csv with \
              run.outputs = [..., \"dipole\"]",
+        ));
+    }
+    if raw.pairs.is_some() && raw.ensemble.is_none() {
+        return Err(src.whole_file(
+            "a [pairs] table without an [ensemble] table",
+            "add [ensemble] (pair states classify an ensemble's sampled states) or remove [pairs]",
         ));
     }
     if raw.statistics.is_some() && raw.ensemble.is_none() {
