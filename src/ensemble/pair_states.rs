@@ -40,7 +40,6 @@
 //! 1.4818e-25 for cm³/molecule) and `K_p = K_c / kT` (atm⁻¹). For an atom–atom pair,
 //! `Z_A Z_B = 1`.
 
-use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -123,7 +122,6 @@ struct RawPairs {
 #[derive(Clone, Debug)]
 pub struct PairScene {
     monomers: Vec<Vec<Spanned<String>>>,
-    monomers_span: Range<usize>,
     distance: Spanned<String>,
     far: Option<Spanned<f64>>,
     max_energy: Option<Spanned<f64>>,
@@ -177,10 +175,8 @@ pub fn parse_pairs(src: &Source<'_>) -> Result<Option<PairScene>, FileError> {
             "write e.g. monomers = [[\"C\", \"O1\", \"O2\"], [\"Ar\"]]",
         ));
     }
-    let monomers_span = t.monomers.span();
     Ok(Some(PairScene {
         monomers: t.monomers.into_inner(),
-        monomers_span,
         distance: t.distance,
         far: t.far,
         max_energy: t.max_energy,
@@ -274,23 +270,24 @@ impl PairScene {
                 ));
             }
         };
-        if self.max_energy.is_some() && temperature.is_none() {
-            let e = self.max_energy.as_ref().expect("checked");
+        if let Some(e) = &self.max_energy
+            && temperature.is_none()
+        {
             return Err(src.error(
                 e.span(),
                 "`pairs.max_energy` restricts a thermal ensemble, and this one is not thermal",
                 "use method = \"thermal\", or remove max_energy",
             ));
         }
-        if self.monomer_integral.is_some() && temperature.is_none() {
-            let e = self.monomer_integral.as_ref().expect("checked");
+        if let Some(e) = &self.monomer_integral
+            && temperature.is_none()
+        {
             return Err(src.error(
                 e.span(),
                 "`pairs.monomer_integral` gives the dimer constant of a thermal ensemble, and this one is not thermal",
                 "use method = \"thermal\", or remove monomer_integral",
             ));
         }
-        let _ = &self.monomers_span;
         Ok(PairStates {
             monomers,
             distance,
