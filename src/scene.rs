@@ -231,6 +231,7 @@ struct RawScene {
     statistics: Option<toml::Value>,
     spectrum: Option<toml::Value>,
     collision: Option<toml::Value>,
+    pairs: Option<toml::Value>,
     #[serde(default)]
     integrator: Option<Spanned<RawIntegrator>>,
     run: Spanned<RawRun>,
@@ -391,6 +392,12 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         return Err(src.whole_file(
             "a [collision] table without an [ensemble] table",
             "add [ensemble] with method = \"collision\" (see docs/src/howto/collisions.md) or remove [collision]",
+        ));
+    }
+    if raw.pairs.is_some() && raw.ensemble.is_none() {
+        return Err(src.whole_file(
+            "a [pairs] table without an [ensemble] table",
+            "add [ensemble] (pair states classify an ensemble's sampled states) or remove [pairs]",
         ));
     }
     if raw.statistics.is_some() && raw.ensemble.is_none() {

@@ -133,6 +133,7 @@ where
         seed: ensemble.seed,
         sampler: description,
         phase_space: None,
+        pair_states: None,
         files,
     };
     Ok((ensemble_report, report))

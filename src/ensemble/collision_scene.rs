@@ -50,6 +50,7 @@ struct RawFile {
     collision: Option<Spanned<RawCollision>>,
     statistics: Option<Spanned<toml::Value>>,
     spectrum: Option<Spanned<toml::Value>>,
+    pairs: Option<Spanned<toml::Value>>,
     run: Option<RawRun>,
 }
 
@@ -116,6 +117,13 @@ pub fn parse_collision(scene: &Scene, method: Range<usize>) -> Result<CollisionS
             s.span(),
             "a collision ensemble does not compute spectra",
             "remove [spectrum], or use a thermal pair ensemble for a spectrum",
+        ));
+    }
+    if let Some(s) = &raw.pairs {
+        return Err(src.error(
+            s.span(),
+            "a collision ensemble does not classify pair states: [pairs] is for thermal pair ensembles",
+            "remove [pairs]; a collision ensemble writes each trajectory's outcome in final_states.csv",
         ));
     }
     if let Some(s) = raw.run.as_ref().and_then(|r| r.stop_outside.as_ref()) {

@@ -33,6 +33,7 @@ pub mod lifetimes;
 pub mod mpi;
 pub mod output;
 pub mod pair;
+pub mod pair_states;
 mod plot;
 pub mod quantity;
 pub mod resources;
@@ -194,6 +195,8 @@ pub struct EnsembleReport {
     /// The dipole's moments over the sampled states and the sampler's configurational integral,
     /// for an ensemble with a spectrum (`pair`).
     pub phase_space: Option<pair::PhaseSpace>,
+    /// The pair states of the sampled states (`[pairs]`).
+    pub pair_states: Option<pair_states::Census>,
     /// Files written.
     pub files: Vec<PathBuf>,
 }
@@ -456,6 +459,15 @@ where
         lanes: options.lanes,
         stops: crate::start::stop_conditions(m, scene)?,
         spectrum: ensemble.spectrum.settings.clone(),
+        pairs: ensemble.pairs.as_ref().map(|p| p.bind(m, scene, &bound.spec)).transpose()?,
+    };
+    // `[pairs] max_energy`: the scene's sampler restricted to H_rel < E_max.
+    let restricted = plan.pairs.as_ref().and_then(|p| {
+        p.max_energy.map(|e| pair_states::RestrictedSampler(pair_states::Restricted::new(sampler, m, p, e)))
+    });
+    let sampler: &dyn Sampler<N> = match &restricted {
+        Some(r) => r,
+        None => sampler,
     };
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let asked = options.threads.or(ensemble.threads);
@@ -558,6 +570,10 @@ where
         seed: ensemble.seed,
         sampler: description.to_owned(),
         phase_space: spectrum::dipole_correlated(&plan).then(|| pair::phase_space(m, sampler, n)),
+        pair_states: plan
+            .pairs
+            .as_ref()
+            .map(|p| pair_states::census(m, p, sampler, restricted.as_ref().map(|r| &r.0), n)),
         files: Vec::new(),
     };
     report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)

@@ -30,7 +30,7 @@ use crate::scene::Scene;
 
 /// Every file `rovib ensemble` writes into its output folder, besides `checkpoint.jsonl` and the
 /// kept trajectories (`trajectories/INDEX/`).
-pub const ENSEMBLE_FILES: [&str; 9] = [
+pub const ENSEMBLE_FILES: [&str; 12] = [
     "ensemble.csv",
     "histograms.csv",
     "correlations.csv",
@@ -40,6 +40,9 @@ pub const ENSEMBLE_FILES: [&str; 9] = [
     "ensemble.svg",
     "histograms.svg",
     "summary.json",
+    "pair_states.csv",
+    "correlations_by_state.csv",
+    "spectrum_by_state.csv",
 ];
 
 /// The folder of the kept trajectories (`ensemble.keep_trajectories`) in the output folder.
@@ -257,6 +260,9 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     if let Some(phase) = &report.phase_space {
         files.push(super::pair::write_moments(phase, spectrum.as_ref(), dir)?);
     }
+    if let Some(census) = &report.pair_states {
+        files.extend(super::pair_states::write(plan, census, &report.outcome.pair_states, (tu, ts), dir)?);
+    }
 
     // Plots.
     let panels: Vec<Panel> = (0..nm)
@@ -346,6 +352,8 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         "charts": charts_json(plan, &o.charts, ts),
         "stops": super::lifetimes::summary(m, plan, o, ts),
         "spectrum": super::pair::summary(plan, report.phase_space.as_ref(), spectrum.as_ref()),
+        "pair_states": plan.pairs.as_ref().zip(report.pair_states.as_ref())
+            .map(|(p, c)| super::pair_states::summary(p, c, &report.outcome.pair_states)),
         "correlation": if plan.spectrum.pair() {
             "C(tau) = x(0) x(tau) for tau from -T to T (negative tau: the trajectory run backward in time from its sampled state, momenta reversed), no mean subtracted, averaged over every completed trajectory (0 after a stop); lags on the uniform grid k * output_interval only"
         } else {

@@ -79,6 +79,8 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     /// `run.stop_outside`: a trajectory stops at the first output time at which one of these
     /// coordinates (index, name, bounds in a.u.) is outside its bounds; that output is its last.
     pub stops: Vec<StopCondition>,
+    /// `[pairs]`: the pair states of the sampled states (`super::pair_states`).
+    pub pairs: Option<super::pair_states::PairStates>,
 }
 
 /// A stop condition bound to the molecule: coordinate index, name, bounds in atomic units.
@@ -366,6 +368,9 @@ pub struct Outcome {
     /// The first [`LISTED_STOPS`] stopped trajectories by index.
     #[serde(default)]
     pub first_stops: Vec<StoppedTrajectory>,
+    /// The dipole correlation per pair state (`[pairs]` with the pair estimator).
+    #[serde(default)]
+    pub pair_states: super::pair_states::ClassCorrelations,
 }
 
 impl Outcome {
@@ -382,6 +387,7 @@ impl Outcome {
             charts: ChartCounts::default(),
             lifetimes: Lifetimes::default(),
             first_stops: Vec::new(),
+            pair_states: Default::default(),
         }
     }
 
@@ -406,6 +412,7 @@ impl Outcome {
         self.lifetimes.merge(&other.lifetimes)?;
         let room = LISTED_STOPS.saturating_sub(self.first_stops.len());
         self.first_stops.extend(other.first_stops.iter().take(room).cloned());
+        self.pair_states.merge(&other.pair_states);
         Ok(())
     }
 
@@ -904,6 +911,8 @@ where
                         Some(kb) => {
                             fold(plan, &mut outcome.statistics, &buffer, k, None, &mut series, &mut correlation);
                             super::pair::fold_pair(plan, &mut outcome.statistics, &buffer, k, &backward, kb);
+                            let classes = &mut outcome.pair_states;
+                            super::pair_states::fold(plan, &drawn, classes, &buffer, k, &backward, kb);
                         }
                         None => fold(
                             plan,

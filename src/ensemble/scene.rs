@@ -55,6 +55,8 @@ pub struct EnsembleScene {
     pub max_disk_gb: (f64, Option<Range<usize>>),
     /// The `[spectrum]` table ([`super::spectrum_scene`]).
     pub spectrum: super::spectrum_scene::SpectrumScene,
+    /// The `[pairs]` table ([`super::pair_states`]).
+    pub pairs: Option<super::pair_states::PairScene>,
     method_span: Range<usize>,
     trajectories_span: Range<usize>,
 }
@@ -587,6 +589,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         max_memory_gb,
         max_disk_gb,
         spectrum: super::spectrum_scene::parse_spectrum(&src)?,
+        pairs: super::pair_states::parse_pairs(&src)?,
         method_span: e.method.span(),
         trajectories_span: e.trajectories.span(),
     })

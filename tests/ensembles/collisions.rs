@@ -276,4 +276,10 @@ fn collision_scene_errors_are_located() {
     let scene = parse_scene("s.toml", &text).unwrap();
     let e = run_collisions(&scene, &common::ensemble::options(d.join("out"), 1)).unwrap_err().to_string();
     assert!(e.contains("does not use [statistics]"), "{e}");
+    // [pairs] classifies thermal pairs; a collision ensemble refuses it rather than ignore it.
+    let text = format!("{text}[pairs]\nmonomers = [[\"N1\", \"N2\"], [\"Ar\"]]\ndistance = \"R\"\n")
+        .replace("[statistics]\nmeans = [\"R\"]\n", "");
+    let scene = parse_scene("s.toml", &text).unwrap();
+    let e = run_collisions(&scene, &common::ensemble::options(d.join("out"), 1)).unwrap_err().to_string();
+    assert!(e.contains("does not classify pair states") && e.contains("s.toml:"), "{e}");
 }

@@ -435,6 +435,7 @@ fn blocks_run_apart_and_shipped_as_json_merge_to_the_same_statistics() {
         lanes: false,
         stops: Vec::new(),
         spectrum: Default::default(),
+        pairs: None,
     };
     let sampler = Gaussian::new(31);
     let stop = AtomicBool::new(false);
@@ -503,6 +504,7 @@ fn a_block_on_lanes_has_the_scalar_outcome_to_round_off() {
         lanes,
         stops: Vec::new(),
         spectrum: Default::default(),
+        pairs: None,
     };
     let sampler = Troubled(Gaussian::new(37));
     let stop = AtomicBool::new(false);

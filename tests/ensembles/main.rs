@@ -16,6 +16,7 @@ mod ensemble_stops;
 mod fuzz;
 mod linear_scenes;
 mod pair_ensemble;
+mod pair_states;
 mod sampling;
 mod scene_limits;
 mod spectrum;
