@@ -35,6 +35,7 @@ pub mod restart;
 pub mod scene;
 pub mod simulation;
 pub mod start;
+pub mod surface_gradient;
 pub mod surfaces;
 
 pub use error::Error;

@@ -201,6 +201,9 @@ pub struct Scene {
     /// whose potential replaces the molecule's, as written (its place for errors) and resolved
     /// against the scene file's directory (see `crate::surfaces`).
     pub library: Option<(Spanned<String>, std::path::PathBuf)>,
+    /// `[potential] gradient = "central-differences"`: the library's ∂U/∂q by central
+    /// differences of its energy (`crate::surface_gradient`).
+    pub central_differences: bool,
     /// Stop conditions: the run stops (status "stopped") at the first output time at which a
     /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
     /// molecule when the run starts).
@@ -238,6 +241,7 @@ struct RawScene {
 struct RawScenePotential {
     parameters: Option<RawTable<f64>>,
     library: Option<Spanned<String>>,
+    gradient: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Default)]
@@ -525,6 +529,11 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             &src,
             raw.potential.as_ref().and_then(|p| p.library.as_ref()),
             raw.potential.as_ref().and_then(|p| p.parameters.as_ref()).map(|t| t.span()),
+        )?,
+        central_differences: crate::surface_gradient::scene_gradient(
+            &src,
+            raw.potential.as_ref().and_then(|p| p.gradient.as_ref()),
+            raw.potential.as_ref().and_then(|p| p.library.as_ref()),
         )?,
         stop_outside: match &run.stop_outside {
             None => Vec::new(),

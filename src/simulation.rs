@@ -248,6 +248,9 @@ impl Run<'_> {
             )));
         }
         let mut warnings = Vec::new();
+        if scene.central_differences {
+            warnings.push(crate::surface_gradient::note(N));
+        }
         // Where the run starts: the scene's initial state, or the restart file's state.
         // A lab-form start at a linear geometry: started in the Cartesian chart as given.
         let mut lab_start: Option<Vec<f64>> = None;

@@ -15,7 +15,8 @@
  * Compiled as a shared library (gcc -shared -fPIC -Iffi/include) it exports the
  * rovib_surface_* functions of rovib_surface.h; rovib-ffi's build script compiles it into the
  * crate with SURFACE(name) defined to give the functions their own prefix.
- * With -DARN2_THETA_SIGN_BUG the theta gradient has the wrong sign (a test of the gradient check).
+ * With -DARN2_THETA_SIGN_BUG the theta gradient has the wrong sign (a test of the gradient check);
+ * with -DARN2_NO_GRADIENT the library exports no gradient function (a test of central differences).
  */
 #include <math.h>
 
@@ -80,6 +81,9 @@ int SURFACE(abi)(void) { return 1; }
 
 int SURFACE(coordinates)(void) { return 2; }
 
+#ifdef ARN2_NO_GRADIENT
+static /* not exported: rovib takes central differences of the energy */
+#endif
 double SURFACE(gradient)(const double *q, double *grad) {
     double r = q[0], theta = q[1];
     double c = cos(theta), s = sin(theta);
