@@ -82,9 +82,15 @@ int SURFACE(abi)(void) { return 1; }
 int SURFACE(coordinates)(void) { return 2; }
 
 #ifdef ARN2_NO_GRADIENT
-static /* not exported: rovib takes central differences of the energy */
+/* Not exported: rovib takes central differences of the energy. */
+#define GRADIENT static double arn2_unexported_gradient
+#define GRADIENT_CALL arn2_unexported_gradient
+#else
+#define GRADIENT double SURFACE(gradient)
+#define GRADIENT_CALL SURFACE(gradient)
 #endif
-double SURFACE(gradient)(const double *q, double *grad) {
+
+GRADIENT(const double *q, double *grad) {
     double r = q[0], theta = q[1];
     double c = cos(theta), s = sin(theta);
     double dp2;
@@ -104,7 +110,7 @@ double SURFACE(gradient)(const double *q, double *grad) {
 
 double SURFACE(energy)(const double *q) {
     double grad[2];
-    return SURFACE(gradient)(q, grad);
+    return GRADIENT_CALL(q, grad);
 }
 
 void SURFACE(dipole)(const double *q, double *mu) {
