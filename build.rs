@@ -72,6 +72,12 @@ fn main() {
             std::process::exit(1);
         }
     };
+    // With the `surface-demos` feature, the definitions whose potentials are source files in
+    // Rust, Fortran and C++ (their tests need gfortran and g++).
+    let mut dirs = dirs;
+    if std::env::var_os("CARGO_FEATURE_SURFACE_DEMOS").is_some() {
+        dirs.push((manifest.join("tests/surfaces"), "tests/surfaces".to_owned()));
+    }
     // The directories themselves, so that adding a definition reruns generation.
     for (dir, _) in &dirs {
         println!("cargo::rerun-if-changed={}", dir.display());

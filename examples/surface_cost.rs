@@ -1,12 +1,17 @@
-//! The cost of one production right-hand side of `arn2` (rigid atom–diatom, 2 coordinates) with
-//! its potential from each route: the generated expressions of `molecules/arn2.toml`, the same
-//! surface in C compiled in (`rovib_ffi::builtin::arn2_spline`), and, given a path, the same C
-//! built as a shared library and loaded at run time. Thread CPU time per evaluation over 8
-//! states, the median of 7 rounds of 20 000 evaluations.
+//! The cost of one production right-hand side of `arn2` (rigid atom–diatom, 2 coordinates, 3
+//! atoms) with its potential from each route: the generated expressions of
+//! `molecules/arn2.toml` (scalar, and lane-generic at `F64x4` per trajectory-evaluation), the
+//! same surface in C compiled into rovib-ffi (`builtin::arn2_spline`), loaded from a shared
+//! library (given its path), named by a definition as a Rust file, as Fortran and as C (with
+//! `--features surface-demos`; the Rust file also on lanes: kinematics lane-generic, potential
+//! one lane at a time), with ∂U/∂q by central differences of the compiled-in C, and a surface
+//! over Cartesian positions (a site–site Ar–N Lennard-Jones, `FromPositions`) against the same
+//! surface hand-written in (R, θ). Thread CPU time per evaluation, the contenders interleaved
+//! round by round; the median of 7 rounds of 8 states × 2500 evaluations each.
 //!
 //! ```sh
 //! gcc -O2 -shared -fPIC -I ffi/include -o /tmp/libarn2.so ffi/surfaces/arn2_spline.c -lm
-//! cargo run --release --example surface_cost -- /tmp/libarn2.so
+//! cargo run --release --features examples,surface-demos --example surface_cost -- /tmp/libarn2.so
 //! ```
 
 mod common;
@@ -17,12 +22,18 @@ use std::path::Path;
 
 use rovib::molecules::Arn2;
 use rovib::runtime::Molecule;
+use rovib::runtime::finite_differences::CentralDifferences;
 use rovib::runtime::hamiltonian::PhaseState;
 use rovib::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
+use rovib::runtime::hamiltonian::lanes::production_rhs;
 use rovib::runtime::integrate::OdeSystem;
-use rovib::runtime::nalgebra::{SVector, Vector3};
-use rovib::runtime::surface::WithPotential;
+use rovib::runtime::lanes::{F64x4, Real};
+use rovib::runtime::nalgebra::{SMatrix, SVector, Vector3};
+use rovib::runtime::position_surface::{CartesianPotential, FromPositions};
+use rovib::runtime::surface::{Potential, WithPotential};
 use rovib_ffi::{SharedLibrary, builtin};
+
+const EVALUATIONS: usize = 2500;
 
 fn states() -> Vec<PhaseState<2>> {
     (0..8)
@@ -38,40 +49,166 @@ fn states() -> Vec<PhaseState<2>> {
         .collect()
 }
 
-/// Median thread CPU time per right-hand side, ns.
-fn cost<M: Molecule<2, 3>>(m: &M) -> f64 {
-    let states = states();
-    let mut rounds: Vec<f64> = (0..7)
-        .map(|_| {
-            let mut total = 0.0;
-            for s in &states {
-                let mut system = ReducedSystem::new(m, Reduction::none(), s);
-                let mut y = vec![0.0; system.dim()];
-                system.reduce(s, &mut y).expect("a regular state");
-                let mut dy = vec![0.0; y.len()];
-                let begin = thread_cpu();
-                for _ in 0..2500 {
-                    system.rhs(0.0, black_box(&y), &mut dy).expect("finite");
-                    black_box(&dy);
-                }
-                total += thread_cpu() - begin;
-            }
-            total / (2500 * states.len()) as f64 * 1e9
+/// Thread CPU time per scalar right-hand side, ns, over the states.
+fn scalar<M: Molecule<2, 3>>(m: &M) -> f64 {
+    let mut total = 0.0;
+    for s in &states() {
+        let mut system = ReducedSystem::new(m, Reduction::none(), s);
+        let mut y = vec![0.0; system.dim()];
+        system.reduce(s, &mut y).expect("a regular state");
+        let mut dy = vec![0.0; y.len()];
+        let begin = thread_cpu();
+        for _ in 0..EVALUATIONS {
+            system.rhs(0.0, black_box(&y), &mut dy).expect("finite");
+            black_box(&dy);
+        }
+        total += thread_cpu() - begin;
+    }
+    total / (EVALUATIONS * 8) as f64 * 1e9
+}
+
+/// Thread CPU time per trajectory-evaluation of the lane-generic right-hand side at `F64x4`, ns.
+fn lanes<M: Molecule<2, 3>>(m: &M) -> f64 {
+    let flat: Vec<Vec<f64>> = states()
+        .iter()
+        .map(|s| {
+            let mut system = ReducedSystem::new(m, Reduction::none(), s);
+            let mut y = vec![0.0; system.dim()];
+            system.reduce(s, &mut y).expect("a regular state");
+            y
         })
         .collect();
-    rounds.sort_by(f64::total_cmp);
-    rounds[rounds.len() / 2]
+    let dim = flat[0].len();
+    let mut total = 0.0;
+    for group in flat.chunks_exact(F64x4::LANES) {
+        let y: Vec<F64x4> = (0..dim)
+            .map(|i| {
+                let mut v = F64x4::splat(0.0);
+                for (l, s) in group.iter().enumerate() {
+                    v.set_lane(l, s[i]);
+                }
+                v
+            })
+            .collect();
+        let mut d = vec![F64x4::splat(0.0); dim];
+        let begin = thread_cpu();
+        for _ in 0..EVALUATIONS {
+            let ok = production_rhs::<_, F64x4, 2, 3>(m, black_box(&y), &mut d, 1e-12);
+            assert_eq!(ok, F64x4::ALL);
+            black_box(&d);
+        }
+        total += thread_cpu() - begin;
+    }
+    total / (EVALUATIONS * flat.len()) as f64 * 1e9
+}
+
+/// The N–N bond of arn2 (bohr) and a Lennard-Jones Ar–N site–site model.
+const RNN: f64 = 2.0744;
+fn lj(r: f64) -> (f64, f64) {
+    let s6 = (6.0 / r).powi(6);
+    (8e-4 * (s6 * s6 - s6), 8e-4 * (-12.0 * s6 * s6 + 6.0 * s6) / r)
+}
+
+/// Ar–N1 + Ar–N2 over the positions.
+struct SiteSite;
+impl CartesianPotential<3> for SiteSite {
+    fn energy(&self, x: &SMatrix<f64, 3, 3>) -> f64 {
+        let mut g = SMatrix::zeros();
+        self.energy_gradient(x, &mut g)
+    }
+    fn energy_gradient(&self, x: &SMatrix<f64, 3, 3>, grad: &mut SMatrix<f64, 3, 3>) -> f64 {
+        grad.fill(0.0);
+        let mut u = 0.0;
+        for n in 0..2 {
+            let d = x.column(2) - x.column(n);
+            let r = d.norm();
+            let (v, dv) = lj(r);
+            u += v;
+            let f = dv / r * d;
+            let mut ar = grad.column_mut(2);
+            ar += f;
+            let mut nn = grad.column_mut(n);
+            nn -= f;
+        }
+        u
+    }
+}
+
+/// The same in (R, θ), by hand.
+struct SiteSiteInternal;
+impl Potential<2> for SiteSiteInternal {
+    fn energy(&self, q: &SVector<f64, 2>) -> f64 {
+        let mut g = SVector::zeros();
+        self.energy_gradient(q, &mut g)
+    }
+    fn energy_gradient(&self, q: &SVector<f64, 2>, grad: &mut SVector<f64, 2>) -> f64 {
+        let (s, c) = q[1].sin_cos();
+        let mut u = 0.0;
+        grad.fill(0.0);
+        for sign in [-1.0, 1.0] {
+            let d = (q[0] * q[0] + sign * q[0] * RNN * c + RNN * RNN / 4.0).sqrt();
+            let (v, dv) = lj(d);
+            u += v;
+            grad[0] += dv * (q[0] + sign * RNN / 2.0 * c) / d;
+            grad[1] += dv * (-sign * q[0] * RNN * s) / (2.0 * d);
+        }
+        u
+    }
 }
 
 fn main() {
-    println!("generated expressions   {:.1} ns", cost(&Arn2));
-    println!(
-        "C compiled in           {:.1} ns",
-        cost(&WithPotential { molecule: Arn2, potential: builtin::arn2_spline() })
-    );
-    if let Some(path) = std::env::args().nth(1) {
-        let library = SharedLibrary::load(Path::new(&path)).unwrap_or_else(|e| panic!("{e}"));
+    let library =
+        std::env::args().nth(1).map(|path| SharedLibrary::load(Path::new(&path)).unwrap_or_else(|e| panic!("{e}")));
+    let mut contenders: Vec<(&str, Box<dyn Fn() -> f64 + '_>)> = vec![
+        ("generated expressions (f64)", Box::new(|| scalar(&Arn2))),
+        ("generated expressions (F64x4, per trajectory)", Box::new(|| lanes(&Arn2))),
+        (
+            "C compiled into rovib-ffi",
+            Box::new(|| scalar(&WithPotential { molecule: Arn2, potential: builtin::arn2_spline() })),
+        ),
+        (
+            "C compiled in, ∂U/∂q by central differences",
+            Box::new(|| {
+                scalar(&WithPotential { molecule: Arn2, potential: CentralDifferences(builtin::arn2_spline()) })
+            }),
+        ),
+        (
+            "site–site LJ over positions (FromPositions)",
+            Box::new(|| {
+                scalar(&WithPotential {
+                    molecule: Arn2,
+                    potential: FromPositions::<_, _, 3> { molecule: Arn2, surface: SiteSite },
+                })
+            }),
+        ),
+        (
+            "site–site LJ in (R, θ) by hand",
+            Box::new(|| scalar(&WithPotential { molecule: Arn2, potential: SiteSiteInternal })),
+        ),
+    ];
+    #[cfg(feature = "surface-demos")]
+    {
+        use rovib::molecules::{Arn2C, Arn2Fortran, Arn2Rust};
+        contenders.push(("definition: Rust file (f64)", Box::new(|| scalar(&Arn2Rust))));
+        contenders.push(("definition: Rust file (F64x4, per trajectory)", Box::new(|| lanes(&Arn2Rust))));
+        contenders.push(("definition: Fortran (f64)", Box::new(|| scalar(&Arn2Fortran))));
+        contenders.push(("definition: C (f64)", Box::new(|| scalar(&Arn2C))));
+    }
+    if let Some(library) = &library {
         let surface = library.surface::<2>().unwrap_or_else(|e| panic!("{e}"));
-        println!("shared library          {:.1} ns", cost(&WithPotential { molecule: Arn2, potential: surface }));
+        contenders.push((
+            "shared library (dlopen)",
+            Box::new(move || scalar(&WithPotential { molecule: Arn2, potential: surface })),
+        ));
+    }
+    let mut rounds: Vec<Vec<f64>> = vec![Vec::new(); contenders.len()];
+    for _ in 0..7 {
+        for (i, (_, f)) in contenders.iter().enumerate() {
+            rounds[i].push(f());
+        }
+    }
+    for ((name, _), mut r) in contenders.iter().zip(rounds) {
+        r.sort_by(f64::total_cmp);
+        println!("{name:<48} {:>7.1} ns", r[r.len() / 2]);
     }
 }

@@ -36,6 +36,7 @@ pub mod restart;
 pub mod scene;
 pub mod simulation;
 pub mod start;
+pub mod surface_gradient;
 pub mod surfaces;
 
 pub use error::Error;

@@ -204,6 +204,9 @@ pub struct Scene {
     /// `[potential] grid` and `outside`: a tabulated surface that replaces the molecule's
     /// potential (see `crate::surfaces::grid`).
     pub grid: Option<crate::surfaces::grid::SceneGrid>,
+    /// `[potential] gradient = "central-differences"`: the library's ∂U/∂q by central
+    /// differences of its energy (`crate::surface_gradient`).
+    pub central_differences: bool,
     /// Stop conditions: the run stops (status "stopped") at the first output time at which a
     /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
     /// molecule when the run starts).
@@ -245,6 +248,7 @@ struct RawScenePotential {
     library: Option<Spanned<String>>,
     grid: Option<Spanned<String>>,
     outside: Option<Spanned<String>>,
+    gradient: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Default)]
@@ -551,6 +555,11 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             raw.potential.as_ref().and_then(|p| p.outside.as_ref()),
             raw.potential.as_ref().and_then(|p| p.library.as_ref()).map(|l| l.span()),
             raw.potential.as_ref().and_then(|p| p.parameters.as_ref()).map(|t| t.span()),
+        )?,
+        central_differences: crate::surface_gradient::scene_gradient(
+            &src,
+            raw.potential.as_ref().and_then(|p| p.gradient.as_ref()),
+            raw.potential.as_ref().and_then(|p| p.library.as_ref()),
         )?,
         stop_outside: match &run.stop_outside {
             None => Vec::new(),

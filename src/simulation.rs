@@ -303,6 +303,9 @@ impl Run<'_> {
             )));
         }
         let mut warnings = Vec::new();
+        if scene.central_differences {
+            warnings.push(crate::surface_gradient::note(N));
+        }
         let begin = self.begin(&m, &mut warnings)?;
         let layout = layout(begin.system.reduction(), &m);
         let stops = stop_conditions(&m, scene)?;

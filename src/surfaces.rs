@@ -66,6 +66,13 @@ pub fn scene_surface<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             "build it with `gcc -O2 -shared -fPIC -o libsurf.so surf.c -lm` (docs/src/howto/outside-surfaces.md)",
         )
     })?;
+    if !library.has_gradient() && !scene.central_differences {
+        return Err(at(
+            format!("the surface library {} has no `rovib_surface_gradient`", path.display()),
+            "add `gradient = \"central-differences\"` to [potential] (2N + 1 energy calls per gradient), or export \
+             rovib_surface_gradient",
+        ));
+    }
     let library: &'static SharedLibrary = Box::leak(Box::new(library));
     let surface = library.surface::<N>().map_err(|e| {
         at(
@@ -77,6 +84,7 @@ pub fn scene_surface<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             ),
         )
     })?;
+    let surface = if scene.central_differences { surface.with_central_differences() } else { surface };
     let coordinates = m.coordinates();
     let centre = m.reference_geometry().unwrap_or_else(|| {
         SVector::from_fn(|k, _| {

@@ -88,6 +88,10 @@ pub fn ident(atom: usize, axis: usize) -> Ident {
 /// Builds the Cartesian expressions for a definition with coordinates by kind, `None` for one
 /// with explicit positions. Call after [`crate::kinetic::build`].
 pub fn build(def: &mut Definition) -> Option<CartesianExprs> {
+    // A potential from source files has no closed form in the positions.
+    if def.external.is_some() {
+        return None;
+    }
     let kinds: Vec<Kind> = def.kinds.clone()?;
     let n = def.coordinates.len();
     let na = def.atoms.len();

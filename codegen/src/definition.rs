@@ -129,6 +129,9 @@ pub struct Definition {
     pub library: Library,
     /// The data files the definition read (CSV files of `[arrays]`).
     pub data_files: Vec<std::path::PathBuf>,
+    /// Where the potential comes from when the definition names source files instead of an
+    /// expression (`potential` is then the constant 0 and not emitted).
+    pub external: Option<crate::external::ExternalPotential>,
     /// The dipole moment surface, if the file has a `[dipole]` table.
     pub dipole: Option<DipoleDef>,
 }
@@ -213,10 +216,21 @@ struct RawAtom {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPotential {
-    expression: Spanned<String>,
+    #[serde(default)]
+    expression: Option<Spanned<String>>,
     energy_unit: Spanned<String>,
     #[serde(default)]
     parameters: BTreeMap<Spanned<String>, Spanned<f64>>,
+    /// A Rust source file instead of `expression` ([`crate::external`]).
+    #[serde(default)]
+    rust: Option<Spanned<String>>,
+    /// C, C++ and Fortran sources instead of `expression`.
+    #[serde(default)]
+    c: Option<Spanned<Vec<String>>>,
+    #[serde(default)]
+    cpp: Option<Spanned<Vec<String>>>,
+    #[serde(default)]
+    fortran: Option<Spanned<Vec<String>>>,
 }
 
 /// A number or an expression, as a position component or constant.
@@ -514,6 +528,97 @@ impl Validator<'_> {
 
     fn check<T>(&mut self, result: Result<T, DefinitionError>) -> Option<T> {
         result.map_err(|e| self.errors.push(e)).ok()
+    }
+
+    /// The `[potential]` table's route: `None` for an expression, else the source files it
+    /// names (each must exist beside the definition; they become inputs of the build). Exactly
+    /// one of `expression`, `rust` and the compiled lists (`c`, `cpp`, `fortran`) is given.
+    fn external_potential(
+        &mut self,
+        table: &Spanned<RawPotential>,
+    ) -> Result<Option<crate::external::ExternalPotential>, DefinitionError> {
+        use crate::external::ExternalPotential;
+        let src = self.src;
+        let pot = table.get_ref();
+        let compiled: Vec<(&str, &Spanned<Vec<String>>)> =
+            [("c", &pot.c), ("cpp", &pot.cpp), ("fortran", &pot.fortran)]
+                .into_iter()
+                .filter_map(|(k, v)| v.as_ref().map(|v| (k, v)))
+                .collect();
+        let first_source =
+            pot.rust.as_ref().map(|r| ("rust", r.span())).or(compiled.first().map(|(k, v)| (*k, v.span())));
+        match (&pot.expression, first_source) {
+            (None, None) => {
+                return Err(src.error(
+                    table.span(),
+                    "`[potential]` has no `expression`",
+                    "write the potential as `expression = \"...\"`, or name its code: `rust = \"surface.rs\"`, or \
+                     `c = [\"surface.c\"]` (also `cpp`, `fortran`)",
+                ));
+            }
+            (Some(_), None) => return Ok(None),
+            (Some(_), Some((key, span))) => {
+                return Err(src.error(
+                    span,
+                    format!("`potential.{key}` and `potential.expression` both give the potential"),
+                    "keep one: the expression, or the source files",
+                ));
+            }
+            (None, Some(_)) => {}
+        }
+        if let (Some(_), Some((key, v))) = (&pot.rust, compiled.first()) {
+            return Err(src.error(
+                v.span(),
+                format!("`potential.{key}` and `potential.rust` both give the potential"),
+                "name the Rust file or the compiled sources, not both",
+            ));
+        }
+        if let Some((name, _)) = pot.parameters.iter().next() {
+            return Err(src.error(
+                name.span(),
+                "`[potential.parameters]` are for a potential expression, not for source files",
+                "remove [potential.parameters]; the source files hold their own constants",
+            ));
+        }
+        if pot.energy_unit.get_ref() != "hartree" {
+            return Err(src.error(
+                pot.energy_unit.span(),
+                format!("a potential from source files is in hartree, not `{}`", pot.energy_unit.get_ref()),
+                "write `energy_unit = \"hartree\"` and return hartree from the code",
+            ));
+        }
+        let base = self.base.unwrap_or(std::path::Path::new(""));
+        let mut named: Vec<(String, Range<usize>)> = Vec::new();
+        if let Some(rust) = &pot.rust {
+            named.push((rust.get_ref().clone(), rust.span()));
+        }
+        for (key, list) in &compiled {
+            if list.get_ref().is_empty() {
+                return Err(src.error(
+                    list.span(),
+                    format!("`potential.{key}` lists no files"),
+                    "name at least one source file",
+                ));
+            }
+            named.extend(list.get_ref().iter().map(|f| (f.clone(), list.span())));
+        }
+        let mut paths = Vec::new();
+        for (file, span) in named {
+            let path = base.join(&file);
+            if !path.is_file() {
+                return Err(src.error(
+                    span,
+                    format!("`{file}` is not a file (looked for {})", path.display()),
+                    "name a source file relative to the definition's directory",
+                ));
+            }
+            paths.push(std::path::absolute(&path).unwrap_or(path));
+        }
+        self.data_files.extend(paths.iter().cloned());
+        Ok(Some(match &pot.rust {
+            Some(_) => ExternalPotential::Rust(paths.remove(0)),
+            None => ExternalPotential::Compiled,
+        }))
     }
 
     /// Validates everything, collecting every problem. A part with a problem is replaced by a
@@ -870,11 +975,20 @@ impl Validator<'_> {
             self.names.insert(k.get_ref().clone(), c);
         }
         let potential_scope = self.names.clone();
-        let u = self.expression(&pot.expression, "the potential");
-        let potential = self.check(u).map(|u| {
-            let scale = self.graph.constant(energy_unit.in_hartree());
-            self.graph.mul(scale, u)
-        });
+        let external = self.external_potential(&raw.potential);
+        let external = self.check(external);
+        let potential = match (&pot.expression, &external) {
+            (Some(expression), _) => {
+                let u = self.expression(expression, "the potential");
+                self.check(u).map(|u| {
+                    let scale = self.graph.constant(energy_unit.in_hartree());
+                    self.graph.mul(scale, u)
+                })
+            }
+            (None, Some(Some(_))) => Some(self.graph.constant(0.0)),
+            (None, _) => None,
+        };
+        let external = external.flatten();
 
         // Nothing non-finite where it can be known now: constant positions and a constant
         // potential everywhere, and everything at the reference geometry if the file gives one
@@ -902,10 +1016,11 @@ impl Validator<'_> {
             }
         }
         if let Some(potential) = potential.filter(|_| constants_ok && parameters_ok)
+            && let Some(expression) = &pot.expression
             && let Some((v, place)) = known(&self.graph, potential).filter(|(v, _)| !v.is_finite())
         {
             self.errors.push(src.error(
-                pot.expression.span(),
+                expression.span(),
                 format!("the potential is {v} hartree {place}"),
                 "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
             ));
@@ -953,9 +1068,10 @@ impl Validator<'_> {
             kinds,
             parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
             potential_scope,
-            potential_text: pot.expression.get_ref().clone(),
+            potential_text: pot.expression.as_ref().map(|e| e.get_ref().clone()).unwrap_or_default(),
             library: self.library,
             data_files: self.data_files,
+            external,
             dipole,
         })
     }

@@ -30,6 +30,7 @@ pub mod elements;
 pub mod emit;
 pub mod emit_lanes;
 pub mod expr;
+pub mod external;
 pub mod kinetic;
 pub mod library;
 pub mod names;

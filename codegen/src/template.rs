@@ -247,6 +247,9 @@ pub(crate) fn molecule_items(
             barrier: None,
         },
     ];
+    if def.external.is_some() {
+        specs.retain(|s| s.name != "potential" && s.name != "potential_gradient");
+    }
     if let Some(c) = cartesian {
         specs.extend(crate::cartesian::specs(c, nc, &def.graph));
     }
@@ -472,6 +475,9 @@ pub(crate) fn molecule_items(
     // `has_lane_forms() == false`, and the runtime integrates it one trajectory at a time.
     if e.centre_of_mass_at_run_time.is_none() {
         let (mut lane_functions, _) = crate::emit_lanes::lane_functions(&def.graph, e, &idents);
+        if def.external.is_some() {
+            lane_functions.retain(|f| !f.to_string().contains("fn potential_gradient_lanes"));
+        }
         lane_functions.push(quote! {
             fn has_lane_forms(&self) -> bool {
                 true
@@ -537,11 +543,17 @@ pub(crate) fn molecule_items(
     } else {
         quote!()
     };
+    let (external_module, external_methods) = match &def.external {
+        Some(x) => crate::external::items(x, &def.name, e.n, e.centre_of_mass_at_run_time.is_none()),
+        None => (quote!(), quote!()),
+    };
     let items = quote! {
         use ::rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
         #unit_imports
         use ::rovib_runtime::{Atom, Coordinate, KineticMatrices, Molecule};
         #lane_imports
+
+        #external_module
 
         #doc
         #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
@@ -576,6 +588,8 @@ pub(crate) fn molecule_items(
             #parameter_items
 
             #(#functions)*
+
+            #external_methods
 
             #has_dipole
 

@@ -10,6 +10,7 @@
 use std::marker::PhantomData;
 use std::path::Path;
 
+use rovib_runtime::finite_differences::central_gradient;
 use rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
 use rovib_runtime::surface::{Dipole, Potential};
 
@@ -102,6 +103,11 @@ impl SharedLibrary {
         self.loaded.functions().coordinates
     }
 
+    /// Whether it has a gradient function (without one, [`Surface`] takes central differences).
+    pub fn has_gradient(&self) -> bool {
+        self.loaded.functions().has_gradient()
+    }
+
     /// Whether it has a dipole surface.
     pub fn has_dipole(&self) -> bool {
         self.loaded.functions().has_dipole()
@@ -118,6 +124,8 @@ impl SharedLibrary {
 #[derive(Copy, Clone, Debug)]
 pub struct Surface<'a, const N: usize> {
     functions: raw::Functions,
+    /// ∂U/∂q by central differences of U (also without a gradient function).
+    differences: bool,
     library: PhantomData<&'a SharedLibrary>,
 }
 
@@ -130,7 +138,19 @@ impl<const N: usize> Surface<'_, N> {
                 expected: N,
             });
         }
-        Ok(Self { functions, library: PhantomData })
+        let differences = !functions.has_gradient();
+        Ok(Self { functions, differences, library: PhantomData })
+    }
+
+    /// The same surface with ∂U/∂q by central differences of its energy
+    /// ([`rovib_runtime::finite_differences`]: 2N + 1 energy calls per gradient).
+    pub fn with_central_differences(self) -> Self {
+        Self { differences: true, ..self }
+    }
+
+    /// Whether ∂U/∂q is taken by central differences.
+    pub fn central_differences(&self) -> bool {
+        self.differences
     }
 }
 
@@ -140,7 +160,12 @@ impl<const N: usize> Potential<N> for Surface<'_, N> {
     }
 
     fn energy_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64 {
-        self.functions.gradient(q.as_slice(), grad.as_mut_slice())
+        if !self.differences
+            && let Some(u) = self.functions.gradient(q.as_slice(), grad.as_mut_slice())
+        {
+            return u;
+        }
+        central_gradient(|q| self.functions.energy(q.as_slice()), q, grad)
     }
 
     fn dipole_part(&self) -> Option<&dyn Dipole<N>> {
@@ -161,6 +186,14 @@ impl<const N: usize> Dipole<N> for Surface<'_, N> {
             dmu.fill(f64::NAN);
         }
     }
+}
+
+/// The potentials of molecule definitions that name C, C++ or Fortran sources (`[potential] c`,
+/// `cpp`, `fortran`), compiled into this crate by its build script: per molecule `NAME`,
+/// `NAME(q, grad) -> U` (∂U/∂q into `grad`) and `NAME_energy(q) -> U`, over the molecule's
+/// coordinates in hartree. The generated molecule calls them; they are safe to call.
+pub mod compiled {
+    include!(concat!(env!("OUT_DIR"), "/compiled.rs"));
 }
 
 /// Surfaces compiled into this crate from `ffi/surfaces/*.c` by the build script.

@@ -22,7 +22,8 @@ type DipoleFn = unsafe extern "C" fn(*const f64, *mut f64);
 pub(crate) struct Functions {
     pub coordinates: usize,
     energy: EnergyFn,
-    gradient: GradientFn,
+    /// `None`: the library has no gradient function (central differences of the energy).
+    gradient: Option<GradientFn>,
     dipole: Option<(DipoleFn, DipoleFn)>,
 }
 
@@ -38,11 +39,16 @@ impl Functions {
         unsafe { (self.energy)(q.as_ptr()) }
     }
 
-    /// ∂U/∂q into `grad`; returns U.
-    pub fn gradient(&self, q: &[f64], grad: &mut [f64]) -> f64 {
+    pub fn has_gradient(&self) -> bool {
+        self.gradient.is_some()
+    }
+
+    /// ∂U/∂q into `grad` and `Some(U)`; `None` without a gradient function.
+    pub fn gradient(&self, q: &[f64], grad: &mut [f64]) -> Option<f64> {
         assert!(q.len() == self.coordinates && grad.len() == self.coordinates, "one value per coordinate");
+        let f = self.gradient?;
         // SAFETY: q and grad hold the `coordinates` values the function reads and writes.
-        unsafe { (self.gradient)(q.as_ptr(), grad.as_mut_ptr()) }
+        Some(unsafe { f(q.as_ptr(), grad.as_mut_ptr()) })
     }
 
     /// μ(q) into `mu` (3 values); `false` without a dipole surface.
@@ -100,8 +106,8 @@ impl Loaded {
             .map_err(|_| SurfaceError::BadCount { source_name: shown.clone(), found: coordinates })?;
         let energy = *unsafe { library.get::<EnergyFn>(b"rovib_surface_energy") }
             .map_err(|_| missing("rovib_surface_energy"))?;
-        let gradient = *unsafe { library.get::<GradientFn>(b"rovib_surface_gradient") }
-            .map_err(|_| missing("rovib_surface_gradient"))?;
+        // Optional: without it, ∂U/∂q is taken by central differences of the energy.
+        let gradient = unsafe { library.get::<GradientFn>(b"rovib_surface_gradient") }.ok().map(|s| *s);
         let mu = unsafe { library.get::<DipoleFn>(b"rovib_surface_dipole") }.ok().map(|s| *s);
         let dmu = unsafe { library.get::<DipoleFn>(b"rovib_surface_dipole_jacobian") }.ok().map(|s| *s);
         let dipole = match (mu, dmu) {
@@ -149,7 +155,15 @@ pub(crate) fn arn2_spline() -> Functions {
     Functions {
         coordinates,
         energy: arn2_spline_energy,
-        gradient: arn2_spline_gradient,
+        gradient: Some(arn2_spline_gradient),
         dipole: Some((arn2_spline_dipole, arn2_spline_dipole_jacobian)),
     }
+}
+
+/// The potentials of molecule definitions that name C, C++ or Fortran sources, compiled in by
+/// the build script: per molecule `NAME`, its `NAME_energy` and `NAME_gradient` and safe calls
+/// `energy_NAME` and `gradient_NAME` over arrays of the molecule's coordinate count.
+pub(crate) mod compiled {
+    #![allow(dead_code)]
+    include!(concat!(env!("OUT_DIR"), "/compiled_raw.rs"));
 }

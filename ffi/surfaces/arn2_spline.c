@@ -15,7 +15,8 @@
  * Compiled as a shared library (gcc -shared -fPIC -Iffi/include) it exports the
  * rovib_surface_* functions of rovib_surface.h; rovib-ffi's build script compiles it into the
  * crate with SURFACE(name) defined to give the functions their own prefix.
- * With -DARN2_THETA_SIGN_BUG the theta gradient has the wrong sign (a test of the gradient check).
+ * With -DARN2_THETA_SIGN_BUG the theta gradient has the wrong sign (a test of the gradient check);
+ * with -DARN2_NO_GRADIENT the library exports no gradient function (a test of central differences).
  */
 #include <math.h>
 
@@ -80,7 +81,16 @@ int SURFACE(abi)(void) { return 1; }
 
 int SURFACE(coordinates)(void) { return 2; }
 
-double SURFACE(gradient)(const double *q, double *grad) {
+#ifdef ARN2_NO_GRADIENT
+/* Not exported: rovib takes central differences of the energy. */
+#define GRADIENT static double arn2_unexported_gradient
+#define GRADIENT_CALL arn2_unexported_gradient
+#else
+#define GRADIENT double SURFACE(gradient)
+#define GRADIENT_CALL SURFACE(gradient)
+#endif
+
+GRADIENT(const double *q, double *grad) {
     double r = q[0], theta = q[1];
     double c = cos(theta), s = sin(theta);
     double dp2;
@@ -100,7 +110,7 @@ double SURFACE(gradient)(const double *q, double *grad) {
 
 double SURFACE(energy)(const double *q) {
     double grad[2];
-    return SURFACE(gradient)(q, grad);
+    return GRADIENT_CALL(q, grad);
 }
 
 void SURFACE(dipole)(const double *q, double *mu) {

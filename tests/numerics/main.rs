@@ -11,6 +11,8 @@ mod common;
 mod bench_units;
 mod cartesian;
 mod cartesian_potential;
+#[cfg(feature = "surface-demos")]
+mod compiled_surfaces;
 mod cross_check_molecules;
 mod dipole_output;
 mod fast_path;
@@ -22,5 +24,6 @@ mod hamiltonian;
 mod lanes;
 mod linear_charts;
 mod molecules;
+mod position_surfaces;
 mod stability;
 mod surfaces;

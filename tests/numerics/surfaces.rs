@@ -54,7 +54,7 @@ fn start() -> PhaseState<2> {
 }
 
 /// The states at 40 output times over 20 000 a.u. (0.48 ps), DOP853 at tolerance 1e-12.
-fn trajectory<M: Molecule<2, 3>>(m: &M) -> Vec<Vec<f64>> {
+pub(crate) fn trajectory<M: Molecule<2, 3>>(m: &M) -> Vec<Vec<f64>> {
     let s = start();
     let mut system = ReducedSystem::new(m, Reduction::none(), &s);
     let mut y0 = vec![0.0; system.dim()];
@@ -71,7 +71,7 @@ fn trajectory<M: Molecule<2, 3>>(m: &M) -> Vec<Vec<f64>> {
 }
 
 /// The largest difference in R (bohr) and θ (rad) between two trajectories.
-fn max_q_difference(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
+pub(crate) fn max_q_difference(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
     a.iter().zip(b).flat_map(|(x, y)| (0..2).map(move |k| (x[k] - y[k]).abs())).fold(0.0, f64::max)
 }
 
