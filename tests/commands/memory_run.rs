@@ -107,7 +107,7 @@ fn an_external_potential_is_checked_then_used() {
     assert!(e.contains("gradient of the test's harmonic potential") && e.contains("fix ∂U/∂alpha"), "{e}");
     let failing = Harmonic { wrong: 9, fail_after: 200, calls: Default::default() };
     let e = run(&failing).err().unwrap().to_string();
-    assert!(e.contains("the run stopped") && e.contains("NaN"), "{e}");
+    assert!(e.contains("the run stopped") && e.contains("non-finite potential"), "{e}");
 }
 
 #[test]
