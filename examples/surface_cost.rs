@@ -35,6 +35,9 @@ use rovib_ffi::{SharedLibrary, builtin};
 
 const EVALUATIONS: usize = 2500;
 
+/// A route's name and one measured round (ns per right-hand side).
+type Contender<'a> = (&'static str, Box<dyn Fn() -> f64 + 'a>);
+
 fn states() -> Vec<PhaseState<2>> {
     (0..8)
         .map(|s| {
@@ -72,7 +75,7 @@ fn lanes<M: Molecule<2, 3>>(m: &M) -> f64 {
     let flat: Vec<Vec<f64>> = states()
         .iter()
         .map(|s| {
-            let mut system = ReducedSystem::new(m, Reduction::none(), s);
+            let system = ReducedSystem::new(m, Reduction::none(), s);
             let mut y = vec![0.0; system.dim()];
             system.reduce(s, &mut y).expect("a regular state");
             y
@@ -159,7 +162,7 @@ impl Potential<2> for SiteSiteInternal {
 fn main() {
     let library =
         std::env::args().nth(1).map(|path| SharedLibrary::load(Path::new(&path)).unwrap_or_else(|e| panic!("{e}")));
-    let mut contenders: Vec<(&str, Box<dyn Fn() -> f64 + '_>)> = vec![
+    let mut contenders: Vec<Contender<'_>> = vec![
         ("generated expressions (f64)", Box::new(|| scalar(&Arn2))),
         ("generated expressions (F64x4, per trajectory)", Box::new(|| lanes(&Arn2))),
         (

@@ -117,7 +117,11 @@ pub fn check_rotation_invariance<C: CartesianPotential<NA> + ?Sized, const NA: u
         let turned = r.matrix() * g0;
         let difference = (u - u0).abs();
         let gradient_difference = (g - turned).norm();
-        if !(difference <= tolerance) || !(gradient_difference <= gradient_tolerance) {
+        if difference.is_nan()
+            || difference > tolerance
+            || gradient_difference.is_nan()
+            || gradient_difference > gradient_tolerance
+        {
             return Err(InvarianceError {
                 motion: if difference <= tolerance {
                     format!("{motion} (its gradient does not turn with it)")
