@@ -7,7 +7,7 @@
 //! one lane at a time), with ∂U/∂q by central differences of the compiled-in C, and a surface
 //! over Cartesian positions (a site–site Ar–N Lennard-Jones, `FromPositions`) against the same
 //! surface hand-written in (R, θ). Thread CPU time per evaluation, the contenders interleaved
-//! round by round; the median of 7 rounds of 8 states × 2500 evaluations each.
+//! round by round; the median of 7 rounds of 8 states × 100 000 evaluations each (a round lasts tens of milliseconds: the thread CPU clock of /proc advances by scheduler ticks).
 //!
 //! ```sh
 //! gcc -O2 -shared -fPIC -I ffi/include -o /tmp/libarn2.so ffi/surfaces/arn2_spline.c -lm
@@ -33,7 +33,7 @@ use rovib::runtime::position_surface::{CartesianPotential, FromPositions};
 use rovib::runtime::surface::{Potential, WithPotential};
 use rovib_ffi::{SharedLibrary, builtin};
 
-const EVALUATIONS: usize = 2500;
+const EVALUATIONS: usize = 100_000;
 
 /// A route's name and one measured round (ns per right-hand side).
 type Contender<'a> = (&'static str, Box<dyn Fn() -> f64 + 'a>);
