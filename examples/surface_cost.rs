@@ -29,7 +29,7 @@ use rovib::runtime::hamiltonian::lanes::production_rhs;
 use rovib::runtime::integrate::OdeSystem;
 use rovib::runtime::lanes::{F64x4, Real};
 use rovib::runtime::nalgebra::{SMatrix, SVector, Vector3};
-use rovib::runtime::position_surface::{CartesianPotential, FromPositions};
+use rovib::runtime::position_surface::{CartesianPotential, FromPositions, add_pair_terms};
 use rovib::runtime::surface::{Potential, WithPotential};
 use rovib_ffi::{SharedLibrary, builtin};
 
@@ -121,19 +121,7 @@ impl CartesianPotential<3> for SiteSite {
     }
     fn energy_gradient(&self, x: &SMatrix<f64, 3, 3>, grad: &mut SMatrix<f64, 3, 3>) -> f64 {
         grad.fill(0.0);
-        let mut u = 0.0;
-        for n in 0..2 {
-            let d = x.column(2) - x.column(n);
-            let r = d.norm();
-            let (v, dv) = lj(r);
-            u += v;
-            let f = dv / r * d;
-            let mut ar = grad.column_mut(2);
-            ar += f;
-            let mut nn = grad.column_mut(n);
-            nn -= f;
-        }
-        u
+        add_pair_terms(x, [(2, 0), (2, 1)], lj, grad)
     }
 }
 

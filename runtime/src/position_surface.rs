@@ -63,6 +63,30 @@ where
     }
 }
 
+/// Σ v(r_ij) over `pairs` of atoms `(i, j)`, with r_ij = |x_i − x_j|, and its gradient added
+/// to `grad` (which the caller zeroes first): the building block of a site–site surface's
+/// [`CartesianPotential::energy_gradient`]. `v` returns the pair term and its derivative dv/dr.
+pub fn add_pair_terms<const NA: usize>(
+    x: &SMatrix<f64, 3, NA>,
+    pairs: impl IntoIterator<Item = (usize, usize)>,
+    v: impl Fn(f64) -> (f64, f64),
+    grad: &mut SMatrix<f64, 3, NA>,
+) -> f64 {
+    let mut u = 0.0;
+    for (i, j) in pairs {
+        let d = x.column(i) - x.column(j);
+        let r = d.norm();
+        let (e, de) = v(r);
+        u += e;
+        let f = de / r * d;
+        let mut gi = grad.column_mut(i);
+        gi += f;
+        let mut gj = grad.column_mut(j);
+        gj -= f;
+    }
+    u
+}
+
 /// A Cartesian surface that changes when all atoms are turned or moved together.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error(
@@ -154,18 +178,9 @@ mod tests {
         }
         fn energy_gradient(&self, x: &SMatrix<f64, 3, 3>, grad: &mut SMatrix<f64, 3, 3>) -> f64 {
             grad.fill(0.0);
-            let mut u = 0.0;
+            let pairs = [(0, 1), (0, 2), (1, 2)];
+            let mut u = add_pair_terms(x, pairs, |r| ((r - 1.0).powi(2), 2.0 * (r - 1.0)), grad);
             for i in 0..3 {
-                for j in i + 1..3 {
-                    let d = x.column(i) - x.column(j);
-                    let r = d.norm();
-                    u += (r - 1.0).powi(2);
-                    let f = 2.0 * (r - 1.0) / r * d;
-                    let mut gi = grad.column_mut(i);
-                    gi += f;
-                    let mut gj = grad.column_mut(j);
-                    gj -= f;
-                }
                 u += self.field * x[(2, i)];
                 grad[(2, i)] += self.field;
             }
