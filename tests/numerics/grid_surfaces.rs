@@ -17,6 +17,8 @@ use rovib::runtime::nalgebra::{SVector, Vector3};
 use rovib::runtime::surface::WithPotential;
 use rovib::runtime::{Molecule, PhaseState};
 
+use crate::surfaces::file_error;
+
 fn tmp(name: &str) -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-grids-{name}"));
     let _ = std::fs::remove_dir_all(&d);
@@ -122,21 +124,10 @@ const SCENE: &str = "molecule = \"arn2\"\n\
 [integrator]\nmethod = \"dop853\"\nrtol = 1e-10\natol = 1e-10\n\
 [run]\nend = 2000\noutput_interval = 100\n";
 
-/// Writes `grid` as dir/pes.csv and `scene` with the `[potential]` table `potential` as
-/// dir/scene.toml, and runs it.
+/// Writes `grid` as dir/pes.csv, then the scene with its `[potential]` table, and runs it.
 fn run_scene(dir: &Path, grid: &str, scene: &str, potential: &str) -> Result<rovib::RunReport, Error> {
     std::fs::write(dir.join("pes.csv"), grid).unwrap();
-    let path = dir.join("scene.toml");
-    std::fs::write(&path, format!("{scene}[potential]\n{potential}\n")).unwrap();
-    rovib::simulation::run(&path, Some(&dir.join("out")))
-}
-
-fn file_error(r: Result<rovib::RunReport, Error>) -> rovib::runtime::diagnostic::FileError {
-    match r {
-        Err(Error::File(e)) => e,
-        Err(e) => panic!("not located: {e}"),
-        Ok(_) => panic!("accepted"),
-    }
+    crate::surfaces::run_scene(dir, scene, potential)
 }
 
 #[test]

@@ -141,13 +141,14 @@ const SCENE: &str = "molecule = \"arn2\"\n\
 [run]\nend = 2000\noutput_interval = 100\n";
 
 /// Writes `scene` (with a `[potential]` table `potential`) as dir/scene.toml and runs it.
-fn run_scene(dir: &Path, scene: &str, potential: &str) -> Result<rovib::RunReport, Error> {
+pub(crate) fn run_scene(dir: &Path, scene: &str, potential: &str) -> Result<rovib::RunReport, Error> {
     let path = dir.join("scene.toml");
     std::fs::write(&path, format!("{scene}[potential]\n{potential}\n")).unwrap();
     rovib::simulation::run(&path, Some(&dir.join("out")))
 }
 
-fn file_error(r: Result<rovib::RunReport, Error>) -> rovib::runtime::diagnostic::FileError {
+/// The located error of a scene that must be refused.
+pub(crate) fn file_error(r: Result<rovib::RunReport, Error>) -> rovib::runtime::diagnostic::FileError {
     match r {
         Err(Error::File(e)) => e,
         Err(e) => panic!("not located: {e}"),
