@@ -6,12 +6,15 @@
 //! `--features surface-demos`; the Rust file also on lanes: kinematics lane-generic, potential
 //! one lane at a time), with ∂U/∂q by central differences of the compiled-in C, and a surface
 //! over Cartesian positions (a site–site Ar–N Lennard-Jones, `FromPositions`) against the same
-//! surface hand-written in (R, θ). Thread CPU time per evaluation, the contenders interleaved
+//! surface hand-written in (R, θ). With a second path, `tests/surfaces/co2ar_sites.c` loaded as a
+//! shared library over positions (`OnPositions`) on `co2ar` (2 coordinates, 4 atoms) against
+//! co2ar's generated expressions. Thread CPU time per evaluation, the contenders interleaved
 //! round by round; the median of 7 rounds of 8 states × 100 000 evaluations each (a round lasts tens of milliseconds: the thread CPU clock of /proc advances by scheduler ticks).
 //!
 //! ```sh
 //! gcc -O2 -shared -fPIC -I ffi/include -o /tmp/libarn2.so ffi/surfaces/arn2_spline.c -lm
-//! cargo run --release --features examples,surface-demos --example surface_cost -- /tmp/libarn2.so
+//! gcc -O2 -shared -fPIC -I ffi/include -o /tmp/libco2ar.so tests/surfaces/co2ar_sites.c -lm
+//! cargo run --release --features examples,surface-demos --example surface_cost -- /tmp/libarn2.so /tmp/libco2ar.so
 //! ```
 
 mod common;
@@ -20,7 +23,7 @@ use common::thread_cpu;
 use std::hint::black_box;
 use std::path::Path;
 
-use rovib::molecules::Arn2;
+use rovib::molecules::{Arn2, Co2ar};
 use rovib::runtime::Molecule;
 use rovib::runtime::finite_differences::CentralDifferences;
 use rovib::runtime::hamiltonian::PhaseState;
@@ -53,7 +56,7 @@ fn states() -> Vec<PhaseState<2>> {
 }
 
 /// Thread CPU time per scalar right-hand side, ns, over the states.
-fn scalar<M: Molecule<2, 3>>(m: &M) -> f64 {
+fn scalar<M: Molecule<2, NA>, const NA: usize>(m: &M) -> f64 {
     let mut total = 0.0;
     for s in &states() {
         let mut system = ReducedSystem::new(m, Reduction::none(), s);
@@ -148,8 +151,10 @@ impl Potential<2> for SiteSiteInternal {
 }
 
 fn main() {
-    let library =
-        std::env::args().nth(1).map(|path| SharedLibrary::load(Path::new(&path)).unwrap_or_else(|e| panic!("{e}")));
+    let load =
+        |k| std::env::args().nth(k).map(|path| SharedLibrary::load(Path::new(&path)).unwrap_or_else(|e| panic!("{e}")));
+    let library = load(1);
+    let positions_library = load(2);
     let mut contenders: Vec<Contender<'_>> = vec![
         ("generated expressions (f64)", Box::new(|| scalar(&Arn2))),
         ("generated expressions (F64x4, per trajectory)", Box::new(|| lanes(&Arn2))),
@@ -190,6 +195,14 @@ fn main() {
         contenders.push((
             "shared library (dlopen)",
             Box::new(move || scalar(&WithPotential { molecule: Arn2, potential: surface })),
+        ));
+    }
+    if let Some(library) = &positions_library {
+        let surface = library.positions_surface::<4>().unwrap_or_else(|e| panic!("{e}")).on(Co2ar);
+        contenders.push(("co2ar: generated expressions (f64)", Box::new(|| scalar(&Co2ar))));
+        contenders.push((
+            "co2ar: shared library over positions (dlopen, OnPositions)",
+            Box::new(move || scalar(&WithPotential { molecule: Co2ar, potential: surface })),
         ));
     }
     let mut rounds: Vec<Vec<f64>> = vec![Vec::new(); contenders.len()];

@@ -120,6 +120,7 @@ fn definition_sources() {
                 );
             }
         }
+        missing_functions(&s, &out_dir);
         let n = s.coordinates;
         let _ = writeln!(
             externs,
@@ -148,6 +149,42 @@ fn definition_sources() {
     }
     write_if_changed(&out_dir.join("compiled_raw.rs"), &externs);
     write_if_changed(&out_dir.join("compiled.rs"), &functions);
+}
+
+/// Stops the build with a located error if the sources of `s` (their static libraries, just
+/// built in `out_dir`) define neither `NAME_energy` nor `NAME_gradient`, or one of them: else
+/// the linker would fail later on the whole of rovib with an undefined symbol and no word of
+/// the definition. Archives without a symbol table are not checked.
+fn missing_functions(s: &rovib_codegen::external::CompiledSources, out_dir: &Path) {
+    let mut symbols = Vec::new();
+    for (language, (files, _)) in [("c", &s.c), ("cpp", &s.cpp), ("fortran", &s.fortran)] {
+        if files.is_empty() {
+            continue;
+        }
+        let archive = out_dir.join(format!("librovib_{}_{language}.a", s.molecule));
+        let Some(found) = std::fs::read(&archive).ok().and_then(|b| rovib_codegen::external::archive_symbols(&b))
+        else {
+            return;
+        };
+        symbols.extend(found);
+    }
+    let missing = s.missing_functions(&symbols);
+    if missing.is_empty() {
+        return;
+    }
+    let (key, line) = s.first_key();
+    let name = &s.molecule;
+    let list = missing.iter().map(|f| format!("`{f}`")).collect::<Vec<_>>().join(" and ");
+    eprintln!(
+        "error: the sources of `potential.{key}` define no function {list}, which rovib calls for molecule `{name}`\n  \
+         --> {}:{line}\n  = help: define `double {name}_energy(const double *q)` and `double {name}_gradient(const double *q, \
+         double *grad)` (C and C++: `double SURFACE(energy)(const double *q)` and `double SURFACE(gradient)(const double \
+         *q, double *grad)`, in C++ inside extern \"C\"; Fortran: bind(C, name=\"{name}_gradient\")); check the spelling \
+         (docs/src/howto/outside-surfaces.md)\n\nrovib: the potential of molecule `{name}` cannot be linked; fix the above \
+         and run cargo build again",
+        s.definition
+    );
+    std::process::exit(1);
 }
 
 fn write_if_changed(path: &Path, text: &str) {

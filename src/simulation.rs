@@ -243,7 +243,7 @@ impl MoleculeVisitor for Run<'_> {
     /// With the scene's `[potential] library` the molecule runs on that potential; with its
     /// `[potential.parameters]` on its own with them (the run-time path), else with its
     /// compiled-in constants.
-    fn visit<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+    fn visit<M: Molecule<N, NA> + Copy, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         if let Some(p) = self.potential {
             crate::memory::check_external(&m, p)?;
             return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: External(p) });

@@ -107,6 +107,54 @@ pub fn compiled_sources(dirs: &[&Path]) -> Vec<CompiledSources> {
     out
 }
 
+impl CompiledSources {
+    /// The functions rovib calls (`NAME_energy`, `NAME_gradient`) that none of `symbols` (the
+    /// names the compiled sources define, e.g. [`archive_symbols`]) is, in that order. A name
+    /// with a leading `_` (the C names on macOS) counts as the name.
+    pub fn missing_functions(&self, symbols: &[String]) -> Vec<String> {
+        ["energy", "gradient"]
+            .iter()
+            .map(|f| format!("{}_{f}", self.molecule))
+            .filter(|f| !symbols.iter().any(|s| s == f || s.strip_prefix('_') == Some(f.as_str())))
+            .collect()
+    }
+
+    /// The key (`c`, `cpp`, `fortran`) and line of the first list that names files.
+    pub fn first_key(&self) -> (&'static str, usize) {
+        [("c", &self.c), ("cpp", &self.cpp), ("fortran", &self.fortran)]
+            .into_iter()
+            .find(|(_, (files, _))| !files.is_empty())
+            .map_or(("c", 0), |(key, (_, line))| (key, *line))
+    }
+}
+
+/// The global names a static library (an `ar` archive) defines, from its symbol table (the
+/// GNU / System V `/` or `/SYM64/` member, which `ar` writes by default and the `cc` crate
+/// always asks for); `None` if the bytes are not such an archive or have no such table (a
+/// BSD-style archive: then nothing is checked and a missing function is left to the linker).
+pub fn archive_symbols(bytes: &[u8]) -> Option<Vec<String>> {
+    let rest = bytes.strip_prefix(b"!<arch>\n")?;
+    // The first member's 60-byte header: name (16), date, uid, gid, mode, size (10), "`\n".
+    let header = rest.get(..60)?;
+    let name = std::str::from_utf8(&header[..16]).ok()?.trim_end();
+    let size: usize = std::str::from_utf8(&header[48..58]).ok()?.trim().parse().ok()?;
+    let table = rest.get(60..60 + size)?;
+    let width = match name {
+        "/" => 4,
+        "/SYM64/" => 8,
+        _ => return None,
+    };
+    let number = |at: usize| -> Option<usize> {
+        let b = table.get(at..at + width)?;
+        usize::try_from(b.iter().fold(0u64, |n, &x| (n << 8) | u64::from(x))).ok()
+    };
+    let count = number(0)?;
+    let names = table.get(width.checked_mul(count.checked_add(1)?)?..)?;
+    let symbols: Vec<String> =
+        names.split(|&b| b == 0).filter(|n| !n.is_empty()).map(|n| String::from_utf8_lossy(n).into_owned()).collect();
+    (symbols.len() == count).then_some(symbols)
+}
+
 /// The generated items of a potential from source files: a module (the Rust file) before the
 /// `impl`, and the `potential`, `potential_gradient` and (with `lanes`) lane-by-lane
 /// `potential_gradient_lanes` methods that call it.
@@ -234,6 +282,54 @@ mod tests {
         let Err(mut e) = parse_definition_in("pair.toml", &text, Some(dir())) else { panic!("cm-1 accepted") };
         let e = e.remove(0);
         assert!(e.message.contains("in hartree"), "{e:?}");
+    }
+
+    /// Compiles `source` with gcc into an object and archives it with `ar` in a fresh `dir`.
+    fn archive(dir: &str, source: &str) -> Vec<u8> {
+        use std::process::Command;
+        let dir = std::env::temp_dir().join(format!("rovib-codegen-archive-{dir}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("s.c"), source).unwrap();
+        let ok = |c: &mut Command| assert!(c.current_dir(&dir).status().expect("this test needs gcc and ar").success());
+        ok(Command::new("gcc").args(["-c", "-fPIC", "-o", "s.o", "s.c"]));
+        ok(Command::new("ar").args(["crs", "libs.a", "s.o"]));
+        let bytes = std::fs::read(dir.join("libs.a")).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        bytes
+    }
+
+    #[test]
+    fn a_misspelt_function_of_the_compiled_sources_is_found_before_linking() {
+        let sources = super::CompiledSources {
+            molecule: "pair".into(),
+            definition: "pair.toml".into(),
+            coordinates: 1,
+            c: (vec!["s.c".into()], 9),
+            cpp: (Vec::new(), 0),
+            fortran: (Vec::new(), 0),
+        };
+        assert_eq!(sources.first_key(), ("c", 9));
+        let good = archive(
+            "good",
+            "static double half(double x) { return 0.5 * x; }\n\
+             double pair_energy(const double *q) { return half(q[0]); }\n\
+             double pair_gradient(const double *q, double *g) { g[0] = 0.5; return half(q[0]); }\n",
+        );
+        let symbols = super::archive_symbols(&good).expect("a GNU archive has a symbol table");
+        assert!(symbols.contains(&"pair_energy".to_owned()) && !symbols.contains(&"half".to_owned()), "{symbols:?}");
+        assert!(sources.missing_functions(&symbols).is_empty());
+        let misspelt = archive(
+            "misspelt",
+            "double pair_energy(const double *q) { return q[0]; }\n\
+             double pair_gradeint(const double *q, double *g) { g[0] = 1; return q[0]; }\n\
+             double use_missing(const double *q) { extern double pair_gradient(const double *, double *); \
+             double g[1]; return pair_gradient(q, g); }\n",
+        );
+        let symbols = super::archive_symbols(&misspelt).unwrap();
+        assert_eq!(sources.missing_functions(&symbols), vec!["pair_gradient".to_owned()], "{symbols:?}");
+        assert_eq!(super::archive_symbols(b"not an archive"), None);
+        assert_eq!(super::archive_symbols(&good[..70]), None);
     }
 
     #[test]

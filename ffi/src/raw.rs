@@ -17,7 +17,9 @@ type EnergyFn = unsafe extern "C" fn(*const f64) -> f64;
 type GradientFn = unsafe extern "C" fn(*const f64, *mut f64) -> f64;
 type DipoleFn = unsafe extern "C" fn(*const f64, *mut f64);
 
-/// A surface's functions, for `coordinates` coordinates.
+/// A surface's functions, for `coordinates` input values: the internal coordinates, or the
+/// 3·NA Cartesian components of NA atoms' positions (atom `i`'s x, y, z at `3i`, `3i + 1`,
+/// `3i + 2`).
 #[derive(Copy, Clone, Debug)]
 pub(crate) struct Functions {
     pub coordinates: usize,
@@ -60,7 +62,8 @@ impl Functions {
         true
     }
 
-    /// ∂μ/∂q into `dmu` (3 × coordinates, column k = ∂μ/∂q_k); `false` without a dipole.
+    /// ∂μ/∂q into `dmu` (3 × coordinates, column k = ∂μ/∂q_k; over positions, column 3i + c
+    /// is ∂μ/∂x_ic); `false` without a dipole.
     pub fn dipole_jacobian(&self, q: &[f64], dmu: &mut [f64]) -> bool {
         assert!(q.len() == self.coordinates && dmu.len() == 3 * self.coordinates, "3 values per coordinate");
         let Some((_, f)) = self.dipole else { return false };
@@ -74,16 +77,50 @@ impl Functions {
 #[derive(Debug)]
 pub(crate) struct Loaded {
     functions: Functions,
+    /// `Some(NA)`: the functions take the positions of NA atoms (`functions.coordinates` is
+    /// 3·NA); `None`: they take the internal coordinates.
+    atoms: Option<usize>,
     // Dropped last: unloads the library.
     _library: libloading::Library,
 }
+
+/// The function names of one form of the ABI: over internal coordinates, or over positions.
+struct Names {
+    count: &'static str,
+    energy: &'static str,
+    gradient: &'static str,
+    dipole: &'static str,
+    dipole_jacobian: &'static str,
+}
+
+const COORDINATE_NAMES: Names = Names {
+    count: "rovib_surface_coordinates",
+    energy: "rovib_surface_energy",
+    gradient: "rovib_surface_gradient",
+    dipole: "rovib_surface_dipole",
+    dipole_jacobian: "rovib_surface_dipole_jacobian",
+};
+
+const POSITION_NAMES: Names = Names {
+    count: "rovib_surface_atoms",
+    energy: "rovib_surface_positions_energy",
+    gradient: "rovib_surface_positions_gradient",
+    dipole: "rovib_surface_positions_dipole",
+    dipole_jacobian: "rovib_surface_positions_dipole_jacobian",
+};
 
 impl Loaded {
     pub fn functions(&self) -> &Functions {
         &self.functions
     }
 
-    /// Loads `path`, checks its ABI version and coordinate count, and calls its init function.
+    /// The number of atoms of a surface over positions; `None` for one over coordinates.
+    pub fn atoms(&self) -> Option<usize> {
+        self.atoms
+    }
+
+    /// Loads `path`, checks its ABI version, which form it has (coordinates or positions) and
+    /// its count, and calls its init function.
     pub fn load(path: &Path) -> Result<Self, SurfaceError> {
         let shown = path.display().to_string();
         // SAFETY: loading runs the library's initialisers; the user named this library as a
@@ -92,6 +129,7 @@ impl Loaded {
             .map_err(|e| SurfaceError::Load { source_name: shown.clone(), message: e.to_string() })?;
         let missing = |symbol: &'static str| SurfaceError::Missing { source_name: shown.clone(), symbol };
         // SAFETY (each `get`): the types are the prototypes of rovib_surface.h.
+        let has = |name: &str| unsafe { library.get::<CountFn>(name.as_bytes()) }.is_ok();
         let count = |name: &'static str| -> Result<c_int, SurfaceError> {
             let f = unsafe { library.get::<CountFn>(name.as_bytes()) }.map_err(|_| missing(name))?;
             // SAFETY: takes no arguments.
@@ -101,30 +139,46 @@ impl Loaded {
         if abi != crate::ABI_VERSION {
             return Err(SurfaceError::Abi { source_name: shown, found: abi });
         }
-        let coordinates = count("rovib_surface_coordinates")?;
-        let coordinates = usize::try_from(coordinates)
-            .map_err(|_| SurfaceError::BadCount { source_name: shown.clone(), found: coordinates })?;
-        let energy = *unsafe { library.get::<EnergyFn>(b"rovib_surface_energy") }
-            .map_err(|_| missing("rovib_surface_energy"))?;
+        let (names, other) = match (has(COORDINATE_NAMES.energy), has(POSITION_NAMES.energy)) {
+            (true, false) => (&COORDINATE_NAMES, &POSITION_NAMES),
+            (false, true) => (&POSITION_NAMES, &COORDINATE_NAMES),
+            (true, true) => return Err(SurfaceError::BothForms { source_name: shown }),
+            (false, false) => return Err(SurfaceError::NoForm { source_name: shown }),
+        };
+        // A function of the other form would be silently unused: refused.
+        for symbol in [other.count, other.gradient, other.dipole, other.dipole_jacobian] {
+            if has(symbol) {
+                return Err(SurfaceError::Mixed { source_name: shown, symbol, energy: names.energy });
+            }
+        }
+        let found = count(names.count)?;
+        let count = usize::try_from(found).ok().filter(|&n| n > 0).ok_or_else(|| SurfaceError::BadCount {
+            source_name: shown.clone(),
+            function: names.count,
+            found,
+        })?;
+        let (coordinates, atoms) =
+            if names.count == POSITION_NAMES.count { (3 * count, Some(count)) } else { (count, None) };
+        let energy = *unsafe { library.get::<EnergyFn>(names.energy.as_bytes()) }.map_err(|_| missing(names.energy))?;
         // Optional: without it, ∂U/∂q is taken by central differences of the energy.
-        let gradient = unsafe { library.get::<GradientFn>(b"rovib_surface_gradient") }.ok().map(|s| *s);
-        let mu = unsafe { library.get::<DipoleFn>(b"rovib_surface_dipole") }.ok().map(|s| *s);
-        let dmu = unsafe { library.get::<DipoleFn>(b"rovib_surface_dipole_jacobian") }.ok().map(|s| *s);
+        let gradient = unsafe { library.get::<GradientFn>(names.gradient.as_bytes()) }.ok().map(|s| *s);
+        let mu = unsafe { library.get::<DipoleFn>(names.dipole.as_bytes()) }.ok().map(|s| *s);
+        let dmu = unsafe { library.get::<DipoleFn>(names.dipole_jacobian.as_bytes()) }.ok().map(|s| *s);
         let dipole = match (mu, dmu) {
             (Some(a), Some(b)) => Some((a, b)),
             (None, None) => None,
             (Some(_), None) => {
                 return Err(SurfaceError::HalfDipole {
                     source_name: shown,
-                    present: "rovib_surface_dipole",
-                    missing: "rovib_surface_dipole_jacobian",
+                    present: names.dipole,
+                    missing: names.dipole_jacobian,
                 });
             }
             (None, Some(_)) => {
                 return Err(SurfaceError::HalfDipole {
                     source_name: shown,
-                    present: "rovib_surface_dipole_jacobian",
-                    missing: "rovib_surface_dipole",
+                    present: names.dipole_jacobian,
+                    missing: names.dipole,
                 });
             }
         };
@@ -135,7 +189,7 @@ impl Loaded {
                 return Err(SurfaceError::Init { source_name: shown, code });
             }
         }
-        Ok(Self { functions: Functions { coordinates, energy, gradient, dipole }, _library: library })
+        Ok(Self { functions: Functions { coordinates, energy, gradient, dipole }, atoms, _library: library })
     }
 }
 

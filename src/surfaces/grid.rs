@@ -13,37 +13,8 @@ use crate::runtime::grid::{BindError, GridFile, GridPotential, Outside, parse};
 use crate::runtime::integrate::SolveError;
 use crate::runtime::molecule::Molecule;
 use crate::runtime::nalgebra::SVector;
-use crate::runtime::surface::{Dipole, GradientCheck, Potential, check_gradient};
+use crate::runtime::surface::{GradientCheck, check_gradient};
 use crate::scene::Scene;
-
-/// The potential a scene puts in place of the molecule's: a shared library's or a grid's.
-pub enum ScenePotential<const N: usize> {
-    /// `[potential] library`.
-    Library(rovib_ffi::Surface<'static, N>),
-    /// `[potential] grid`.
-    Grid(GridPotential<N>),
-}
-
-impl<const N: usize> Potential<N> for ScenePotential<N> {
-    fn energy(&self, q: &SVector<f64, N>) -> f64 {
-        match self {
-            Self::Library(s) => s.energy(q),
-            Self::Grid(g) => g.energy(q),
-        }
-    }
-    fn energy_gradient(&self, q: &SVector<f64, N>, grad: &mut SVector<f64, N>) -> f64 {
-        match self {
-            Self::Library(s) => s.energy_gradient(q, grad),
-            Self::Grid(g) => g.energy_gradient(q, grad),
-        }
-    }
-    fn dipole_part(&self) -> Option<&dyn Dipole<N>> {
-        match self {
-            Self::Library(s) => s.dipole_part(),
-            Self::Grid(g) => g.dipole_part(),
-        }
-    }
-}
 
 /// The checked `grid` and `outside` keys of a scene's `[potential]`.
 #[derive(Clone, Debug)]

@@ -7,19 +7,25 @@
 //! central differences gives trajectories close to the analytic gradient's (the error is
 //! measured and bounded); a library without a gradient function is refused unless the scene
 //! asks for central differences, and then runs and says so.
+//!
+//! A shared library over positions (`tests/surfaces/co2ar_sites.c`, compiled here with gcc):
+//! molecules/co2ar.toml's site–site surface and dipole over the atoms' positions, composed with
+//! R(q), equals the definition's pointwise and gives its trajectories to 1e-12 bohr, directly
+//! and from a scene; a surface that is not rotation-invariant, a wrong gradient and a wrong
+//! atom count are refused with located errors.
 
 use std::path::Path;
 use std::process::Command;
 
-use rovib::molecules::Arn2;
+use rovib::molecules::{Arn2, Co2ar};
 use rovib::runtime::Molecule;
 use rovib::runtime::finite_differences::CentralDifferences;
-use rovib::runtime::nalgebra::{SMatrix, SVector};
+use rovib::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use rovib::runtime::position_surface::{CartesianPotential, FromPositions, add_pair_terms, check_rotation_invariance};
 use rovib::runtime::surface::{Potential, WithPotential};
-use rovib_ffi::builtin;
+use rovib_ffi::{SharedLibrary, builtin};
 
-use crate::surfaces::{max_q_difference, trajectory};
+use crate::surfaces::{file_error, max_q_difference, run_scene, trajectory};
 
 /// The N–N bond of molecules/arn2.toml, bohr.
 const RNN: f64 = 2.0744;
@@ -154,4 +160,110 @@ fn a_library_without_a_gradient_runs_on_central_differences_only_when_asked() {
     );
     let summary = std::fs::read_to_string(dir.join("out/summary.json")).unwrap();
     assert!(summary.contains("central differences"), "{summary}");
+}
+
+const SITES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/surfaces/co2ar_sites.c");
+
+/// Compiles `co2ar_sites.c` with `defines` into `dir/libco2ar.so` with gcc (a fresh directory
+/// per test: `dir` is emptied first).
+fn sites_library(name: &str, defines: &[&str]) -> std::path::PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-position-library-{name}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let status = Command::new("gcc")
+        .args(["-O2", "-shared", "-fPIC", "-I"])
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/ffi/include"))
+        .arg("-o")
+        .arg(dir.join("libco2ar.so"))
+        .arg(SITES)
+        .args(defines)
+        .arg("-lm")
+        .status()
+        .expect("this test needs gcc");
+    assert!(status.success(), "gcc failed on {SITES}");
+    dir
+}
+
+#[test]
+fn a_library_over_positions_is_the_definitions_surface_and_gives_its_trajectory() {
+    let dir = sites_library("pointwise", &[]);
+    let library = SharedLibrary::load(&dir.join("libco2ar.so")).unwrap();
+    assert_eq!((library.atoms(), library.coordinates(), library.has_dipole()), (Some(4), None, true));
+    let surface = library.positions_surface::<4>().unwrap().on(Co2ar);
+    assert!(!surface.central_differences());
+    for r in [5.0, 6.6, 8.0, 11.0] {
+        for theta in [0.0, 0.4, 1.3, std::f64::consts::FRAC_PI_2, 2.5, std::f64::consts::PI] {
+            let q = SVector::from([r, theta]);
+            let (mut g1, mut g2) = (SVector::zeros(), SVector::zeros());
+            let (u1, u2) = (surface.energy_gradient(&q, &mut g1), Co2ar.potential_gradient(&q, &mut g2));
+            assert!((u1 - u2).abs() <= 1e-14 * u2.abs().max(1e-6), "U at {q:?}: {u1:e} vs {u2:e}");
+            assert!((g1 - g2).norm() <= 1e-13 * g2.norm().max(1e-6), "∂U/∂q at {q:?}: {g1:?} vs {g2:?}");
+            let composed = WithPotential { molecule: Co2ar, potential: surface };
+            let (mut m1, mut m2) = (Vector3::zeros(), Vector3::zeros());
+            composed.dipole(&q, &mut m1);
+            Co2ar.dipole(&q, &mut m2);
+            assert!((m1 - m2).norm() <= 1e-13 * m2.norm().max(1e-9), "μ at {q:?}: {m1:?} vs {m2:?}");
+            let (mut d1, mut d2) = (SMatrix::<f64, 3, 2>::zeros(), SMatrix::<f64, 3, 2>::zeros());
+            composed.dipole_jacobian(&q, &mut d1);
+            Co2ar.dipole_jacobian(&q, &mut d2);
+            assert!((d1 - d2).norm() <= 1e-12 * d2.norm().max(1e-9), "∂μ/∂q at {q:?}: {d1:?} vs {d2:?}");
+        }
+    }
+    let a = trajectory(&WithPotential { molecule: Co2ar, potential: surface });
+    let b = trajectory(&Co2ar);
+    let (first, last) = (&b[0], &b[40]);
+    assert!((first[0] - last[0]).abs() > 0.05, "the trajectory moves: {first:?} {last:?}");
+    let d = max_q_difference(&a, &b);
+    eprintln!("max |Δq| library over positions vs definition (co2ar): {d:e}");
+    assert!(d <= 1e-12, "{d:e}");
+}
+
+const CO2AR_SCENE: &str = "molecule = \"co2ar\"\n\
+[units]\nangle = \"deg\"\n\
+[initial]\nq = { R = 6.9, theta = 80 }\np = { R = 0, theta = 1.5 }\n\
+[integrator]\nmethod = \"dop853\"\nrtol = 1e-12\natol = 1e-12\n\
+[run]\nend = 2000\noutput_interval = 100\n";
+
+#[test]
+fn a_scene_runs_on_a_library_over_positions() {
+    let dir = sites_library("scene", &[]);
+    run_scene(&dir, CO2AR_SCENE, "library = \"libco2ar.so\"").unwrap();
+    let with_library = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
+    let plain = sites_library("scene-plain", &[]);
+    let path = plain.join("scene.toml");
+    std::fs::write(&path, CO2AR_SCENE).unwrap();
+    rovib::simulation::run(&path, Some(&plain.join("out"))).unwrap();
+    let generated = std::fs::read_to_string(plain.join("out/trajectory.csv")).unwrap();
+    let rows = |s: &str| s.lines().map(|l| l.split(',').map(str::to_owned).collect::<Vec<_>>()).collect::<Vec<_>>();
+    let (a, b) = (rows(&with_library), rows(&generated));
+    assert!(a.len() > 10 && a.len() == b.len() && a[0] == b[0]);
+    for (x, y) in a.iter().zip(&b).skip(1) {
+        for (u, v) in x.iter().zip(y) {
+            let (u, v): (f64, f64) = (u.parse().unwrap(), v.parse().unwrap());
+            assert!((u - v).abs() <= 1e-9 * v.abs().max(1.0), "{x:?}\n{y:?}");
+        }
+    }
+}
+
+#[test]
+fn a_library_over_positions_is_checked_at_load() {
+    let line = CO2AR_SCENE.lines().count() + 2;
+    // An external field along z: U changes when the atoms are turned.
+    let dir = sites_library("field", &["-DCO2AR_FIELD"]);
+    let e = file_error(run_scene(&dir, CO2AR_SCENE, "library = \"libco2ar.so\""));
+    assert!(e.line == line && e.message.contains("not invariant under a rotation"), "{e}");
+    assert!(e.message.contains("libco2ar.so") && e.help.contains("turned"), "{e}");
+    // A gradient off by one part in 10⁴ (the check's tolerance is 1e-5 relative).
+    let dir = sites_library("gradient", &["-DCO2AR_GRADIENT_SCALE=1.0001"]);
+    let e = file_error(run_scene(&dir, CO2AR_SCENE, "library = \"libco2ar.so\""));
+    assert!(e.line == line && e.message.contains("disagrees with its energy"), "{e}");
+    assert!(e.help.contains("rovib_surface_positions_gradient"), "{e}");
+    // Four atoms for a molecule of three, and a surface over positions asked for over coordinates.
+    let dir = sites_library("atoms", &[]);
+    let arn2 = CO2AR_SCENE.replace("co2ar", "arn2");
+    let e = file_error(run_scene(&dir, &arn2, "library = \"libco2ar.so\""));
+    assert!(e.line == line && e.message.contains("positions of 4 atoms, but the molecule has 3"), "{e}");
+    assert!(e.help.contains("N1, N2, Ar"), "{e}");
+    let library = SharedLibrary::load(&dir.join("libco2ar.so")).unwrap();
+    assert!(matches!(library.surface::<2>(), Err(rovib_ffi::SurfaceError::Form { .. })));
 }

@@ -54,7 +54,7 @@ fn start() -> PhaseState<2> {
 }
 
 /// The states at 40 output times over 20 000 a.u. (0.48 ps), DOP853 at tolerance 1e-12.
-pub(crate) fn trajectory<M: Molecule<2, 3>>(m: &M) -> Vec<Vec<f64>> {
+pub(crate) fn trajectory<M: Molecule<2, NA>, const NA: usize>(m: &M) -> Vec<Vec<f64>> {
     let s = start();
     let mut system = ReducedSystem::new(m, Reduction::none(), &s);
     let mut y0 = vec![0.0; system.dim()];
@@ -107,7 +107,7 @@ fn the_c_surface_is_the_definitions_surface_pointwise() {
 fn compiled_in_loaded_and_generated_surfaces_give_the_same_trajectory() {
     let dir = tmp("trajectory");
     let library = SharedLibrary::load(&shared_library(&dir, &[])).unwrap();
-    assert_eq!((library.coordinates(), library.has_dipole()), (2, true));
+    assert_eq!((library.coordinates(), library.has_dipole()), (Some(2), true));
     let loaded = library.surface::<2>().unwrap();
     let generated = trajectory(&Arn2);
     let compiled_in = trajectory(&WithPotential { molecule: Arn2, potential: builtin::arn2_spline() });
@@ -247,5 +247,83 @@ fn an_ensemble_on_a_library_runs_one_trajectory_at_a_time_and_says_so() {
     for k in 0..5 {
         let (a, b) = (with_library.mean("R", k).unwrap().0, generated.mean("R", k).unwrap().0);
         assert!((a - b).abs() < 1e-9, "mean R at output {k}: {a} vs {b}");
+    }
+}
+
+/// Compiles the C `source` (with rovib_surface.h included first) into `dir/libbad.so`.
+fn library_from(dir: &Path, source: &str) {
+    let file = dir.join("bad.c");
+    std::fs::write(&file, format!("#include \"rovib_surface.h\"\n{source}\n")).unwrap();
+    let status = Command::new("gcc")
+        .args(["-O2", "-shared", "-fPIC", "-I", INCLUDE, "-o"])
+        .arg(dir.join("libbad.so"))
+        .arg(&file)
+        .status()
+        .expect("these tests need gcc");
+    assert!(status.success(), "gcc failed on {source}");
+}
+
+#[test]
+fn every_load_failure_is_located_at_the_library_line_and_says_what_to_change() {
+    const ABI: &str = "int rovib_surface_abi(void) { return ROVIB_SURFACE_ABI; }\n";
+    const COUNT: &str = "int rovib_surface_coordinates(void) { return 2; }\n";
+    const ENERGY: &str = "double rovib_surface_energy(const double *q) { return q[0]; }\n\
+                          double rovib_surface_gradient(const double *q, double *g) { g[0] = 1; g[1] = 0; return q[0]; }\n";
+    const POSITIONS: &str = "int rovib_surface_atoms(void) { return 3; }\n\
+                             double rovib_surface_positions_energy(const double *x) { return 0; }\n";
+    let line = SCENE.lines().count() + 2;
+    // (library source, what the message must say, what the help must say)
+    let cases: [(String, &str, &str); 9] = [
+        (
+            format!("{COUNT}{ENERGY}"),
+            "no function `rovib_surface_abi`",
+            "int rovib_surface_abi(void) { return ROVIB_SURFACE_ABI; }",
+        ),
+        (
+            format!("int rovib_surface_abi(void) {{ return 7; }}\n{COUNT}{ENERGY}"),
+            "built for surface ABI 7; this rovib reads ABI 1",
+            "ROVIB_SURFACE_ABI (1)",
+        ),
+        (format!("{ABI}{ENERGY}"), "no function `rovib_surface_coordinates`", "int rovib_surface_coordinates(void)"),
+        (
+            format!("{ABI}int rovib_surface_coordinates(void) {{ return -2; }}\n{ENERGY}"),
+            "rovib_surface_coordinates() returned -2",
+            "return the number",
+        ),
+        (
+            format!("{ABI}{COUNT}"),
+            "has neither `rovib_surface_energy`",
+            "double rovib_surface_positions_energy(const double *x)",
+        ),
+        (
+            format!("{ABI}{COUNT}{ENERGY}{POSITIONS}"),
+            "has both `rovib_surface_energy` and `rovib_surface_positions_energy`",
+            "keep one",
+        ),
+        (
+            format!("{ABI}{ENERGY}{POSITIONS}").replace("rovib_surface_energy", "e"),
+            "has `rovib_surface_gradient`, which does not go with its energy `rovib_surface_positions_energy`",
+            "remove `rovib_surface_gradient`",
+        ),
+        (
+            format!("{ABI}{COUNT}{ENERGY}int rovib_surface_init(void) {{ return 3; }}\n"),
+            "did not start: rovib_surface_init() returned 3",
+            "what its init code means",
+        ),
+        (
+            format!("{ABI}{COUNT}{ENERGY}void rovib_surface_dipole(const double *q, double *mu) {{}}\n"),
+            "has `rovib_surface_dipole` but not `rovib_surface_dipole_jacobian`",
+            "void rovib_surface_dipole_jacobian(const double *q, double *dmu)",
+        ),
+    ];
+    for (k, (source, message, help)) in cases.iter().enumerate() {
+        let dir = tmp(&format!("load-failure-{k}"));
+        library_from(&dir, source);
+        let e = file_error(run_scene(&dir, SCENE, "library = \"libbad.so\""));
+        assert_eq!(e.line, line, "{e}");
+        assert!(e.path.ends_with("scene.toml"), "{e}");
+        assert!(e.message.contains(message) && e.message.contains("libbad.so"), "case {k}: {e}");
+        assert!(e.help.contains(help), "case {k}: {e}");
+        assert!(!dir.join("out/trajectory.csv").exists());
     }
 }
