@@ -322,33 +322,38 @@ impl Run<'_> {
         let Run { scene, out_dir, stop, progress, resume, tap, .. } = self;
         let mut recorder = Recorder::<M, N, NA> {
             system: begin.system,
-            writers,
-            diagnostics: scene.outputs.summary || scene.outputs.restart || in_memory,
-            conservation: resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
-            initial_energy: resume.and_then(|r| r.conservation.initial_energy),
-            max_energy_error: scene.max_energy_error,
             layout: layout.clone(),
             time_scale: scene.time_unit.in_au(),
             time_unit: scene.time_unit.name(),
             com: begin.com,
-            progress,
-            total: (scene.t_end / scene.output_interval).ceil() as u64 + 1,
-            stop,
-            interrupted: false,
+            outputs: Outputs {
+                files: writers,
+                // Rebuilt so that the sink's borrow shortens to the recorder's.
+                tap: tap.map(|t| Tap { sink: t.sink, lab: t.lab, dipole: t.dipole }),
+            },
+            guard: EnergyGuard {
+                diagnostics: scene.outputs.summary || scene.outputs.restart || in_memory,
+                conservation: resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
+                initial_energy: resume.and_then(|r| r.conservation.initial_energy),
+                max_energy_error: scene.max_energy_error,
+            },
+            stops: Stops { flag: stop, interrupted: false, outside: stops, met: None },
+            count: Count {
+                progress,
+                total: (scene.t_end / scene.output_interval).ceil() as u64 + 1,
+                records,
+                // A fixed-step continuation starts the solver at the last output time, which the
+                // first run already wrote.
+                skip_first: resume.is_some() && !dop853_continues(scene, resume),
+            },
+            last: LastOutput {
+                y: begin.y0.clone(),
+                y_valid: true,
+                q: begin.body.q,
+                cartesian: CartesianSystem::new(&m).ok(),
+            },
             t_reached: None,
             error: None,
-            // A fixed-step continuation starts the solver at the last output time, which the
-            // first run already wrote.
-            skip_first: resume.is_some() && !dop853_continues(scene, resume),
-            records,
-            last_y: begin.y0.clone(),
-            last_y_valid: true,
-            last_q: begin.body.q,
-            cartesian: CartesianSystem::new(&m).ok(),
-            stops,
-            stopped: None,
-            // Rebuilt so that the sink's borrow shortens to the recorder's.
-            tap: tap.map(|t| Tap { sink: t.sink, lab: t.lab, dipole: t.dipole }),
         };
         let integrated = integrate_run(scene, resume, &begin, &mut recorder);
         Finish { scene, out_dir, resume }.finish(&m, begin, recorder, integrated, &layout, warnings)
@@ -469,8 +474,8 @@ impl Finish<'_> {
             }
         };
         let failure = failure.or_else(|| flushed.err().map(|e| format!("the run stopped: {e}")));
-        let interrupted = recorder.interrupted && failure.is_none();
-        let stopped = recorder.stopped.take().filter(|_| failure.is_none());
+        let interrupted = recorder.stops.interrupted && failure.is_none();
+        let stopped = recorder.stops.met.take().filter(|_| failure.is_none());
         let t_reached = recorder.t_reached.map(|t| t / scene.time_unit.in_au());
         let mut files: Vec<PathBuf> = Vec::new();
         if scene.outputs.trajectory {
@@ -494,7 +499,7 @@ impl Finish<'_> {
                 Err(e) => summary_error = Some(e.to_string()),
             }
         }
-        let in_memory = recorder.tap.is_some();
+        let in_memory = recorder.outputs.tap.is_some();
         if scene.outputs.summary || in_memory {
             let summary = RunSummary {
                 scene,
@@ -508,14 +513,14 @@ impl Finish<'_> {
                 stats,
                 rhs_evaluations: evaluations,
                 wall_time,
-                conservation: &recorder.conservation,
+                conservation: &recorder.guard.conservation,
                 com_position: begin.com.0,
                 com_velocity: begin.com.1,
                 resumed_from: self.resume.map(|r| r.t),
                 warnings: &warnings,
                 charts: chart_report.is_some().then(|| charts_json(chart_report.as_ref(), scene)),
             };
-            match &mut recorder.tap {
+            match &mut recorder.outputs.tap {
                 Some(tap) if failure.is_none() => tap.sink.summary(&summary.to_json()),
                 Some(_) => {}
                 None => match write_summary(self.out_dir, &summary.to_json()) {
@@ -564,7 +569,7 @@ impl Finish<'_> {
             out_dir: self.out_dir.to_owned(),
             files,
             stats,
-            conservation: recorder.conservation,
+            conservation: recorder.guard.conservation,
             wall_time,
             warnings,
             stopped,
@@ -824,48 +829,90 @@ fn layout<M: Molecule<N, NA>, const N: usize, const NA: usize>(r: &Reduction<N>,
 struct Recorder<'m, M, const N: usize, const NA: usize> {
     /// A copy of the integrated system, to expand states and evaluate H at output times.
     system: ReducedSystem<'m, M, N, NA>,
-    writers: Writers,
-    diagnostics: bool,
-    conservation: Conservation,
-    /// H at the first output time, for the energy guard.
-    initial_energy: Option<f64>,
-    /// The relative energy error at which the run stops.
-    max_energy_error: f64,
     /// The flat layout, for messages.
     layout: String,
     time_scale: f64,
     time_unit: &'static str,
     com: (Vector3<f64>, Vector3<f64>),
+    /// Where the records go.
+    outputs: Outputs<'m>,
+    guard: EnergyGuard,
+    stops: Stops<'m>,
+    count: Count<'m>,
+    last: LastOutput<'m, M, N, NA>,
+    /// The last output time recorded, a.u.
+    t_reached: Option<f64>,
+    error: Option<String>,
+}
+
+/// Where the records go: the files written as the run goes, and the records of a run in memory.
+struct Outputs<'m> {
+    files: Writers,
+    tap: Option<Tap<'m>>,
+}
+
+/// The conservation diagnostics and the guard against a run that has gone unstable.
+struct EnergyGuard {
+    /// Whether to accumulate the diagnostics (for the summary, the restart file or a run in memory).
+    diagnostics: bool,
+    conservation: Conservation,
+    /// H at the first output time, for the guard.
+    initial_energy: Option<f64>,
+    /// The relative energy error at which the run stops.
+    max_energy_error: f64,
+}
+
+/// What ends a run between output records: the caller's stop flag and `run.stop_outside`.
+struct Stops<'m> {
+    /// The caller's stop flag, polled after each output record, so the run stops between records.
+    flag: &'m AtomicBool,
+    /// Whether the run stopped on `flag`.
+    interrupted: bool,
+    /// `run.stop_outside`: coordinate index, name, bounds in atomic units.
+    outside: Vec<StopCondition>,
+    /// The stop condition met, for summary.json.
+    met: Option<serde_json::Value>,
+}
+
+/// The output records: how many so far and in the whole run, reported to the progress callback.
+struct Count<'m> {
     /// Called after each output record.
     progress: &'m mut dyn FnMut(Progress),
     /// Output records of the whole run (the progress total).
     total: u64,
-    /// The caller's stop flag, polled after each output record, so the run stops between records.
-    stop: &'m AtomicBool,
-    /// Whether the run stopped on `stop`.
-    interrupted: bool,
-    /// The last output time recorded, a.u.
-    t_reached: Option<f64>,
-    error: Option<String>,
-    /// Whether to pass over the first call (a continuation's start, already written).
-    skip_first: bool,
     /// Output records in the files so far (the next one is number `records` of the grid).
     records: u64,
+    /// Whether to pass over the first call (a continuation's start, already written).
+    skip_first: bool,
+}
+
+/// The state at the last output recorded, in the internal chart (for the restart file), and the
+/// Cartesian chart that states near a linear geometry arrive in.
+struct LastOutput<'m, M, const N: usize, const NA: usize> {
     /// The flat state (internal chart) at the last output recorded.
-    last_y: Vec<f64>,
-    /// Whether `last_y` is the last output's state (not so after an output at an exactly
-    /// linear geometry, which the internal chart cannot hold).
-    last_y_valid: bool,
+    y: Vec<f64>,
+    /// Whether `y` is the last output's state (not so after an output at an exactly linear
+    /// geometry, which the internal chart cannot hold).
+    y_valid: bool,
     /// q at the last output recorded (the branch for closed-form angles).
-    last_q: SVector<f64, N>,
+    q: SVector<f64, N>,
     /// The Cartesian chart, if the molecule has one (states the chart switch hands over).
     cartesian: Option<CartesianSystem<'m, M, N, NA>>,
-    /// `run.stop_outside`: coordinate index, name, bounds in atomic units.
-    stops: Vec<StopCondition>,
-    /// The stop condition met, for summary.json.
-    stopped: Option<serde_json::Value>,
-    /// Where the records go in a run in memory.
-    tap: Option<Tap<'m>>,
+}
+
+impl Writers {
+    fn flush(&mut self) -> Result<(), Error> {
+        if let Some(csv) = &mut self.trajectory {
+            csv.flush()?;
+        }
+        if let Some(xyz) = &mut self.lab {
+            xyz.flush()?;
+        }
+        if let Some(csv) = &mut self.dipole {
+            csv.flush()?;
+        }
+        Ok(())
+    }
 }
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
@@ -889,31 +936,31 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
                 (body, energy, None)
             }
             Some(y) => {
-                let chart = self.cartesian.as_ref().ok_or("a Cartesian state without a Cartesian chart")?;
+                let chart = self.last.cartesian.as_ref().ok_or("a Cartesian state without a Cartesian chart")?;
                 let lab = CartesianSystem::<M, N, NA>::lab(y);
-                let (body, _) = body_of_lab_exact(self.system.molecule(), &lab, &self.last_q)
+                let (body, _) = body_of_lab_exact(self.system.molecule(), &lab, &self.last.q)
                     .map_err(|e| at(&e, y, cartesian_layout))?;
                 let energy = chart.energy(y).map_err(|e| at(&e, y, cartesian_layout))?;
-                let internal = charts::to_internal(&self.system, y, &self.last_q).ok().map(|(_, yi)| yi);
+                let internal = charts::to_internal(&self.system, y, &self.last.q).ok().map(|(_, yi)| yi);
                 (body, energy, Some(internal))
             }
         };
         let layout = if cartesian.is_some() { cartesian_layout } else { self.layout.as_str() };
-        let h0 = *self.initial_energy.get_or_insert(energy);
+        let h0 = *self.guard.initial_energy.get_or_insert(energy);
         let rotation = body.rotation();
         let phase = body.to_phase();
         // Recorded before the guard, so that the summary includes the output that tripped it.
-        if self.diagnostics {
-            self.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
+        if self.guard.diagnostics {
+            self.guard.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
         }
-        energy_guard(h0, energy, self.max_energy_error).map_err(|e| at(&e, y, layout))?;
-        if let Some(csv) = &mut self.writers.trajectory {
+        energy_guard(h0, energy, self.guard.max_energy_error).map_err(|e| at(&e, y, layout))?;
+        if let Some(csv) = &mut self.outputs.files.trajectory {
             let (euler, pe) = (phase.euler.into(), phase.pe.into());
             csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, body.j.into(), energy)?;
         }
-        let tap_lab = self.tap.as_ref().is_some_and(|t| t.lab);
+        let tap_lab = self.outputs.tap.as_ref().is_some_and(|t| t.lab);
         let mut lab_record = None;
-        if self.writers.lab.is_some() || tap_lab {
+        if self.outputs.files.lab.is_some() || tap_lab {
             let com = CentreOfMass { position: self.com.0 + self.com.1 * t, velocity: self.com.1 };
             let lab: LabState<NA> = match cartesian {
                 None => to_lab_body(self.system.molecule(), &body, &com).map_err(|e| at(&e, y, layout))?,
@@ -927,24 +974,24 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
                 }
             };
             let potential = self.system.molecule().potential(&body.q);
-            if let Some(xyz) = &mut self.writers.lab {
+            if let Some(xyz) = &mut self.outputs.files.lab {
                 let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
                 xyz.frame(t_out, energy, potential, atoms)?;
             }
             lab_record = tap_lab.then_some((lab, potential));
         }
-        let tap_dipole = self.tap.as_ref().is_some_and(|t| t.dipole);
+        let tap_dipole = self.outputs.tap.as_ref().is_some_and(|t| t.dipole);
         let mut dipole_record = None;
-        if self.writers.dipole.is_some() || tap_dipole {
+        if self.outputs.files.dipole.is_some() || tap_dipole {
             let mut mu = Vector3::zeros();
             self.system.molecule().dipole(&body.q, &mut mu);
             let mu_lab = rotation * mu;
-            if let Some(csv) = &mut self.writers.dipole {
+            if let Some(csv) = &mut self.outputs.files.dipole {
                 csv.row(t_out, &mu_lab)?;
             }
             dipole_record = tap_dipole.then_some(mu_lab.into());
         }
-        if let Some(tap) = &mut self.tap {
+        if let Some(tap) = &mut self.outputs.tap {
             tap.sink.record(&Record {
                 t: t_out,
                 q: phase.q.as_slice(),
@@ -962,18 +1009,18 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             });
         }
         // A state the internal chart cannot hold (exactly linear) leaves no restart point.
-        self.last_y_valid = true;
+        self.last.y_valid = true;
         match &internal_y {
-            None => self.last_y.copy_from_slice(y),
-            Some(Some(yi)) => self.last_y.copy_from_slice(yi),
-            Some(None) => self.last_y_valid = false,
+            None => self.last.y.copy_from_slice(y),
+            Some(Some(yi)) => self.last.y.copy_from_slice(yi),
+            Some(None) => self.last.y_valid = false,
         }
-        self.last_q = body.q;
-        self.records += 1;
+        self.last.q = body.q;
+        self.count.records += 1;
         if let Some(&(k, name, [low, high])) =
-            self.stops.iter().find(|(k, _, [lo, hi])| !(*lo..=*hi).contains(&body.q[*k]))
+            self.stops.outside.iter().find(|(k, _, [lo, hi])| !(*lo..=*hi).contains(&body.q[*k]))
         {
-            self.stopped = Some(serde_json::json!({
+            self.stops.met = Some(serde_json::json!({
                 "coordinate": name,
                 "value_au": body.q[k],
                 "bounds_au": [low, high],
@@ -981,19 +1028,19 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
                 "checked": "at output times",
             }));
         }
-        (self.progress)(Progress { done: self.records, total: self.total, failed: 0 });
+        (self.count.progress)(Progress { done: self.count.records, total: self.count.total, failed: 0 });
         Ok(())
     }
 
     /// The restart file for a run that reached output time `t` (a.u.), with DOP853's
     /// continuation point if it has one.
     fn restart(&self, scene: &Scene, t: f64, point: Option<&Dop853Resume>, layout: &str) -> Result<Restart, Error> {
-        if !self.last_y_valid {
+        if !self.last.y_valid {
             return Err("cannot write the restart file: the last output is at a linear geometry, which internal \
                  coordinates cannot hold (continue from an earlier time or run longer)"
                 .into());
         }
-        let body = self.system.expand_body(&self.last_y).map_err(|e| format!("cannot write the restart file: {e}"))?;
+        let body = self.system.expand_body(&self.last.y).map_err(|e| format!("cannot write the restart file: {e}"))?;
         let phase = body.to_phase();
         let q = body.orientation.quaternion();
         let m = self.system.molecule();
@@ -1005,7 +1052,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             t_au: t,
             t: t / self.time_scale,
             time_unit: self.time_unit.to_owned(),
-            outputs_done: self.records.saturating_sub(1),
+            outputs_done: self.count.records.saturating_sub(1),
             state: FinalState {
                 q: body.q.as_slice().to_vec(),
                 p: body.p.as_slice().to_vec(),
@@ -1014,28 +1061,19 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
                 euler: phase.euler.into(),
                 pe: phase.pe.into(),
             },
-            y: self.last_y.clone(),
+            y: self.last.y.clone(),
             state_layout: layout.to_owned(),
             zero_angular_momentum: self.system.reduction().rotation != RotationPart::Free,
             dop853: point.map(Dop853Point::from_resume),
             com_position_bohr: self.com.0.into(),
             com_velocity_bohr_per_au: self.com.1.into(),
-            conservation: self.conservation.clone(),
-            euler_unwrapped: self.writers.trajectory.as_ref().and_then(TrajectoryCsv::last_unwrapped),
+            conservation: self.guard.conservation.clone(),
+            euler_unwrapped: self.outputs.files.trajectory.as_ref().and_then(TrajectoryCsv::last_unwrapped),
         })
     }
 
     fn flush(&mut self) -> Result<(), Error> {
-        if let Some(csv) = &mut self.writers.trajectory {
-            csv.flush()?;
-        }
-        if let Some(xyz) = &mut self.writers.lab {
-            xyz.flush()?;
-        }
-        if let Some(csv) = &mut self.writers.dipole {
-            csv.flush()?;
-        }
-        Ok(())
+        self.outputs.files.flush()
     }
 }
 
@@ -1047,18 +1085,18 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for Recorder<
 
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> ChartObserver for Recorder<'_, M, N, NA> {
     fn observe(&mut self, t: f64, y: ChartState<'_>) -> ControlFlow<()> {
-        if std::mem::take(&mut self.skip_first) {
+        if std::mem::take(&mut self.count.skip_first) {
             return ControlFlow::Continue(());
         }
         match self.record(t, y) {
             Ok(()) => {
                 self.t_reached = Some(t);
-                if self.stopped.is_some() {
+                if self.stops.met.is_some() {
                     return ControlFlow::Break(());
                 }
                 // After a complete record: the files end on a whole row and a whole frame.
-                if self.stop.load(Ordering::SeqCst) {
-                    self.interrupted = true;
+                if self.stops.flag.load(Ordering::SeqCst) {
+                    self.stops.interrupted = true;
                     return ControlFlow::Break(());
                 }
                 ControlFlow::Continue(())

@@ -362,6 +362,51 @@ struct Validator<'s> {
     data_files: Vec<std::path::PathBuf>,
 }
 
+/// The atoms as read by [`Validator::atoms`].
+struct ReadAtoms {
+    atoms: Vec<AtomDef>,
+    /// One per atom, `None` where the position has a problem.
+    positions: Vec<Option<[ExprId; 3]>>,
+    /// The place of each position component, for messages.
+    position_spans: Vec<Vec<Range<usize>>>,
+    /// Whether every mass was read.
+    masses_ok: bool,
+    /// Whether the coordinates declare their kinds.
+    by_kind: bool,
+    /// Whether the kinds place the atoms (no atom has a position).
+    zmatrix_positions: bool,
+}
+
+/// The `[potential]` table as read by [`Validator::potential`].
+struct ReadPotential {
+    energy_unit: EnergyUnit,
+    /// Whether every parameter was read.
+    parameters_ok: bool,
+    /// The names the potential expression sees.
+    scope: HashMap<String, ExprId>,
+    /// The potential in hartree (the constant 0 for source files), `None` where it has a problem.
+    potential: Option<ExprId>,
+    external: Option<crate::external::ExternalPotential>,
+}
+
+/// Where an expression's value is known before the molecule runs: everywhere for a constant, and
+/// at the reference geometry (atomic units) if the file gives one.
+struct Known {
+    reference: Option<Vec<f64>>,
+}
+
+impl Known {
+    /// The value of `e` where it is known now, and where that is (for the message).
+    fn value(&self, graph: &Graph, e: ExprId) -> Option<(f64, &'static str)> {
+        let varying = graph.reachable(&[e]).iter().zip(graph.nodes()).any(|(r, n)| *r && matches!(n, Node::Var(_)));
+        match (&self.reference, varying) {
+            (_, false) => Some((graph.eval(&[e], &[])[0], "(a constant)")),
+            (Some(q), true) => Some((graph.eval(&[e], q)[0], "at the reference geometry")),
+            (None, true) => None,
+        }
+    }
+}
+
 /// The molecule's name becomes a module and a type, and `--molecule NAME` finds it by file
 /// name: the first thing wrong with it.
 fn check_molecule_name(src: &Source, name: &Spanned<String>, stem: &str) -> Result<(), DefinitionError> {
@@ -631,8 +676,74 @@ impl Validator<'_> {
         let stem = std::path::Path::new(src.path).file_stem().and_then(|s| s.to_str()).unwrap_or_default();
         let named = check_molecule_name(src, &raw.name, stem);
         self.check(named);
+        let length_unit = self.length_unit(raw.length_unit.as_ref());
+        let (mut coordinates, coordinate_spans) = self.coordinates(&raw.coordinates);
+        let constants_ok = self.constants_and_library(&raw);
+        let mut read = self.atoms(&raw, length_unit)?;
+        let kinds = if read.by_kind { Some(self.kinds(&raw, &mut coordinates, &mut read)?) } else { None };
+        self.check_total_mass(&read);
+        // Every coordinate must move some atom, or the kinetic metric is singular (checked when
+        // every position was read, so a broken position does not make its coordinates unused).
+        let all_positions: Option<Vec<[ExprId; 3]>> = read.positions.iter().copied().collect();
+        if let Some(all) = all_positions.as_deref().filter(|_| read.atoms.len() >= 2) {
+            self.check_coordinates_used(all, &coordinates, &coordinate_spans);
+        }
+        let pot = raw.potential.get_ref();
+        let potential = self.potential(&raw.potential);
 
-        let length_unit = match &raw.length_unit {
+        // Nothing non-finite where it can be known now: constant positions and a constant
+        // potential everywhere, and everything at the reference geometry if the file gives one
+        // (only for parts that had no problem, whose values mean what the file says).
+        let known = Known {
+            reference: coordinates.iter().map(|c| c.reference.map(|r| r * c.unit.in_atomic_units())).collect(),
+        };
+        if constants_ok {
+            self.check_positions_finite(&read, &known);
+        }
+        if let Some(u) = potential.potential.filter(|_| constants_ok && potential.parameters_ok)
+            && let Some(expression) = &pot.expression
+            && let Some((v, place)) = known.value(&self.graph, u).filter(|(v, _)| !v.is_finite())
+        {
+            self.errors.push(src.error(
+                expression.span(),
+                format!("the potential is {v} hartree {place}"),
+                "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
+            ));
+        }
+        let dipole = raw.dipole.as_ref().and_then(|d| self.dipole_table(d, &read.atoms, &known, constants_ok));
+
+        let (Some(positions), Some(potential_id), true) = (all_positions, potential.potential, self.errors.is_empty())
+        else {
+            let mut errors = self.errors;
+            // In file order; problems of the whole file first.
+            errors.sort_by_key(|e| (e.line, e.column));
+            return Err(errors);
+        };
+        Ok(Definition {
+            path: src.path.to_owned(),
+            name,
+            description: raw.description.unwrap_or_default().trim().to_owned(),
+            atoms: read.atoms,
+            coordinates,
+            graph: self.graph,
+            positions,
+            potential: potential_id,
+            energy_unit: potential.energy_unit,
+            kinds,
+            parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
+            potential_scope: potential.scope,
+            potential_text: pot.expression.as_ref().map(|e| e.get_ref().clone()).unwrap_or_default(),
+            library: self.library,
+            data_files: self.data_files,
+            external: potential.external,
+            dipole,
+        })
+    }
+
+    /// `length_unit`: bohr when absent (and in place of an unknown unit).
+    fn length_unit(&mut self, unit: Option<&Spanned<String>>) -> LengthUnit {
+        let src = self.src;
+        match unit {
             None => LengthUnit::Bohr,
             Some(u) => {
                 let unit = LengthUnit::parse(u.get_ref()).ok_or_else(|| {
@@ -644,13 +755,17 @@ impl Validator<'_> {
                 });
                 self.check(unit).unwrap_or(LengthUnit::Bohr)
             }
-        };
+        }
+    }
 
-        // Coordinates first: graph variable k is coordinate k, in atomic units. A coordinate
-        // with a problem still gets its variable and its name, so expressions using it parse.
+    /// The coordinates, in file order, and the place of each name: graph variable k is
+    /// coordinate k, in atomic units. A coordinate with a problem still gets its variable and its
+    /// name, so expressions using it parse.
+    fn coordinates(&mut self, raw: &[RawCoordinate]) -> (Vec<CoordinateDef>, Vec<Range<usize>>) {
+        let src = self.src;
         let mut coordinates = Vec::new();
         let mut coordinate_spans = Vec::new();
-        for c in &raw.coordinates {
+        for c in raw {
             let declared = self.declare(&c.name, "coordinate").and_then(|()| self.not_a_quantity(&c.name));
             self.check(declared);
             let unit = CoordinateUnit::parse(c.unit.get_ref()).ok_or_else(|| {
@@ -708,8 +823,14 @@ impl Validator<'_> {
             coordinates.push(CoordinateDef { name: c.name.get_ref().clone(), unit, reference, range });
             coordinate_spans.push(c.name.span());
         }
+        (coordinates, coordinate_spans)
+    }
 
-        // Constants may refer to each other (in any order) but not to coordinates.
+    /// The constants (which may refer to each other in any order but not to coordinates), the
+    /// arrays, and the functions and named expressions, checked once here and inlined where they
+    /// are used. Whether all of them are free of problems (then their values can be evaluated).
+    fn constants_and_library(&mut self, raw: &RawDefinition) -> bool {
+        let src = self.src;
         let before_constants = self.errors.len();
         let constants: Vec<(Spanned<String>, Spanned<RawValue>)> =
             raw.constants.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
@@ -728,7 +849,7 @@ impl Validator<'_> {
             .collect();
         self.names.extend(coordinate_names);
 
-        // Functions and named expressions, checked once here and inlined where they are used.
+        // Functions and named expressions.
         let mut names: Vec<String> = self.names.keys().cloned().collect();
         names.extend(raw.potential.get_ref().parameters.keys().map(|k| k.get_ref().clone()));
         names.extend(raw.dipole.iter().flat_map(|d| d.get_ref().parameters.keys().map(|k| k.get_ref().clone())));
@@ -754,9 +875,15 @@ impl Validator<'_> {
         let library_ok = library_errors.is_empty() && arrays_ok;
         self.errors.extend(library_errors);
         self.library = library;
-        let constants_ok = self.errors.len() == before_constants && library_ok;
+        self.errors.len() == before_constants && library_ok
+    }
 
-        // Atoms and their positions (`None` where a position has a problem).
+    /// The atoms and their positions (`None` where a position has a problem). Coordinates by
+    /// kind (every coordinate says what it is) place the atoms themselves: with kinds and no
+    /// positions the generator places them; with kinds and positions the positions are used and
+    /// checked against the kinds ([`Validator::kinds`]).
+    fn atoms(&mut self, raw: &RawDefinition, length_unit: LengthUnit) -> Result<ReadAtoms, Vec<DefinitionError>> {
+        let src = self.src;
         if raw.atoms.len() < 2 {
             self.errors.push(src.whole_file(
                 format!("a molecule needs at least 2 atoms, this one has {}", raw.atoms.len()),
@@ -772,10 +899,7 @@ impl Validator<'_> {
                 "declare every coordinate's kind (distance, angle, dihedral) or none (then every atom needs a position)",
             )));
         }
-        // With kinds and no positions the generator places the atoms; with kinds and positions
-        // the positions are used and checked against the kinds.
         let zmatrix_positions = by_kind && raw.atoms.iter().any(|a| a.position.is_none());
-        let mut kinds = None;
         let mut atoms = Vec::new();
         let mut positions: Vec<Option<[ExprId; 3]>> = Vec::new();
         let mut labels: HashMap<String, Range<usize>> = HashMap::new();
@@ -850,104 +974,124 @@ impl Validator<'_> {
                 None => vec![a.label.span(); 3],
             });
         }
+        Ok(ReadAtoms { atoms, positions, position_spans, masses_ok, by_kind, zmatrix_positions })
+    }
 
-        if by_kind {
-            let labels: Vec<&str> = atoms.iter().map(|a| a.label.as_str()).collect();
-            let atom_spans: Vec<Range<usize>> = raw.atoms.iter().map(|a| a.label.span()).collect();
-            let mut declared = Vec::new();
-            for (k, c) in raw.coordinates.iter().enumerate() {
-                let kind_value = c.kind.as_ref().expect("every coordinate has a kind");
-                let kind = crate::zmatrix::parse_kind(src, kind_value.span(), kind_value.get_ref(), &labels)
-                    .map_err(|e| self.fail(e))?;
-                let is_angle = matches!(coordinates[k].unit, CoordinateUnit::Angle(_));
-                if kind.is_angle() != is_angle {
+    /// The kinds of coordinates declared by kind, in coordinate order: each checked against its
+    /// unit (and a bond angle's range against [0, π]); then the atoms placed by them, or their
+    /// explicit positions checked against them.
+    fn kinds(
+        &mut self,
+        raw: &RawDefinition,
+        coordinates: &mut [CoordinateDef],
+        read: &mut ReadAtoms,
+    ) -> Result<Vec<crate::zmatrix::Kind>, Vec<DefinitionError>> {
+        let src = self.src;
+        let (atoms, zmatrix_positions) = (&read.atoms, read.zmatrix_positions);
+        let labels: Vec<&str> = atoms.iter().map(|a| a.label.as_str()).collect();
+        let atom_spans: Vec<Range<usize>> = raw.atoms.iter().map(|a| a.label.span()).collect();
+        let mut declared = Vec::new();
+        for (k, c) in raw.coordinates.iter().enumerate() {
+            let kind_value = c.kind.as_ref().expect("every coordinate has a kind");
+            let kind = crate::zmatrix::parse_kind(src, kind_value.span(), kind_value.get_ref(), &labels)
+                .map_err(|e| self.fail(e))?;
+            let is_angle = matches!(coordinates[k].unit, CoordinateUnit::Angle(_));
+            if kind.is_angle() != is_angle {
+                return Err(self.fail(src.error(
+                    c.unit.span(),
+                    format!(
+                        "coordinate `{}` is declared `{}` but its unit `{}` is {}",
+                        coordinates[k].name,
+                        kind.name(),
+                        c.unit.get_ref(),
+                        if is_angle { "an angle" } else { "a length" }
+                    ),
+                    if kind.is_angle() {
+                        "write unit = \"rad\" or \"deg\""
+                    } else {
+                        "write unit = \"bohr\" or \"angstrom\""
+                    },
+                )));
+            }
+            if matches!(kind, crate::zmatrix::Kind::Angle(_)) {
+                // A bond angle lies in [0, π]; beyond π it would name the mirror image of a
+                // geometry with a smaller angle. With no declared range it gets that one.
+                let per_unit = coordinates[k].unit.in_atomic_units();
+                let pi = std::f64::consts::PI;
+                let (low, high) = coordinates[k].range;
+                let slack = 1e-12;
+                if c.range.is_some() && (low * per_unit < -slack || high * per_unit > pi + slack) {
+                    let span = c.range.as_ref().map_or(kind_value.span(), |r| r.span());
                     return Err(self.fail(src.error(
-                        c.unit.span(),
+                        span,
                         format!(
-                            "coordinate `{}` is declared `{}` but its unit `{}` is {}",
-                            coordinates[k].name,
-                            kind.name(),
-                            c.unit.get_ref(),
-                            if is_angle { "an angle" } else { "a length" }
+                            "the range [{low:?}, {high:?}] of bond angle `{}` reaches outside [0, π]",
+                            coordinates[k].name
                         ),
-                        if kind.is_angle() {
-                            "write unit = \"rad\" or \"deg\""
-                        } else {
-                            "write unit = \"bohr\" or \"angstrom\""
-                        },
+                        "a bond angle lies in [0, π] (0 to 180°): write range = [0, \"pi\"] (rad) or [0, 180] \
+                         (deg), or a narrower interval",
                     )));
                 }
-                if matches!(kind, crate::zmatrix::Kind::Angle(_)) {
-                    // A bond angle lies in [0, π]; beyond π it would name the mirror image of a
-                    // geometry with a smaller angle. With no declared range it gets that one.
-                    let per_unit = coordinates[k].unit.in_atomic_units();
-                    let pi = std::f64::consts::PI;
-                    let (low, high) = coordinates[k].range;
-                    let slack = 1e-12;
-                    if c.range.is_some() && (low * per_unit < -slack || high * per_unit > pi + slack) {
-                        let span = c.range.as_ref().map_or(kind_value.span(), |r| r.span());
-                        return Err(self.fail(src.error(
-                            span,
-                            format!(
-                                "the range [{low:?}, {high:?}] of bond angle `{}` reaches outside [0, π]",
-                                coordinates[k].name
-                            ),
-                            "a bond angle lies in [0, π] (0 to 180°): write range = [0, \"pi\"] (rad) or [0, 180] \
-                             (deg), or a narrower interval",
-                        )));
-                    }
-                    if c.range.is_none() {
-                        coordinates[k].range = (0.0, pi / per_unit);
-                    }
+                if c.range.is_none() {
+                    coordinates[k].range = (0.0, pi / per_unit);
                 }
-                let c_def = &coordinates[k];
-                declared.push(crate::zmatrix::Declared {
-                    kind,
-                    span: kind_value.span(),
-                    var: self.graph.var(&c_def.name),
-                    reference: c_def.reference.map(|r| r * c_def.unit.in_atomic_units()),
-                });
             }
-            if zmatrix_positions {
-                let built = crate::zmatrix::build_positions(src, &mut self.graph, &labels, &atom_spans, &declared);
-                positions = built.map_err(|e| self.fail(e))?.into_iter().map(Some).collect();
-            } else if let Some(all) = positions.iter().copied().collect::<Option<Vec<_>>>() {
-                let checked = crate::zmatrix::check_positions(src, &mut self.graph, &all, &declared, &labels);
-                checked.map_err(|e| self.fail(e))?;
-            }
-            kinds = Some(declared.iter().map(|d| d.kind).collect());
+            let c_def = &coordinates[k];
+            declared.push(crate::zmatrix::Declared {
+                kind,
+                span: kind_value.span(),
+                var: self.graph.var(&c_def.name),
+                reference: c_def.reference.map(|r| r * c_def.unit.in_atomic_units()),
+            });
         }
+        if zmatrix_positions {
+            let built = crate::zmatrix::build_positions(src, &mut self.graph, &labels, &atom_spans, &declared);
+            read.positions = built.map_err(|e| self.fail(e))?.into_iter().map(Some).collect();
+        } else if let Some(all) = read.positions.iter().copied().collect::<Option<Vec<_>>>() {
+            let checked = crate::zmatrix::check_positions(src, &mut self.graph, &all, &declared, &labels);
+            checked.map_err(|e| self.fail(e))?;
+        }
+        Ok(declared.iter().map(|d| d.kind).collect())
+    }
 
-        // The total mass divides every position (the centre-of-mass shift): it must be finite.
+    /// The total mass divides every position (the centre-of-mass shift): it must be finite.
+    fn check_total_mass(&mut self, read: &ReadAtoms) {
+        let (atoms, masses_ok) = (&read.atoms, read.masses_ok);
         let total: f64 = atoms.iter().map(|a| a.mass_da * DALTON_IN_ELECTRON_MASSES).sum();
         if masses_ok && !total.is_finite() {
-            self.errors.push(src.whole_file(
+            self.errors.push(self.src.whole_file(
                 format!("the total mass overflows in electron masses ({} atoms)", atoms.len()),
                 "give every mass in daltons, e.g. mass = 1.00782503223",
             ));
         }
+    }
 
-        // Every coordinate must move some atom, or the kinetic metric is singular (checked when
-        // every position was read, so a broken position does not make its coordinates unused).
-        let all_positions: Option<Vec<[ExprId; 3]>> = positions.iter().copied().collect();
-        if let Some(all) = all_positions.as_ref().filter(|_| atoms.len() >= 2) {
-            let roots: Vec<ExprId> = all.iter().flatten().copied().collect();
-            let reachable = self.graph.reachable(&roots);
-            for (k, c) in coordinates.iter().enumerate() {
-                let used =
-                    self.graph.nodes().iter().enumerate().any(|(i, n)| reachable[i] && *n == Node::Var(k as u32));
-                if !used {
-                    self.errors.push(src.error(
-                        coordinate_spans[k].clone(),
-                        format!("no atom position depends on coordinate `{}`", c.name),
-                        "use the coordinate in some atom's position, or remove it (a coordinate that moves no atom makes the kinetic metric singular)",
-                    ));
-                }
+    /// Every coordinate moves some atom (some position depends on it).
+    fn check_coordinates_used(
+        &mut self,
+        positions: &[[ExprId; 3]],
+        coordinates: &[CoordinateDef],
+        coordinate_spans: &[Range<usize>],
+    ) {
+        let roots: Vec<ExprId> = positions.iter().flatten().copied().collect();
+        let reachable = self.graph.reachable(&roots);
+        for (k, c) in coordinates.iter().enumerate() {
+            let used = self.graph.nodes().iter().enumerate().any(|(i, n)| reachable[i] && *n == Node::Var(k as u32));
+            if !used {
+                self.errors.push(self.src.error(
+                    coordinate_spans[k].clone(),
+                    format!("no atom position depends on coordinate `{}`", c.name),
+                    "use the coordinate in some atom's position, or remove it (a coordinate that moves no atom makes the kinetic metric singular)",
+                ));
             }
         }
+    }
 
-        // The potential sees coordinates, constants and its own parameters.
-        let pot = raw.potential.get_ref();
+    /// The `[potential]` table: its unit, its parameters (seen by the potential besides the
+    /// coordinates and constants) and the potential, as an expression in hartree or source files.
+    fn potential(&mut self, table: &Spanned<RawPotential>) -> ReadPotential {
+        let src = self.src;
+        let pot = table.get_ref();
         let energy_unit = EnergyUnit::parse(pot.energy_unit.get_ref()).ok_or_else(|| {
             src.error(
                 pot.energy_unit.span(),
@@ -975,7 +1119,7 @@ impl Validator<'_> {
             self.names.insert(k.get_ref().clone(), c);
         }
         let potential_scope = self.names.clone();
-        let external = self.external_potential(&raw.potential);
+        let external = self.external_potential(table);
         let external = self.check(external);
         let potential = match (&pot.expression, &external) {
             (Some(expression), _) => {
@@ -988,55 +1132,43 @@ impl Validator<'_> {
             (None, Some(Some(_))) => Some(self.graph.constant(0.0)),
             (None, _) => None,
         };
-        let external = external.flatten();
+        ReadPotential { energy_unit, parameters_ok, scope: potential_scope, potential, external: external.flatten() }
+    }
 
-        // Nothing non-finite where it can be known now: constant positions and a constant
-        // potential everywhere, and everything at the reference geometry if the file gives one
-        // (only for parts that had no problem, whose values mean what the file says).
-        let reference: Option<Vec<f64>> =
-            coordinates.iter().map(|c| c.reference.map(|r| r * c.unit.in_atomic_units())).collect();
-        // The value of `e` where it is known now, and where that is (for the message).
-        let known = |graph: &Graph, e: ExprId| -> Option<(f64, &'static str)> {
-            let varying = graph.reachable(&[e]).iter().zip(graph.nodes()).any(|(r, n)| *r && matches!(n, Node::Var(_)));
-            match (&reference, varying) {
-                (_, false) => Some((graph.eval(&[e], &[])[0], "(a constant)")),
-                (Some(q), true) => Some((graph.eval(&[e], q)[0], "at the reference geometry")),
-                (None, true) => None,
-            }
-        };
-        for (i, xyz) in positions.iter().enumerate().filter(|_| constants_ok) {
+    /// Every position component that is known now ([`Known`]) is finite.
+    fn check_positions_finite(&mut self, read: &ReadAtoms, known: &Known) {
+        let src = self.src;
+        for (i, xyz) in read.positions.iter().enumerate() {
             for (axis, &e) in xyz.iter().flatten().enumerate() {
-                if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
+                if let Some((v, place)) = known.value(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
                     self.errors.push(src.error(
-                        position_spans[i][axis].clone(),
-                        format!("the {} coordinate of atom `{}` is {v} {place}", ["x", "y", "z"][axis], atoms[i].label),
+                        read.position_spans[i][axis].clone(),
+                        format!("the {} coordinate of atom `{}` is {v} {place}", ["x", "y", "z"][axis], read.atoms[i].label),
                         "check for a division by zero, the square root or logarithm of a negative number, or a number too large in bohr",
                     ));
                 }
             }
         }
-        if let Some(potential) = potential.filter(|_| constants_ok && parameters_ok)
-            && let Some(expression) = &pot.expression
-            && let Some((v, place)) = known(&self.graph, potential).filter(|(v, _)| !v.is_finite())
-        {
-            self.errors.push(src.error(
-                expression.span(),
-                format!("the potential is {v} hartree {place}"),
-                "check for a division by zero, the logarithm or square root of a negative number, or values too large in hartree",
-            ));
-        }
-        // The dipole table's first mistake is collected with the others.
-        let dipole = match &raw.dipole {
-            None => None,
-            Some(d) => {
-                let read = self.dipole(d, &atoms);
-                self.check(read).map(|(dipole, spans)| {
+    }
+
+    /// The `[dipole]` table, whose first mistake is collected with the others; where the
+    /// constants had no problem, every part of it known now ([`Known`]) is finite.
+    fn dipole_table(
+        &mut self,
+        d: &Spanned<RawDipole>,
+        atoms: &[AtomDef],
+        known: &Known,
+        constants_ok: bool,
+    ) -> Option<DipoleDef> {
+        let src = self.src;
+        let read = self.dipole(d, atoms);
+        self.check(read).map(|(dipole, spans)| {
                 let what = match &dipole {
                     DipoleDef::Components(c) => c.to_vec(),
                     DipoleDef::Charges(c) => c.clone(),
                 };
                 for (e, span) in what.into_iter().zip(spans).filter(|_| constants_ok) {
-                    if let Some((v, place)) = known(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
+                    if let Some((v, place)) = known.value(&self.graph, e).filter(|(v, _)| !v.is_finite()) {
                         self.errors.push(src.error(
                             span,
                             format!("this part of the dipole is {v} {place}"),
@@ -1044,35 +1176,7 @@ impl Validator<'_> {
                         ));
                     }
                 }
-                dipole
-                })
-            }
-        };
-
-        let (Some(positions), Some(potential), true) = (all_positions, potential, self.errors.is_empty()) else {
-            let mut errors = self.errors;
-            // In file order; problems of the whole file first.
-            errors.sort_by_key(|e| (e.line, e.column));
-            return Err(errors);
-        };
-        Ok(Definition {
-            path: src.path.to_owned(),
-            name,
-            description: raw.description.unwrap_or_default().trim().to_owned(),
-            atoms,
-            coordinates,
-            graph: self.graph,
-            positions,
-            potential,
-            energy_unit,
-            kinds,
-            parameters: pot.parameters.iter().map(|(k, v)| (k.get_ref().clone(), *v.get_ref())).collect(),
-            potential_scope,
-            potential_text: pot.expression.as_ref().map(|e| e.get_ref().clone()).unwrap_or_default(),
-            library: self.library,
-            data_files: self.data_files,
-            external,
-            dipole,
+            dipole
         })
     }
 

@@ -565,7 +565,7 @@ const PR_TRAJECTORIES: u64 = 48;
 /// maxima of its P and R branches are `2.3583·√(B·T)` cm⁻¹ apart, B from the masses and bond
 /// lengths alone.
 #[test]
-#[ignore = "heavy tier (CI: `cargo test --release -- --ignored`): 8 x 48 thermal HCN trajectories, ~90 s in the test profile"]
+#[ignore = "heavy tier (CI: `cargo test -- --ignored`): 8 x 48 thermal HCN trajectories, ~90 s in the test profile"]
 fn the_p_r_maxima_of_a_linear_molecule_are_classically_separated() {
     use rovib::ensemble::run_with_sampler;
     use rovib::runtime::sample::{Region, Thermal};
