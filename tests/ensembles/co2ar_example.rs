@@ -80,7 +80,15 @@ fn quadrature() -> Quadrature {
     let kt = BOLTZMANN * T;
     let (nr, nt) = (600, 300);
     let (hr, ht) = ((R[1] - R[0]) / nr as f64, std::f64::consts::PI / nt as f64);
-    let weight = |i: usize, n: usize| if i == 0 || i == n { 1.0 } else if i % 2 == 1 { 4.0 } else { 2.0 };
+    let weight = |i: usize, n: usize| {
+        if i == 0 || i == n {
+            1.0
+        } else if i % 2 == 1 {
+            4.0
+        } else {
+            2.0
+        }
+    };
     let (mut volume, mut m0, mut dimer) = (0.0, 0.0, 0.0);
     for j in 0..=nt {
         let theta = j as f64 * ht;
@@ -121,10 +129,8 @@ fn number(v: &serde_json::Value) -> f64 {
 /// The example with 2048 pairs: C(0) = M0 of phase space; the spectrum's M0 and the phase-space
 /// M0 within their standard errors of the quadrature; the configurational integral, the dimer
 /// constant and the scene's `pair_volume` against the quadratures.
-// About a minute on the shared 2-core machine (2048 pairs, 1 ps each way): CI's heavy tier runs it
-// (`cargo test --test ensembles co2ar_example -- --ignored`).
+// 2.4 s in the test profile on 2 threads (2048 pairs, 1 ps each way).
 #[test]
-#[ignore]
 fn the_co2ar_example_agrees_with_its_phase_space_and_the_quadratures() {
     let q = quadrature();
     let text = scene_text();
