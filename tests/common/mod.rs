@@ -205,3 +205,4 @@ pub fn richardson_derivative(y: &[f64], i: usize, h: f64, f: &mut dyn FnMut(&[f6
 }
 pub mod cartesian;
 pub mod internal_coordinates;
+pub mod rigid_rotor;

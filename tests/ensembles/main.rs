@@ -7,6 +7,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod co2ar_example;
 mod collisions;
 mod ensemble;
 mod ensemble_fuzz;

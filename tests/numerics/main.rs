@@ -25,5 +25,6 @@ mod lanes;
 mod linear_charts;
 mod molecules;
 mod position_surfaces;
+mod rigid_collinear;
 mod stability;
 mod surfaces;
