@@ -66,7 +66,7 @@ pub(crate) fn lane_functions(
     let specs = [
         FunctionSpec {
             name: "kinetic_and_gradient_lanes",
-            doc: "[`Molecule::kinetic_and_gradient`] for `T::LANES` states at once (lane-generic, branch-free; the\n\
+            doc: "[`Kinematics::kinetic_and_gradient`] for `T::LANES` states at once (lane-generic, branch-free; the\n\
                   `f64` function's operations, with `T`'s `sin_cos` and `exp`)."
                 .into(),
             signature: quote!(

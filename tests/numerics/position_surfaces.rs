@@ -12,7 +12,7 @@ use std::path::Path;
 use std::process::Command;
 
 use rovib::molecules::Arn2;
-use rovib::runtime::Molecule;
+use rovib::runtime::Kinematics;
 use rovib::runtime::finite_differences::CentralDifferences;
 use rovib::runtime::nalgebra::{SMatrix, SVector};
 use rovib::runtime::position_surface::{CartesianPotential, FromPositions, add_pair_terms, check_rotation_invariance};
