@@ -102,7 +102,7 @@ fn a_composed_molecule_conserves_its_energy() {
         euler: Vector3::new(0.3, 1.2, -0.4),
         pe: Vector3::new(0.5, -1.0, 4.0),
     };
-    let mut system = ReducedSystem::new(&m, Reduction::none(), &s);
+    let system = ReducedSystem::new(&m, Reduction::none(), &s);
     let mut y0 = vec![0.0; system.dim()];
     system.reduce(&s, &mut y0).unwrap();
     let h0 = system.energy(&y0).unwrap();
