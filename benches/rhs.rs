@@ -24,7 +24,7 @@ use rovib::runtime::hamiltonian::{HamiltonianSystem, PhaseState};
 use rovib::runtime::integrate::OdeSystem;
 use rovib::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use rovib::runtime::units::CoordinateUnit;
-use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
+use rovib::runtime::{Kinematics, KineticMatrices, Molecule, MoleculeVisitor};
 
 /// A fixed, generic state: the reference geometry with lengths stretched 3 % and angles opened
 /// by 0.05 rad, momenta of a few ħ, orientation away from gimbal lock.
@@ -59,7 +59,7 @@ fn bench_system<S: OdeSystem>(c: &mut Criterion, id: &str, system: &mut S, y: &[
 #[derive(Copy, Clone)]
 struct Unfused<M>(M);
 
-impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Unfused<M> {
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Kinematics<N, NA> for Unfused<M> {
     fn name(&self) -> &'static str {
         self.0.name()
     }
@@ -93,6 +93,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Un
     ) -> f64 {
         self.0.kinetic_energy_gradient(q, omega, qdot, grad)
     }
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Unfused<M> {
     fn potential(&self, q: &SVector<f64, N>) -> f64 {
         self.0.potential(q)
     }

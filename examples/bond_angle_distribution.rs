@@ -43,7 +43,7 @@ use rovib::runtime::hamiltonian::{euler_momenta_from_angular_momentum, rotation_
 use rovib::runtime::integrate::{Dop853, Dop853Options, Observer};
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rovib::runtime::units::AU_TIME_IN_FS;
-use rovib::runtime::{KineticMatrices, Molecule, PhaseState};
+use rovib::runtime::{Kinematics, KineticMatrices, Molecule, PhaseState};
 
 /// Temperature of the initial distribution.
 const TEMPERATURE_K: f64 = 500.0;

@@ -24,7 +24,7 @@ use rovib::molecules::H2o;
 use rovib::runtime::hamiltonian::InverseMetric;
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector};
 use rovib::runtime::units::{AngleUnit, BOHR_IN_ANGSTROM, CoordinateUnit, LengthUnit};
-use rovib::runtime::{KineticMatrices, Molecule};
+use rovib::runtime::{Kinematics, KineticMatrices};
 
 /// The default geometry: r1, r2 in Å, α in degrees.
 const DEFAULT_GEOMETRY: [f64; 3] = [0.96, 1.00, 104.5];

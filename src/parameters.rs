@@ -5,9 +5,10 @@
 //! keep the compiled-in constants (folded into the generated code), see BENCHMARKS.md for what
 //! the run-time path costs.
 
-use crate::runtime::Molecule;
 use crate::runtime::diagnostic::FileError;
-use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
+use crate::runtime::nalgebra::{SMatrix, SVector};
+use crate::runtime::surface::Dipole;
+use crate::runtime::{HasKinematics, Molecule};
 use crate::scene::Scene;
 use crate::scene::did_you_mean;
 
@@ -51,9 +52,14 @@ pub fn scene_parameters<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     Ok(Some(values))
 }
 
-impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for WithParameters<M> {
-    crate::runtime::forward_kinematics!(molecule);
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> HasKinematics<N, NA> for WithParameters<M> {
+    type Kinematics = M;
+    fn kinematics(&self) -> &M {
+        &self.molecule
+    }
+}
 
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for WithParameters<M> {
     // `potential_gradient_lanes` is deliberately not forwarded: the molecule's lane-generic
     // potential has the compiled-in parameters folded in, so the trait's default (lane by lane
     // through `potential_gradient` above, i.e. `potential_gradient_with`) is the right one.
@@ -78,15 +84,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Wi
         self.molecule.potential_gradient_with(q, params, grad)
     }
 
-    fn reference_geometry(&self) -> Option<SVector<f64, N>> {
-        self.molecule.reference_geometry()
-    }
-
     // The Cartesian chart (`runtime::charts`) with the same parameters: U(q(x), values).
-
-    fn internal_coordinates(&self, x: &SMatrix<f64, 3, NA>, q: &mut SVector<f64, N>) -> bool {
-        self.molecule.internal_coordinates(x, q)
-    }
 
     fn cartesian_potential(&self, x: &SMatrix<f64, 3, NA>) -> Option<f64> {
         self.molecule.cartesian_potential_with(x, &self.values)
@@ -109,15 +107,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Wi
         self.molecule.cartesian_potential_gradient_with(x, params, grad)
     }
 
-    fn has_dipole(&self) -> bool {
-        self.molecule.has_dipole()
-    }
-
-    fn dipole(&self, q: &SVector<f64, N>, mu: &mut Vector3<f64>) {
-        self.molecule.dipole(q, mu)
-    }
-
-    fn dipole_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>) {
-        self.molecule.dipole_jacobian(q, dmu)
+    fn dipole(&self) -> Option<impl Dipole<N>> {
+        self.molecule.dipole()
     }
 }

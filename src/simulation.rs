@@ -26,6 +26,7 @@ use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::hamiltonian::{ReducedSystem, Reduction, RotationPart};
 use crate::runtime::integrate::{Dop853, Dop853Resume, Method, Observer, OdeSystem, SolveError, Stats, solve};
 use crate::runtime::nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
+use crate::runtime::surface::Dipole;
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::{Scene, parse_scene};
 use crate::start::{StopCondition, frozen_reduction, stop_conditions};
@@ -983,8 +984,11 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         let tap_dipole = self.outputs.tap.as_ref().is_some_and(|t| t.dipole);
         let mut dipole_record = None;
         if self.outputs.files.dipole.is_some() || tap_dipole {
-            let mut mu = Vector3::zeros();
-            self.system.molecule().dipole(&body.q, &mut mu);
+            // A scene that writes the dipole is refused for a molecule without one (`Run::go`).
+            let mut mu = Vector3::from_element(f64::NAN);
+            if let Some(dipole) = self.system.molecule().dipole() {
+                dipole.moment(&body.q, &mut mu);
+            }
             let mu_lab = rotation * mu;
             if let Some(csv) = &mut self.outputs.files.dipole {
                 csv.row(t_out, &mu_lab)?;

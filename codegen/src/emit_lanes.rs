@@ -66,7 +66,7 @@ pub(crate) fn lane_functions(
     let specs = [
         FunctionSpec {
             name: "kinetic_and_gradient_lanes",
-            doc: "[`Molecule::kinetic_and_gradient`] for `T::LANES` states at once (lane-generic, branch-free; the\n\
+            doc: "[`Kinematics::kinetic_and_gradient`] for `T::LANES` states at once (lane-generic, branch-free; the\n\
                   `f64` function's operations, with `T`'s `sin_cos` and `exp`)."
                 .into(),
             signature: quote!(
@@ -118,7 +118,9 @@ mod tests {
         let m = generate_molecule("molecules/h2o.toml", &text).unwrap();
         let start = m.source.find("fn kinetic_and_gradient_lanes<T: Real>").expect("the lane function is emitted");
         let body = &m.source[start..];
-        let end = body.find("fn potential_gradient_lanes").expect("both are emitted");
+        assert!(body.contains("fn potential_gradient_lanes"), "both are emitted");
+        // The kinetic lane function is the last item of `impl Kinematics`.
+        let end = body.find("\n}\n").expect("the impl ends");
         let lanes = &body[..end];
         assert!(lanes.contains("T::splat("), "constants are splatted");
         assert!(lanes.contains(".sin_cos()"), "sin and cos of one angle in one call");

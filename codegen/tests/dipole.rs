@@ -124,14 +124,24 @@ fn components_are_converted_from_their_unit() {
 #[test]
 fn dipole_functions_are_generated_only_for_a_dipole() {
     let with = generate_molecule("molecules/xy2.toml", GOOD).expect("valid");
-    assert!(with.source.contains("fn dipole(") && with.source.contains("fn dipole_jacobian("));
-    assert!(with.source.contains("fn has_dipole("));
+    assert!(with.source.contains("fn dipole(&self) -> Option<impl Dipole<3>>"));
+    assert!(with.source.contains("impl Dipole<3> for Xy2"));
+    assert!(with.source.contains("fn moment(") && with.source.contains("fn moment_jacobian("));
     let without_text = GOOD.split("[dipole]").next().expect("a prefix").to_owned();
     let without = generate_molecule("molecules/xy2.toml", &without_text).expect("valid");
-    assert!(!without.source.contains("dipole"), "no dipole code without a [dipole] table");
-    // Everything else is the same code: the dipole functions are appended after the rest.
-    let at = with.source.find("    /// The body-frame dipole moment").expect("the dipole function");
-    assert_eq!(without.source.trim_end().trim_end_matches('}').trim_end(), with.source[..at].trim_end());
+    assert!(
+        !without.source.contains("dipole") && !without.source.contains("Dipole"),
+        "no dipole code without a [dipole] table"
+    );
+    // Everything else is the same code: the dipole adds an import, the accessor at the end of
+    // `impl Molecule` and `impl Dipole` after it.
+    let accessor = with.source.find("    /// The dipole surface of the definition's").expect("the accessor");
+    let accessor_end = accessor + with.source[accessor..].find("    }\n").expect("its end") + "    }\n".len();
+    let dipole_impl = with.source.find("\nimpl Dipole<3>").expect("the dipole impl");
+    let rest = format!("{}{}", &with.source[..accessor], &with.source[accessor_end..dipole_impl])
+        .replace("use ::rovib_runtime::surface::Dipole;\n", "");
+    let lines = |s: &str| s.lines().filter(|l| !l.trim().is_empty()).map(str::to_owned).collect::<Vec<_>>();
+    assert_eq!(lines(&without.source), lines(&rest));
     assert_eq!(with.stats.len(), without.stats.len() + 2);
 }
 

@@ -36,5 +36,5 @@ pub use frames::{
     CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, from_lab_body, to_lab, to_lab_body,
 };
 pub use hamiltonian::{FastSystem, HamiltonianError, HamiltonianSystem, PhaseState};
-pub use molecule::{Atom, Coordinate, KineticMatrices, Molecule, MoleculeVisitor};
+pub use molecule::{Atom, Coordinate, HasKinematics, Kinematics, KineticMatrices, Molecule, MoleculeVisitor, NoDipole};
 pub use nalgebra;

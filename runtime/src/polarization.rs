@@ -1,9 +1,9 @@
 //! The q-derivatives of the kinetic matrices from the kinetic-energy gradient, by polarization:
-//! the default [`Molecule::kinetic_jacobian`] that the G-matrix reference path uses when the
+//! the default [`Kinematics::kinetic_jacobian`] that the G-matrix reference path uses when the
 //! generator did not emit the symbolic one (it does not by default; see `rovib-codegen`'s
 //! `Options`).
 //!
-//! With `v = (ω, q̇)` and `M = [[I, A], [Aᵀ, a]]`, [`Molecule::kinetic_energy_gradient`] returns
+//! With `v = (ω, q̇)` and `M = [[I, A], [Aᵀ, a]]`, [`Kinematics::kinetic_energy_gradient`] returns
 //! `g_l(v) = ½ vᵀ (∂M/∂q_l) v` for every `l` at once. A symmetric matrix is determined by its
 //! quadratic form (polarization identity): with unit vectors `e_a`,
 //!
@@ -22,7 +22,7 @@
 
 use nalgebra::{SVector, Vector3};
 
-use crate::molecule::{KineticMatrices, Molecule};
+use crate::molecule::{Kinematics, KineticMatrices};
 
 /// `dk[l]` = `∂a/∂q_l`, `∂A/∂q_l`, `∂I/∂q_l` from `molecule`'s kinetic-energy gradient.
 pub fn kinetic_jacobian<M, const N: usize, const NA: usize>(
@@ -30,7 +30,7 @@ pub fn kinetic_jacobian<M, const N: usize, const NA: usize>(
     q: &SVector<f64, N>,
     dk: &mut [KineticMatrices<N>; N],
 ) where
-    M: Molecule<N, NA> + ?Sized,
+    M: Kinematics<N, NA> + ?Sized,
 {
     // g(v) into `out`, for v = e_a (+ e_b).
     let gradient = |a: usize, b: Option<usize>, out: &mut SVector<f64, N>| {

@@ -1,15 +1,16 @@
 //! The potential and the dipole as parts of their own, so that a surface can come from anywhere.
 //!
-//! [`Molecule<N, NA>`] is the whole contract the integrators use. It has three jobs, which this
-//! module separates:
+//! [`Molecule<N, NA>`] is the whole contract the integrators use: its
+//! [`crate::molecule::Kinematics`] (atoms, coordinates, positions, their Jacobian, the kinetic
+//! matrices and ∂T/∂q, always generated from a definition), a potential and an optional dipole.
+//! This module gives the last two as parts of their own:
 //!
-//! * **kinematics** (atoms, coordinates, positions, their Jacobian, the kinetic matrices and ∂T/∂q):
-//!   always generated from a definition, and taken from a [`Molecule`];
 //! * a **potential**, [`Potential<N>`]: U(q) and ∂U/∂q, an optional lane form;
 //! * a **dipole**, [`Dipole<N>`]: μ(q) and its Jacobian.
 //!
 //! [`WithPotential<M, P>`] composes them: a full [`Molecule`] whose kinematics (and, unless the
-//! potential part brings one, dipole) are `M`'s and whose potential is `P`'s. The generated code
+//! potential part brings one, dipole) are `M`'s, forwarded by [`HasKinematics`], and whose
+//! potential is `P`'s. The generated code
 //! is untouched, so a run of a generated molecule costs what it did; an outside potential costs
 //! what its own code costs. [`PotentialOf`] is the other direction: the potential part of a
 //! generated molecule, for checking one surface against another.
@@ -19,7 +20,7 @@
 use nalgebra::{SMatrix, SVector, Vector3};
 
 use crate::lanes::Real;
-use crate::molecule::{Coordinate, Molecule};
+use crate::molecule::{Coordinate, HasKinematics, Molecule};
 
 /// A potential energy surface over `N` internal coordinates (atomic units: q in bohr or
 /// radians, U in hartree), in the coordinate order of the molecule it is composed with.
@@ -64,6 +65,15 @@ pub trait Dipole<const N: usize> {
 
     /// `∂μ/∂q` into `dmu` (overwritten): column `k` is `∂μ/∂q_k`.
     fn moment_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>);
+}
+
+impl<D: Dipole<N> + ?Sized, const N: usize> Dipole<N> for &D {
+    fn moment(&self, q: &SVector<f64, N>, mu: &mut Vector3<f64>) {
+        (**self).moment(q, mu)
+    }
+    fn moment_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>) {
+        (**self).moment_jacobian(q, dmu)
+    }
 }
 
 impl<P: Potential<N> + ?Sized, const N: usize> Potential<N> for &P {
@@ -118,13 +128,18 @@ pub struct WithPotential<M, P> {
     pub potential: P,
 }
 
+impl<M: Molecule<N, NA>, P, const N: usize, const NA: usize> HasKinematics<N, NA> for WithPotential<M, P> {
+    type Kinematics = M;
+    fn kinematics(&self) -> &M {
+        &self.molecule
+    }
+}
+
 impl<M, P, const N: usize, const NA: usize> Molecule<N, NA> for WithPotential<M, P>
 where
     M: Molecule<N, NA>,
     P: Potential<N>,
 {
-    crate::forward_kinematics!(molecule);
-
     fn potential(&self, q: &SVector<f64, N>) -> f64 {
         self.potential.energy(q)
     }
@@ -137,23 +152,32 @@ where
     fn potential_gradient_lanes<T: Real>(&self, q: &[T; N], grad: &mut [T; N]) -> T {
         self.potential.energy_gradient_lanes(q, grad)
     }
-    fn has_dipole(&self) -> bool {
-        self.potential.dipole_part().is_some() || self.molecule.has_dipole()
-    }
-    fn dipole(&self, q: &SVector<f64, N>, mu: &mut Vector3<f64>) {
+    fn dipole(&self) -> Option<impl Dipole<N>> {
         match self.potential.dipole_part() {
-            Some(d) => d.moment(q, mu),
-            None => self.molecule.dipole(q, mu),
+            Some(d) => Some(Either::Left(d)),
+            None => self.molecule.dipole().map(Either::Right),
         }
     }
-    fn dipole_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>) {
-        match self.potential.dipole_part() {
-            Some(d) => d.moment_jacobian(q, dmu),
-            None => self.molecule.dipole_jacobian(q, dmu),
+}
+
+/// One of two dipole surfaces.
+enum Either<A, B> {
+    Left(A),
+    Right(B),
+}
+
+impl<A: Dipole<N>, B: Dipole<N>, const N: usize> Dipole<N> for Either<A, B> {
+    fn moment(&self, q: &SVector<f64, N>, mu: &mut Vector3<f64>) {
+        match self {
+            Self::Left(d) => d.moment(q, mu),
+            Self::Right(d) => d.moment(q, mu),
         }
     }
-    fn internal_coordinates(&self, x: &SMatrix<f64, 3, NA>, q: &mut SVector<f64, N>) -> bool {
-        self.molecule.internal_coordinates(x, q)
+    fn moment_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>) {
+        match self {
+            Self::Left(d) => d.moment_jacobian(q, dmu),
+            Self::Right(d) => d.moment_jacobian(q, dmu),
+        }
     }
 }
 

@@ -5,12 +5,12 @@
 mod common;
 
 use common::{RigidTop, Rng, Water, random_euler, random_vector, random_water_q};
-use rovib_runtime::Molecule;
 use rovib_runtime::frames::{
     CentreOfMass, FitOptions, FrameError, LabState, euler_angles, from_lab, lab_angular_momentum, to_lab,
 };
 use rovib_runtime::hamiltonian::{PhaseState, body_angular_momentum, hamiltonian, rotation_matrix};
 use rovib_runtime::nalgebra::{Matrix3, SMatrix, Vector3};
+use rovib_runtime::{Kinematics, Molecule};
 
 const STATES: usize = 20;
 

@@ -12,7 +12,7 @@ use rovib_runtime::hamiltonian::{
     velocities, w_matrix,
 };
 use rovib_runtime::integrate::OdeSystem;
-use rovib_runtime::molecule::{Atom, Coordinate, KineticMatrices, Molecule};
+use rovib_runtime::molecule::{Atom, Coordinate, Kinematics, KineticMatrices, Molecule};
 use rovib_runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 const PI: f64 = core::f64::consts::PI;
@@ -531,7 +531,7 @@ fn non_finite_inputs_are_reported_by_quantity() {
 /// Water with a potential that is NaN beyond r1 = 2 bohr, as a broken generated molecule might.
 struct BrokenPotential;
 
-impl Molecule<3, 3> for BrokenPotential {
+impl Kinematics<3, 3> for BrokenPotential {
     fn name(&self) -> &'static str {
         "broken"
     }
@@ -565,6 +565,9 @@ impl Molecule<3, 3> for BrokenPotential {
     ) -> f64 {
         Water.kinetic_energy_gradient(q, omega, qdot, grad)
     }
+}
+
+impl Molecule<3, 3> for BrokenPotential {
     fn potential(&self, q: &SVector<f64, 3>) -> f64 {
         if q[0] > 2.0 { f64::NAN } else { Water.potential(q) }
     }

@@ -6,13 +6,13 @@
 mod common;
 
 use common::{Rng, Water, random_water_q};
-use rovib_runtime::molecule::{Atom, Coordinate, KineticMatrices, Molecule};
+use rovib_runtime::molecule::{Atom, Coordinate, Kinematics, KineticMatrices, Molecule};
 use rovib_runtime::nalgebra::{SMatrix, SVector, Vector3};
 
 /// Water with every method but `kinetic_jacobian`, which takes the trait's default.
 struct DefaultJacobian;
 
-impl Molecule<3, 3> for DefaultJacobian {
+impl Kinematics<3, 3> for DefaultJacobian {
     fn name(&self) -> &'static str {
         "water-default-jacobian"
     }
@@ -43,6 +43,9 @@ impl Molecule<3, 3> for DefaultJacobian {
     ) -> f64 {
         Water.kinetic_energy_gradient(q, omega, qdot, grad)
     }
+}
+
+impl Molecule<3, 3> for DefaultJacobian {
     fn potential(&self, q: &SVector<f64, 3>) -> f64 {
         Water.potential(q)
     }

@@ -50,6 +50,7 @@ use crate::runtime::molecule::KineticMatrices;
 use crate::runtime::nalgebra::{DMatrix, DVector, SMatrix, Vector3};
 use crate::runtime::sample::Sampler;
 use crate::runtime::spectrum::Spectrum;
+use crate::runtime::surface::Dipole;
 use crate::runtime::units::HARTREE_IN_WAVENUMBERS;
 
 /// The time-reversed state: momenta and angular momentum reversed, configuration and
@@ -155,6 +156,11 @@ where
     M: Molecule<N, NA>,
 {
     let mut out = PhaseSpace { integral: sampler.configurational_integral(), ..PhaseSpace::default() };
+    let Some(dipole) = m.dipole() else {
+        // Without a dipole surface no state has a dipole moment.
+        out.left_out = n;
+        return out;
+    };
     let mut kin = KineticMatrices::default();
     let mut dmu = SMatrix::<f64, 3, N>::zeros();
     let mut mu = Vector3::zeros();
@@ -178,8 +184,8 @@ where
         };
         let omega = Vector3::new(v[0], v[1], v[2]);
         let qdot = crate::runtime::nalgebra::SVector::<f64, N>::from_fn(|i, _| v[3 + i]);
-        m.dipole(&s.q, &mut mu);
-        m.dipole_jacobian(&s.q, &mut dmu);
+        dipole.moment(&s.q, &mut mu);
+        dipole.moment_jacobian(&s.q, &mut dmu);
         let rate = dmu * qdot + omega.cross(&mu);
         if !(mu.iter().chain(rate.iter()).all(|x| x.is_finite())) {
             out.left_out += 1;

@@ -59,6 +59,7 @@ use crate::runtime::molecule::KineticMatrices;
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use crate::runtime::sample::{BOLTZMANN, SampleError, Sampler, Spec};
 use crate::runtime::spectrum::Spectrum;
+use crate::runtime::surface::Dipole;
 
 /// Points of the scan of `U_eff` from a state's distance to `R_far`.
 pub const SCAN_POINTS: usize = 256;
@@ -528,8 +529,8 @@ where
         c.energy_all.add(rel.energy);
         c.angular_momentum[k].add(rel.angular_momentum);
         c.distance[k].add(rel.distance);
-        if m.has_dipole() {
-            m.dipole(&s.q, &mut mu);
+        if let Some(dipole) = m.dipole() {
+            dipole.moment(&s.q, &mut mu);
             c.dipole_squared[k].add(mu.norm_squared());
         }
     }

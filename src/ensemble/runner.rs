@@ -28,6 +28,7 @@ use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use crate::runtime::integrate::{InvalidInput, Method, Observer, SolveError, Stats};
 use crate::runtime::nalgebra::Vector3;
 use crate::runtime::sample::Sampler;
+use crate::runtime::surface::Dipole;
 
 /// Trajectories per block: the grain of parallel work and of the fixed merge order.
 pub const BLOCK: u64 = 64;
@@ -652,8 +653,10 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
         let u = if self.needs_potential { self.plan.molecule.potential(&body.q) } else { f64::NAN };
         let rotation = body.rotation();
         let mut mu = Vector3::from_element(f64::NAN);
-        if self.needs_dipole {
-            self.plan.molecule.dipole(&body.q, &mut mu);
+        if self.needs_dipole
+            && let Some(dipole) = self.plan.molecule.dipole()
+        {
+            dipole.moment(&body.q, &mut mu);
             mu = rotation * mu;
         }
         let row = &mut self.buffer[self.k * nq..(self.k + 1) * nq];

@@ -157,7 +157,7 @@ fn a_closed_pipe_ends_output_quietly() {
 /// U the same, the positions on a line, the Cartesian gradient zero at this minimum.
 #[test]
 fn eval_at_a_linear_reference_says_the_chart_is_singular_and_prints_what_exists() {
-    use rovib::runtime::Molecule;
+    use rovib::runtime::{Kinematics, Molecule};
     for (name, u_ref) in [
         ("hcn", rovib::molecules::Hcn.potential(&rovib::molecules::Hcn.reference_geometry().unwrap())),
         ("co2", rovib::molecules::Co2.potential(&rovib::molecules::Co2.reference_geometry().unwrap())),

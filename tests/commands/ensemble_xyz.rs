@@ -3,7 +3,7 @@
 
 use rovib::ensemble::states_xyz::{ASE_TIME_IN_FS, read_xyz};
 use rovib::molecules::H2o;
-use rovib::runtime::Molecule;
+use rovib::runtime::Kinematics;
 use rovib::runtime::frames::{CentreOfMass, to_lab_body};
 use rovib::runtime::hamiltonian::fast::{BodyState, quaternion_of_euler};
 use rovib::runtime::nalgebra::{SVector, Vector3};

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use rovib::molecules::H2o;
-use rovib::runtime::Molecule;
 use rovib::runtime::hamiltonian::hamiltonian;
 use rovib::runtime::units::{BOHR_IN_ANGSTROM, HARTREE_IN_EV};
+use rovib::runtime::{Kinematics, Molecule};
 use rovib::scene::parse_scene;
 use rovib::start::initial_state;
 

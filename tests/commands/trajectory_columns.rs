@@ -7,7 +7,7 @@ use std::process::Command;
 use rovib::molecules::H2oRigid;
 use rovib::output::trajectory_columns;
 use rovib::runtime::Coordinate;
-use rovib::runtime::Molecule;
+use rovib::runtime::Kinematics;
 use rovib::runtime::nalgebra::SMatrix;
 use rovib::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit};
 

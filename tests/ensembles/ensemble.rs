@@ -11,12 +11,12 @@ use rand_distr::{Distribution, StandardNormal};
 use rovib::ensemble::runner::Outcome;
 use rovib::ensemble::{EnsembleOptions, Status, run_ensemble, run_with_sampler};
 use rovib::molecules::H2o;
-use rovib::runtime::Molecule;
 use rovib::runtime::ensemble::{Moments, autocorrelation_direct};
 use rovib::runtime::hamiltonian::fast::{BodyState, ReducedSystem, Reduction};
 use rovib::runtime::integrate::solve;
 use rovib::runtime::nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
 use rovib::runtime::sample::{self, SampleError, Sampler};
+use rovib::runtime::{Kinematics, Molecule};
 use rovib::scene::{Scene, parse_scene};
 
 /// A test distribution that is not rovib's: q Gaussian about the reference (0.02 bohr, 0.03

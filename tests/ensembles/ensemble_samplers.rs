@@ -8,9 +8,9 @@ use std::path::PathBuf;
 
 use rovib::ensemble::{EnsembleOptions, run_ensemble};
 use rovib::molecules::H2o;
-use rovib::runtime::Molecule;
 use rovib::runtime::nalgebra::SVector;
 use rovib::runtime::sample::BOLTZMANN;
+use rovib::runtime::{Kinematics, Molecule};
 use rovib::scene::{Scene, parse_scene};
 
 fn out_dir(name: &str) -> PathBuf {

@@ -18,7 +18,7 @@ use common::ensemble::{STATISTICS_FILES, column, csv};
 use rand_distr::{Distribution, StandardNormal};
 use rovib::ensemble::{EnsembleOptions, EnsembleReport, Status, run_ensemble, run_with_sampler};
 use rovib::molecules::H2o;
-use rovib::runtime::Molecule;
+use rovib::runtime::Kinematics;
 use rovib::runtime::ensemble::{Side, autocorrelation_direct};
 use rovib::runtime::hamiltonian::fast::{BodyState, ReducedSystem, Reduction};
 use rovib::runtime::integrate::solve;

@@ -13,7 +13,7 @@ use rovib::runtime::sample::{
     sampler,
 };
 use rovib::runtime::units::HARTREE_IN_WAVENUMBERS;
-use rovib::runtime::{KineticMatrices, Molecule};
+use rovib::runtime::{Kinematics, KineticMatrices, Molecule};
 
 /// Mean and standard error of the mean.
 fn mean_se(x: &[f64]) -> (f64, f64) {

@@ -25,8 +25,9 @@ use rovib::molecules::{H2o, Hcn, Nh3};
 use rovib::runtime::modes::{NormalModes, stationary_point};
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, SymmetricEigen, Vector3};
 use rovib::runtime::spectrum::{BOLTZMANN_HARTREE_PER_K, QuantumCorrection, Spectrum, double_harmonic_km_per_mol};
+use rovib::runtime::surface::Dipole;
 use rovib::runtime::units::HARTREE_IN_WAVENUMBERS;
-use rovib::runtime::{KineticMatrices, Molecule};
+use rovib::runtime::{HasKinematics, Kinematics, Molecule};
 use rovib::scene::parse_scene;
 
 /// Water's fixed charges from molecules/h2o.toml (O, H1, H2), e.
@@ -361,57 +362,19 @@ struct ChargedHcn;
 /// The test dipole's charges (H, C, N), e: a model, not HCN's; only the band's shape matters.
 const HCN_CHARGES: [f64; 3] = [0.2, 0.2, -0.4];
 
+impl HasKinematics<3, 3> for ChargedHcn {
+    type Kinematics = Hcn;
+    fn kinematics(&self) -> &Hcn {
+        &Hcn
+    }
+}
+
 impl Molecule<3, 3> for ChargedHcn {
-    fn name(&self) -> &'static str {
-        Hcn.name()
-    }
-    fn source(&self) -> &'static str {
-        Hcn.source()
-    }
-    fn atoms(&self) -> [rovib::runtime::Atom; 3] {
-        Hcn.atoms()
-    }
-    fn coordinates(&self) -> [rovib::runtime::Coordinate; 3] {
-        Hcn.coordinates()
-    }
-    fn positions(&self, q: &SVector<f64, 3>, r: &mut SMatrix<f64, 3, 3>) {
-        Hcn.positions(q, r)
-    }
-    fn positions_jacobian(&self, q: &SVector<f64, 3>, dr: &mut [SMatrix<f64, 3, 3>; 3]) {
-        Hcn.positions_jacobian(q, dr)
-    }
-    fn kinetic(&self, q: &SVector<f64, 3>, k: &mut KineticMatrices<3>) {
-        Hcn.kinetic(q, k)
-    }
-    fn kinetic_energy_gradient(
-        &self,
-        q: &SVector<f64, 3>,
-        omega: &Vector3<f64>,
-        qdot: &SVector<f64, 3>,
-        grad: &mut SVector<f64, 3>,
-    ) -> f64 {
-        Hcn.kinetic_energy_gradient(q, omega, qdot, grad)
-    }
-    fn kinetic_and_gradient<E>(
-        &self,
-        q: &SVector<f64, 3>,
-        k: &mut KineticMatrices<3>,
-        velocities: impl FnOnce(&KineticMatrices<3>) -> Result<(Vector3<f64>, SVector<f64, 3>), E>,
-        grad: &mut SVector<f64, 3>,
-    ) -> Result<(Vector3<f64>, SVector<f64, 3>, f64), E> {
-        Hcn.kinetic_and_gradient(q, k, velocities, grad)
-    }
     fn potential(&self, q: &SVector<f64, 3>) -> f64 {
         Hcn.potential(q)
     }
     fn potential_gradient(&self, q: &SVector<f64, 3>, grad: &mut SVector<f64, 3>) -> f64 {
         Hcn.potential_gradient(q, grad)
-    }
-    fn reference_geometry(&self) -> Option<SVector<f64, 3>> {
-        Hcn.reference_geometry()
-    }
-    fn internal_coordinates(&self, x: &SMatrix<f64, 3, 3>, q: &mut SVector<f64, 3>) -> bool {
-        Hcn.internal_coordinates(x, q)
     }
     fn cartesian_potential(&self, x: &SMatrix<f64, 3, 3>) -> Option<f64> {
         Hcn.cartesian_potential(x)
@@ -419,13 +382,26 @@ impl Molecule<3, 3> for ChargedHcn {
     fn cartesian_potential_gradient(&self, x: &SMatrix<f64, 3, 3>, grad: &mut SMatrix<f64, 3, 3>) -> Option<f64> {
         Hcn.cartesian_potential_gradient(x, grad)
     }
-    fn has_dipole(&self) -> bool {
-        true
+    fn dipole(&self) -> Option<impl Dipole<3>> {
+        Some(HcnCharges)
     }
-    fn dipole(&self, q: &SVector<f64, 3>, mu: &mut Vector3<f64>) {
+}
+
+/// The point-charge dipole of [`ChargedHcn`].
+struct HcnCharges;
+
+impl Dipole<3> for HcnCharges {
+    fn moment(&self, q: &SVector<f64, 3>, mu: &mut Vector3<f64>) {
         let mut r = SMatrix::<f64, 3, 3>::zeros();
         Hcn.positions(q, &mut r);
         *mu = (0..3).map(|i| HCN_CHARGES[i] * r.column(i)).sum();
+    }
+    fn moment_jacobian(&self, q: &SVector<f64, 3>, dmu: &mut SMatrix<f64, 3, 3>) {
+        let mut dr = [SMatrix::<f64, 3, 3>::zeros(); 3];
+        Hcn.positions_jacobian(q, &mut dr);
+        for (k, d) in dr.iter().enumerate() {
+            dmu.set_column(k, &(0..3).map(|i| HCN_CHARGES[i] * d.column(i)).sum::<Vector3<f64>>());
+        }
     }
 }
 

@@ -17,7 +17,7 @@ use crate::common;
 use common::cartesian::{CrossCheck, CrossCheckReport, cross_check, cross_check_with_masses, oscillations};
 use common::internal_coordinates::{self, Dual, V3, dihedral};
 use rovib::molecules::H2o;
-use rovib::runtime::Molecule;
+use rovib::runtime::Kinematics;
 use rovib::runtime::frames::CentreOfMass;
 use rovib::runtime::hamiltonian::{PhaseState, body_angular_momentum, euler_momenta_from_angular_momentum};
 use rovib::runtime::integrate::{GaussLegendreOptions, Method};

@@ -7,8 +7,9 @@
 use std::path::{Path, PathBuf};
 
 use rovib::molecules::H2o;
-use rovib::runtime::Molecule;
+use rovib::runtime::Kinematics;
 use rovib::runtime::nalgebra::{SVector, Vector3};
+use rovib::runtime::surface::Dipole;
 use rovib::runtime::units::{BOHR_IN_ANGSTROM, DEBYE_IN_E_BOHR};
 use rovib::simulation::run;
 
@@ -91,7 +92,7 @@ fn water_dipole_matches_the_charges_on_the_lab_frame_positions() {
         // |μ_lab| = |μ(q)|: the rotation keeps the length.
         let q = SVector::<f64, 3>::new(traj[1], traj[2], traj[3]);
         let mut body = Vector3::zeros();
-        H2o.dipole(&q, &mut body);
+        H2o.moment(&q, &mut body);
         worst_norm = worst_norm.max((mu.norm() - body.norm()).abs());
         spread = (spread.0.min(mu.norm()), spread.1.max(mu.norm()));
     }

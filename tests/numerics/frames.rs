@@ -11,7 +11,7 @@ use rovib::molecules::{Ch4, H2o, H2oRigid, Nh3};
 use rovib::runtime::frames::{CentreOfMass, FitOptions, FrameError, LabState, from_lab, lab_angular_momentum, to_lab};
 use rovib::runtime::hamiltonian::{PhaseState, body_angular_momentum, hamiltonian, rotation_matrix};
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
-use rovib::runtime::{Molecule, MoleculeVisitor};
+use rovib::runtime::{Kinematics, Molecule, MoleculeVisitor};
 
 const STATES: usize = 12;
 

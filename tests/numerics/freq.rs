@@ -4,10 +4,10 @@
 
 use rovib::freq::{HARTREE_IN_MHZ, freq, frequencies};
 use rovib::molecules::H2o;
-use rovib::runtime::Molecule;
 use rovib::runtime::modes::NormalModes;
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rovib::runtime::units::HARTREE_IN_WAVENUMBERS;
+use rovib::runtime::{Kinematics, Molecule};
 
 #[test]
 fn water_wavenumbers_and_rotational_constants() {

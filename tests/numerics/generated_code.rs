@@ -8,7 +8,7 @@ use common::for_each_molecule;
 
 use common::{Rng, central_difference, fd_step, random_q, rel_diff, richardson_derivative};
 use rovib::runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
-use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
+use rovib::runtime::{Kinematics, KineticMatrices, Molecule, MoleculeVisitor};
 
 const POINTS: usize = 5;
 

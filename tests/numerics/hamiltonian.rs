@@ -13,7 +13,7 @@ use rovib::runtime::hamiltonian::{
 };
 use rovib::runtime::integrate::OdeSystem;
 use rovib::runtime::nalgebra::{DMatrix, SVector};
-use rovib::runtime::{KineticMatrices, Molecule, MoleculeVisitor};
+use rovib::runtime::{Kinematics, KineticMatrices, Molecule, MoleculeVisitor};
 
 const STATES: usize = 8;
 

@@ -26,13 +26,13 @@ use rovib::runtime::integrate::{
 };
 use rovib::runtime::lanes::{F64x2, F64x4, F64x8, KineticLanes, Real};
 use rovib::runtime::nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
-use rovib::runtime::{Atom, Coordinate, KineticMatrices, Molecule, MoleculeVisitor};
+use rovib::runtime::{Atom, Coordinate, Kinematics, KineticMatrices, Molecule, MoleculeVisitor};
 
 /// A molecule that forwards only the `f64` methods, so that its lane methods are the trait's
 /// defaults (the `f64` functions lane by lane).
 struct ScalarOnly<'a, M>(&'a M);
 
-impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for ScalarOnly<'_, M> {
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Kinematics<N, NA> for ScalarOnly<'_, M> {
     fn name(&self) -> &'static str {
         self.0.name()
     }
@@ -66,6 +66,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for Sc
     ) -> f64 {
         self.0.kinetic_energy_gradient(q, omega, qdot, grad)
     }
+}
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Molecule<N, NA> for ScalarOnly<'_, M> {
     fn potential(&self, q: &SVector<f64, N>) -> f64 {
         self.0.potential(q)
     }

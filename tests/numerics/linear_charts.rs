@@ -16,7 +16,6 @@ use common::cartesian::CartesianSystem as Reference;
 use common::internal_coordinates;
 use rovib::ensemble::run_with_sampler;
 use rovib::molecules::{H2o, Hcn};
-use rovib::runtime::Molecule;
 use rovib::runtime::cartesian_system::CartesianSystem;
 use rovib::runtime::charts::{self, ChartObserver, ChartStart, ChartState};
 use rovib::runtime::frames::{CentreOfMass, LabState, to_lab_body};
@@ -24,6 +23,7 @@ use rovib::runtime::hamiltonian::fast::{BodyState, ReducedSystem, Reduction};
 use rovib::runtime::integrate::{Dop853, Dop853Options};
 use rovib::runtime::nalgebra::{SVector, UnitQuaternion, Vector3};
 use rovib::runtime::sample::{SampleError, Sampler};
+use rovib::runtime::{Kinematics, Molecule};
 use std::ops::ControlFlow;
 
 const T_END: f64 = 10000.0;

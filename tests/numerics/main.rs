@@ -13,6 +13,7 @@ mod cartesian;
 mod cartesian_potential;
 #[cfg(feature = "surface-demos")]
 mod compiled_surfaces;
+mod contract;
 mod cross_check_molecules;
 mod dipole_output;
 mod fast_path;

@@ -20,7 +20,7 @@ use rovib::molecules::{Ch4, Co2, Ethane, H2o, H2o2, Nh3};
 use rovib::runtime::hamiltonian::InverseMetric;
 use rovib::runtime::nalgebra::{DMatrix, Rotation3, SMatrix, SVector, Vector3};
 use rovib::runtime::units::{BOHR_IN_ANGSTROM, HARTREE_IN_WAVENUMBERS};
-use rovib::runtime::{KineticMatrices, Molecule};
+use rovib::runtime::{Kinematics, KineticMatrices, Molecule};
 
 /// 1 aJ in cm⁻¹ (1e-18 J / (h c)), for quoting force constants.
 const AJ_IN_WAVENUMBERS: f64 = 50_341.165_675;

@@ -36,7 +36,7 @@ use rovib::runtime::integrate::{
 };
 use rovib::runtime::nalgebra::{SVector, Vector3};
 use rovib::runtime::units::{BOHR_IN_ANGSTROM, HARTREE_IN_WAVENUMBERS};
-use rovib::runtime::{KineticMatrices, Molecule};
+use rovib::runtime::{Kinematics, KineticMatrices, Molecule};
 
 /// DOP853 with `rtol` and `atol`.
 fn dop853(rtol: f64, atol: f64) -> Method {

@@ -9,7 +9,7 @@
 // Each test binary uses a different subset of these helpers.
 #![allow(dead_code)]
 
-use rovib_runtime::molecule::{Atom, Coordinate, KineticMatrices, Molecule};
+use rovib_runtime::molecule::{Atom, Coordinate, Kinematics, KineticMatrices, Molecule};
 use rovib_runtime::nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rovib_runtime::units::{AngleUnit, CoordinateUnit, DALTON_IN_ELECTRON_MASSES, LengthUnit};
 
@@ -203,7 +203,7 @@ impl Water {
     }
 }
 
-impl Molecule<3, 3> for Water {
+impl Kinematics<3, 3> for Water {
     fn name(&self) -> &'static str {
         "water-test"
     }
@@ -255,7 +255,9 @@ impl Molecule<3, 3> for Water {
     ) -> f64 {
         self.derivatives(q).kinetic_energy_gradient(&self.masses(), omega, qdot, grad)
     }
+}
 
+impl Molecule<3, 3> for Water {
     fn potential(&self, q: &SVector<f64, 3>) -> f64 {
         let mut g = SVector::zeros();
         self.potential_gradient(q, &mut g)
@@ -296,7 +298,7 @@ impl RigidTop {
     }
 }
 
-impl Molecule<0, 3> for RigidTop {
+impl Kinematics<0, 3> for RigidTop {
     fn name(&self) -> &'static str {
         "rigid-top-test"
     }
@@ -334,7 +336,9 @@ impl Molecule<0, 3> for RigidTop {
     ) -> f64 {
         self.derivatives().kinetic_energy_gradient(&self.masses(), omega, qdot, grad)
     }
+}
 
+impl Molecule<0, 3> for RigidTop {
     fn potential(&self, _q: &SVector<f64, 0>) -> f64 {
         Self::U0
     }
