@@ -18,11 +18,11 @@ use std::path::Path;
 use std::process::Command;
 
 use rovib::molecules::{Arn2, Co2ar};
-use rovib::runtime::{Kinematics, Molecule};
 use rovib::runtime::finite_differences::CentralDifferences;
 use rovib::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use rovib::runtime::position_surface::{CartesianPotential, FromPositions, add_pair_terms, check_rotation_invariance};
 use rovib::runtime::surface::{Dipole, Potential, WithPotential};
+use rovib::runtime::{Kinematics, Molecule};
 use rovib_ffi::{SharedLibrary, builtin};
 
 use crate::surfaces::{file_error, max_q_difference, run_scene, trajectory};
