@@ -18,7 +18,7 @@ use crate::common;
 
 use common::rigid_rotor::{AtomRotor, Site};
 use rovib::molecules::Hclar;
-use rovib::runtime::Molecule;
+use rovib::runtime::Kinematics;
 use rovib::runtime::frames::{CentreOfMass, lab_of_body_any, to_lab_body};
 use rovib::runtime::hamiltonian::fast::{BodyState, ReducedSystem, Reduction};
 use rovib::runtime::integrate::{Dop853, Dop853Options, OdeSystem};
