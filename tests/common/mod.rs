@@ -7,7 +7,7 @@ pub mod ensemble;
 
 use rovib::runtime::nalgebra::{SMatrix, SVector};
 use rovib::runtime::units::CoordinateUnit;
-use rovib::runtime::{Molecule, MoleculeVisitor};
+use rovib::runtime::{Kinematics, Molecule, MoleculeVisitor};
 
 /// The stack of the thread [`for_each_molecule`] runs each check on. The test harness's
 /// threads have 2 MiB, which a molecule of 54 coordinates (hexane, added through
@@ -45,6 +45,31 @@ pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy + Send)
         rovib::molecules::NAMES.len(),
         failures.join("\n")
     );
+}
+
+/// The molecules whose kinetic metric is too ill-conditioned for the checks that compare two
+/// paths to a fixed 1e-12: `hclar` (a MODEL HCl-like rotor + Ar, whose light rotor makes
+/// M·M⁻¹ − 1 about 5e-12 in round-off alone). Its paths are checked instead against an
+/// independent lab-frame propagation (tests/numerics/rigid_collinear.rs).
+pub const ILL_CONDITIONED: [&str; 1] = ["hclar"];
+
+/// [`for_each_molecule`] without the [`ILL_CONDITIONED`] ones, for checks whose tolerance is a
+/// fixed multiple of the round-off of a well-conditioned metric.
+pub fn for_each_well_conditioned_molecule(check: impl MoleculeVisitor<Output = ()> + Copy + Send) {
+    #[derive(Copy, Clone)]
+    struct Skip<C>(C);
+    impl<C: MoleculeVisitor<Output = ()>> MoleculeVisitor for Skip<C> {
+        type Output = ();
+        fn visit<M, const N: usize, const NA: usize>(self, m: M)
+        where
+            M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+        {
+            if !ILL_CONDITIONED.contains(&Kinematics::name(&m)) {
+                self.0.visit(m)
+            }
+        }
+    }
+    for_each_molecule(Skip(check))
 }
 
 /// The definition file of the molecule called `name` as the build names it:

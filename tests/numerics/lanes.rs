@@ -333,7 +333,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> OdeSystem for GeneralO
 /// clears only its own bit.
 #[test]
 fn production_rhs_lanes_equal_f64_and_the_general_path() {
-    for_each_molecule(ProductionLanesMatch);
+    common::for_each_well_conditioned_molecule(ProductionLanesMatch);
 }
 
 /// Which molecules take the lane code: every shipped molecule has exact lane forms (so the
