@@ -41,7 +41,7 @@ pub struct Frequencies {
     pub wavenumbers: Vec<f64>,
     /// Mode vectors, one per mode: in q (`δq = Σ_k l_k Q_k`, `Lᵀ G⁻¹ L = 1`), or at a linear
     /// stationary point Cartesian displacements (x, y, z of each atom in turn, in the body frame
-    /// of [`Molecule::positions`], per unit mass-weighted normal coordinate).
+    /// of [`Kinematics::positions`](crate::runtime::Kinematics::positions), per unit mass-weighted normal coordinate).
     pub vectors: Vec<Vec<f64>>,
     /// Principal moments of inertia, electron masses · bohr², descending constants order.
     pub moments: [f64; 3],

@@ -10,7 +10,7 @@
 //!   `Σ_k ∂U/∂q_k ∂q_k/∂x`, done by [`crate::diff`] like every other derivative).
 //!
 //! and the generated functions [`specs`] that evaluate them
-//! (`Molecule::internal_coordinates`, `Molecule::cartesian_potential`,
+//! (`Kinematics::internal_coordinates`, `Molecule::cartesian_potential`,
 //! `Molecule::cartesian_potential_gradient`).
 //!
 //! Where a coordinate's closed form is not differentiable in `x` (an angle at exactly 0 or π,

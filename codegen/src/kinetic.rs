@@ -33,7 +33,7 @@
 //!   `j ≤ l` (the symbolic derivative of a shared first derivative);
 //! * `U(q)` and `∂U/∂q`;
 //! * only if asked for ([`Options::kinetic_jacobian`]), `∂a/∂q`, `∂A/∂q`, `∂I/∂q` symbolically;
-//!   by default the reference path gets them from the runtime (`Molecule::kinetic_jacobian`'s
+//!   by default the reference path gets them from the runtime (`Kinematics::kinetic_jacobian`'s
 //!   default, from the generated `∂T/∂q`), since the production path never needs them.
 //!
 //! The cost of the generated production code is then about `Σ_i n_i² + n²` operations (`n_i`

@@ -11,8 +11,8 @@
 //! Z-matrix-like coordinates) minus a dense rank-3 term. Expanded, the dense term is
 //! `n(n + 1)/2` expressions of 7 operations each, a fifth of hexane's generated production
 //! code; as the loop below it is `3n²` multiply-adds over contiguous columns. The generator
-//! emits the sparse sum and `∂c/∂q` and calls [`remove_centre_of_mass`] from `Molecule::kinetic`
-//! and `Molecule::kinetic_and_gradient` for molecules with at least
+//! emits the sparse sum and `∂c/∂q` and calls [`remove_centre_of_mass`] from `Kinematics::kinetic`
+//! and `Kinematics::kinetic_and_gradient` for molecules with at least
 //! `rovib_codegen::kinetic::RUN_TIME_CENTRE_OF_MASS_FROM` coordinates; smaller ones keep the
 //! expanded form.
 
@@ -22,7 +22,7 @@ use crate::molecule::KineticMatrices;
 
 /// The velocities callback of a large molecule's generated `kinetic_and_gradient_sparse`:
 /// `(ω, q̇)` from the finished kinetic matrices, or `None` (the generic
-/// `Molecule::kinetic_and_gradient` wrapper keeps the error). `dyn`, so that the large
+/// `Kinematics::kinetic_and_gradient` wrapper keeps the error). `dyn`, so that the large
 /// generated body is compiled once rather than once per caller.
 pub type Velocities<'a, const N: usize> =
     dyn FnMut(&KineticMatrices<N>) -> Option<(Vector3<f64>, SVector<f64, N>)> + 'a;

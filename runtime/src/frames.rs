@@ -53,7 +53,7 @@
 //!
 //!    whose matrix is *exactly* the kinetic metric of the Hamiltonian (the mass-weighted Gram
 //!    matrix of the rotational and vibrational displacement fields). So the molecule's own
-//!    [`Molecule::kinetic`] and [`Molecule::positions_jacobian`] give every ingredient, and the
+//!    [`Kinematics::kinetic`](crate::molecule::Kinematics::kinetic) and [`Kinematics::positions_jacobian`](crate::molecule::Kinematics::positions_jacobian) give every ingredient, and the
 //!    solve is `(δθ, δq) = [[G11, G12], [G12ᵀ, G22]] · rhs` with the Hamiltonian's
 //!    [`InverseMetric`] (which also detects a singular metric). A step that would increase `S`
 //!    is halved (backtracking), so `S` never increases. After each step `R` is re-orthonormalised
@@ -69,7 +69,7 @@
 //!    molecule's. Setting the tolerance to `f64::INFINITY` accepts the least-squares fit.
 //!
 //! For a molecule whose coordinates are declared by kind (distances, angles, dihedrals) steps
-//! 1–3 are replaced by the closed form `q = q(x)` ([`Molecule::internal_coordinates`]) and one
+//! 1–3 are replaced by the closed form `q = q(x)` ([`Kinematics::internal_coordinates`](crate::molecule::Kinematics::internal_coordinates)) and one
 //! Kabsch rotation: no iteration and no metric, so the fit also works where the metric is
 //! singular (a linear geometry). Angles are taken on the branch nearest the starting `q`.
 //!
@@ -811,7 +811,7 @@ struct PositionFit<const N: usize, const NA: usize> {
 }
 
 /// The fit of the centre-of-mass positions `y` for a molecule whose coordinates have closed
-/// forms ([`Molecule::internal_coordinates`]): `q = q(y)`, each angle moved by a multiple of 2π
+/// forms ([`Kinematics::internal_coordinates`](crate::molecule::Kinematics::internal_coordinates)): `q = q(y)`, each angle moved by a multiple of 2π
 /// to the value nearest `start` (a dihedral keeps its branch), then the Kabsch rotation of
 /// `R_i(q)` onto `y`. `None` for a molecule without closed forms.
 fn closed_form_fit<M, const N: usize, const NA: usize>(

@@ -2,7 +2,7 @@
 //! code that evaluates several independent trajectories at once, one per SIMD lane
 //! ([`F64x2`], [`F64x4`], [`F64x8`]).
 //!
-//! The generated molecule code has a lane-generic form (`Molecule::kinetic_and_gradient_lanes`
+//! The generated molecule code has a lane-generic form (`Kinematics::kinetic_and_gradient_lanes`
 //! and `Molecule::potential_gradient_lanes`) written over [`Real`], and the production right-hand
 //! side ([`crate::hamiltonian::lanes`]) is written once over [`Real`]: instantiated with `f64` it
 //! is the one-trajectory production path, with a vector type it evaluates `LANES` trajectories.

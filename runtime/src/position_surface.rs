@@ -4,7 +4,7 @@
 //! A [`CartesianPotential<NA>`] is `U(x)` over the 3 × NA positions (column `i` is atom `i`, in
 //! the molecule's atom order, bohr → hartree). [`FromPositions`] makes it a [`Potential<N>`] over
 //! the internal coordinates: `U(q) = U(R(q))` and, by the chain rule through the generated
-//! positions Jacobian ([`Molecule::positions_jacobian`]),
+//! positions Jacobian ([`Kinematics::positions_jacobian`](crate::molecule::Kinematics::positions_jacobian)),
 //! `∂U/∂q_k = Σ_i ∂U/∂x_i · ∂R_i/∂q_k`.
 //!
 //! `R(q)` is the body frame with the centre of mass at the origin, so the surface must not

@@ -11,12 +11,12 @@
 //! Per evaluation, at `(q, p, Ω_e, p_e)`:
 //!
 //! 1. `J = W p_e` (eq. 2), from `sin`/`cos` of θ and ψ directly (no `∂W/∂Ω_e` matrices);
-//! 2. `a`, `A`, `I` ([`Molecule::kinetic`]) and the block factorization of the full metric
+//! 2. `a`, `A`, `I` ([`Kinematics::kinetic`](crate::molecule::Kinematics::kinetic)) and the block factorization of the full metric
 //!    `M = [[I, A], [Aᵀ, a]]` ([`MetricFactor`]): `I⁻¹` (3 × 3, closed form), `Y = I⁻¹A`, and the
 //!    Schur complement `S = a − Aᵀ I⁻¹ A = a − AᵀY = G22⁻¹ = L D Lᵀ` (Cholesky without square
 //!    roots);
 //! 3. the velocities `v = (ω, q̇) = M⁻¹ (J, p)`: `q̇ = S⁻¹ (p − YᵀJ)`, `ω = I⁻¹J − Y q̇`;
-//! 4. `∂T/∂q` at fixed `(ω, q̇)` ([`Molecule::kinetic_energy_gradient`]) and `∂U/∂q`
+//! 4. `∂T/∂q` at fixed `(ω, q̇)` ([`Kinematics::kinetic_energy_gradient`](crate::molecule::Kinematics::kinetic_energy_gradient)) and `∂U/∂q`
 //!    ([`Molecule::potential_gradient`]).
 //!
 //! Then
@@ -48,7 +48,7 @@
 //!
 //!     ½ vᵀ (∂M/∂q_k) v = ∂T/∂q_k |_(ω, q̇ fixed),
 //!
-//! which is exactly what Molecule::kinetic_energy_gradient returns. Hence
+//! which is exactly what Kinematics::kinetic_energy_gradient returns. Hence
 //!
 //!     ṗ_k = −∂H/∂q_k = ∂T/∂q_k|_(ω, q̇) − ∂U/∂q_k.
 //!
@@ -115,7 +115,7 @@
 //! load): G-matrix path 10 325 instructions, fast path 2 117, production [`ReducedSystem`] 2 046, J = 0
 //! 1 838; in time on the development machine (a shared 2-core AMD EPYC VM at 2.6 GHz) G-matrix path
 //! ≈ 1.37 µs against ≈ 0.2 µs. The generated code is about half of the fast path, the
-//! factorization and solve a fifth. The generated [`Molecule::kinetic_and_gradient`] computes
+//! factorization and solve a fifth. The generated [`Kinematics::kinetic_and_gradient`](crate::molecule::Kinematics::kinetic_and_gradient) computes
 //! the position terms (and every `sin_cos`) once for `a, A, I` and for `∂T/∂q`: 2 117
 //! instructions against 2 394 with the two separate generated calls (`rhs/NAME/fast_unfused`).
 //!
@@ -143,7 +143,7 @@ type VelocitiesAndForce<const N: usize> = (Vector3<f64>, SVector<f64, N>, SVecto
 
 /// The kinetic matrices, the velocities `(ω, q̇)` from `factor` (the caller's metric solve),
 /// and the internal force `ṗ = ∂T/∂q|_(ω, q̇) − ∂U/∂q`, through the generated
-/// [`Molecule::kinetic_and_gradient`], which computes the position terms once for both halves.
+/// [`Kinematics::kinetic_and_gradient`](crate::molecule::Kinematics::kinetic_and_gradient), which computes the position terms once for both halves.
 /// Returns `(ω, q̇, ṗ)`.
 #[inline(always)]
 pub(super) fn velocities_and_force<M, const N: usize, const NA: usize>(

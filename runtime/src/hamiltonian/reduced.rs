@@ -53,7 +53,7 @@ impl<const N: usize> Reduction<N> {
         Self { active, rotation: RotationPart::Free }
     }
 
-    /// The coordinates called `frozen` (names as in [`Molecule::coordinates`]) frozen, rotation
+    /// The coordinates called `frozen` (names as in [`Kinematics::coordinates`](crate::molecule::Kinematics::coordinates)) frozen, rotation
     /// free: how a scene that names coordinates picks them at run time.
     pub fn freezing<M, const NA: usize>(molecule: &M, frozen: &[&str]) -> Result<Self, ReductionError>
     where
