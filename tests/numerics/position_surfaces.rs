@@ -25,7 +25,7 @@ use rovib::runtime::surface::{Dipole, Potential, WithPotential};
 use rovib::runtime::{Kinematics, Molecule};
 use rovib_ffi::{SharedLibrary, builtin};
 
-use crate::surfaces::{file_error, max_q_difference, run_scene, trajectory};
+use crate::surfaces::{assert_same_trajectory_as_the_definition, file_error, max_q_difference, run_scene, trajectory};
 
 /// The N–N bond of molecules/arn2.toml, bohr.
 const RNN: f64 = 2.0744;
@@ -228,21 +228,8 @@ const CO2AR_SCENE: &str = "molecule = \"co2ar\"\n\
 fn a_scene_runs_on_a_library_over_positions() {
     let dir = sites_library("scene", &[]);
     run_scene(&dir, CO2AR_SCENE, "library = \"libco2ar.so\"").unwrap();
-    let with_library = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
-    let plain = sites_library("scene-plain", &[]);
-    let path = plain.join("scene.toml");
-    std::fs::write(&path, CO2AR_SCENE).unwrap();
-    rovib::simulation::run(&path, Some(&plain.join("out"))).unwrap();
-    let generated = std::fs::read_to_string(plain.join("out/trajectory.csv")).unwrap();
-    let rows = |s: &str| s.lines().map(|l| l.split(',').map(str::to_owned).collect::<Vec<_>>()).collect::<Vec<_>>();
-    let (a, b) = (rows(&with_library), rows(&generated));
-    assert!(a.len() > 10 && a.len() == b.len() && a[0] == b[0]);
-    for (x, y) in a.iter().zip(&b).skip(1) {
-        for (u, v) in x.iter().zip(y) {
-            let (u, v): (f64, f64) = (u.parse().unwrap(), v.parse().unwrap());
-            assert!((u - v).abs() <= 1e-9 * v.abs().max(1.0), "{x:?}\n{y:?}");
-        }
-    }
+    let rows = assert_same_trajectory_as_the_definition(&dir, &sites_library("scene-plain", &[]), CO2AR_SCENE);
+    assert!(rows > 10, "{rows} rows");
 }
 
 #[test]

@@ -148,6 +148,29 @@ pub(crate) fn run_scene(dir: &Path, scene: &str, potential: &str) -> Result<rovi
     rovib::simulation::run(&path, Some(&dir.join("out")))
 }
 
+/// Runs `scene` as written (the definition's own potential) in `plain`, and asserts that its
+/// trajectory.csv has the rows of `dir/out/trajectory.csv` (a run of the same scene on an outside
+/// surface) to the digits written: the same header, the same number of rows, each value within
+/// 1e-9 relative (1e-9 absolute below 1). Returns the number of rows.
+pub(crate) fn assert_same_trajectory_as_the_definition(dir: &Path, plain: &Path, scene: &str) -> usize {
+    let with_library = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
+    let path = plain.join("scene.toml");
+    std::fs::write(&path, scene).unwrap();
+    rovib::simulation::run(&path, Some(&plain.join("out"))).unwrap();
+    let generated = std::fs::read_to_string(plain.join("out/trajectory.csv")).unwrap();
+    let rows = |s: &str| s.lines().map(|l| l.split(',').map(str::to_owned).collect::<Vec<_>>()).collect::<Vec<_>>();
+    let (a, b) = (rows(&with_library), rows(&generated));
+    assert_eq!(a.len(), b.len());
+    assert_eq!(a[0], b[0]);
+    for (x, y) in a.iter().zip(&b).skip(1) {
+        for (u, v) in x.iter().zip(y) {
+            let (u, v): (f64, f64) = (u.parse().unwrap(), v.parse().unwrap());
+            assert!((u - v).abs() <= 1e-9 * v.abs().max(1.0), "{x:?}\n{y:?}");
+        }
+    }
+    a.len()
+}
+
 /// The located error of a scene that must be refused.
 pub(crate) fn file_error(r: Result<rovib::RunReport, Error>) -> rovib::runtime::diagnostic::FileError {
     match r {
@@ -162,23 +185,7 @@ fn a_scene_runs_on_a_library_named_relative_to_it() {
     let dir = tmp("scene");
     shared_library(&dir, &[]);
     run_scene(&dir, SCENE, "library = \"libarn2.so\"").unwrap();
-    let with_library = std::fs::read_to_string(dir.join("out/trajectory.csv")).unwrap();
-    let plain = tmp("scene-plain");
-    let path = plain.join("scene.toml");
-    std::fs::write(&path, SCENE).unwrap();
-    rovib::simulation::run(&path, Some(&plain.join("out"))).unwrap();
-    let generated = std::fs::read_to_string(plain.join("out/trajectory.csv")).unwrap();
-    // The same rows to the digits written (R, θ and everything else).
-    let rows = |s: &str| s.lines().map(|l| l.split(',').map(str::to_owned).collect::<Vec<_>>()).collect::<Vec<_>>();
-    let (a, b) = (rows(&with_library), rows(&generated));
-    assert_eq!(a.len(), b.len());
-    assert_eq!(a[0], b[0]);
-    for (x, y) in a.iter().zip(&b).skip(1) {
-        for (u, v) in x.iter().zip(y) {
-            let (u, v): (f64, f64) = (u.parse().unwrap(), v.parse().unwrap());
-            assert!((u - v).abs() <= 1e-9 * v.abs().max(1.0), "{x:?}\n{y:?}");
-        }
-    }
+    assert_same_trajectory_as_the_definition(&dir, &tmp("scene-plain"), SCENE);
 }
 
 #[test]
