@@ -47,6 +47,16 @@ pub fn for_each_molecule(check: impl MoleculeVisitor<Output = ()> + Copy + Send)
     );
 }
 
+/// ∫ₐᵇ f by the composite Simpson rule on `n` (even) intervals.
+pub fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
+    let h = (b - a) / n as f64;
+    let mut s = f(a) + f(b);
+    for i in 1..n {
+        s += f(a + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    s * h / 3.0
+}
+
 /// The molecules whose kinetic metric is too ill-conditioned for the checks that compare two
 /// paths to a fixed 1e-12: `hclar` (a MODEL HCl-like rotor + Ar, whose light rotor makes
 /// M·M⁻¹ − 1 about 5e-12 in round-off alone). Its paths are checked instead against an

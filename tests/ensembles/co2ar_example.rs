@@ -59,14 +59,8 @@ fn p32(x: f64) -> f64 {
     if x <= 0.0 {
         return 0.0;
     }
-    let (n, b) = (64, x.sqrt());
-    let h = b / n as f64;
     let f = |s: f64| s * s * (-s * s).exp();
-    let mut sum = f(0.0) + f(b);
-    for i in 1..n {
-        sum += f(i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
-    }
-    4.0 / std::f64::consts::PI.sqrt() * sum * h / 3.0
+    4.0 / std::f64::consts::PI.sqrt() * common::simpson(f, 0.0, x.sqrt(), 64)
 }
 
 struct Quadrature {

@@ -37,13 +37,7 @@ const R: [f64; 2] = [1.47, 2.67];
 const ELECTRON_MASSES_PER_DALTON: f64 = 1_822.888_486_209;
 
 fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64) -> f64 {
-    let n = 20_000;
-    let h = (b - a) / n as f64;
-    let mut s = f(a) + f(b);
-    for i in 1..n {
-        s += f(a + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
-    }
-    s * h / 3.0
+    common::simpson(f, a, b, 20_000)
 }
 
 struct Quadrature {

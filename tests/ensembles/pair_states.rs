@@ -37,15 +37,6 @@ const D: [f64; 2] = [5.5, 20.0];
 const R: [f64; 2] = [1.47, 2.67];
 const ELECTRON_MASSES_PER_DALTON: f64 = 1_822.888_486_209;
 
-fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
-    let h = (b - a) / n as f64;
-    let mut s = f(a) + f(b);
-    for i in 1..n {
-        s += f(a + i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
-    }
-    s * h / 3.0
-}
-
 fn lj(d: f64) -> f64 {
     4.0 * EPS * ((SIGMA / d).powi(12) - (SIGMA / d).powi(6))
 }
@@ -64,7 +55,7 @@ fn normal(a: f64, b: f64) -> f64 {
     if b <= a {
         return 0.0;
     }
-    simpson(|x| (-0.5 * x * x).exp() / (2.0 * PI).sqrt(), a, b, 200)
+    common::simpson(|x| (-0.5 * x * x).exp() / (2.0 * PI).sqrt(), a, b, 200)
 }
 
 struct Quadrature {
@@ -79,22 +70,22 @@ fn quadrature() -> Quadrature {
     let kt = BOLTZMANN * T;
     let m = reduced_mass();
     let w = |d: f64| d * d * (-lj(d) / kt).exp();
-    let norm = simpson(w, D[0], D[1], 4000);
+    let norm = common::simpson(w, D[0], D[1], 4000);
     let c = 4.0 / PI.sqrt();
     let p_bound = |d: f64| {
         let e = -v(d);
-        if e <= 0.0 { 0.0 } else { c * simpson(|y| y * y * (-y * y).exp(), 0.0, (e / kt).sqrt(), 400) }
+        if e <= 0.0 { 0.0 } else { c * common::simpson(|y| y * y * (-y * y).exp(), 0.0, (e / kt).sqrt(), 400) }
     };
     let h_bound = |d: f64| {
         let e = -v(d);
         if e <= 0.0 {
             0.0
         } else {
-            c * simpson(|y| y * y * (-y * y).exp() * (kt * y * y + v(d)), 0.0, (e / kt).sqrt(), 400)
+            c * common::simpson(|y| y * y * (-y * y).exp() * (kt * y * y + v(d)), 0.0, (e / kt).sqrt(), 400)
         }
     };
-    let bound_weight = simpson(|d| w(d) * p_bound(d), D[0], D[1], 2000);
-    let bound_energy = simpson(|d| w(d) * h_bound(d), D[0], D[1], 2000) / bound_weight;
+    let bound_weight = common::simpson(|d| w(d) * p_bound(d), D[0], D[1], 2000);
+    let bound_energy = common::simpson(|d| w(d) * h_bound(d), D[0], D[1], 2000) / bound_weight;
     // The centrifugal barrier outside d for angular momentum l.
     let barrier = |d: f64, l: f64| {
         let ueff = |r: f64| v(r) + l * l / (2.0 * m * r * r);
@@ -111,7 +102,7 @@ fn quadrature() -> Quadrature {
     };
     let sd = (kt / m).sqrt();
     let p_meta = |d: f64| {
-        simpson(
+        common::simpson(
             |s| {
                 let density = s / (sd * sd) * (-0.5 * s * s / (sd * sd)).exp();
                 let e_t = 0.5 * m * s * s + v(d);
@@ -128,8 +119,8 @@ fn quadrature() -> Quadrature {
             200,
         )
     };
-    let metastable = simpson(|d| w(d) * p_meta(d), D[0], D[1], 200) / norm;
-    let monomer = 4.0 * PI * simpson(|r| r * r * (-0.5 * KB * (r - R0).powi(2) / kt).exp(), R[0], R[1], 2000);
+    let metastable = common::simpson(|d| w(d) * p_meta(d), D[0], D[1], 200) / norm;
+    let monomer = 4.0 * PI * common::simpson(|r| r * r * (-0.5 * KB * (r - R0).powi(2) / kt).exp(), R[0], R[1], 2000);
     Quadrature { bound: bound_weight / norm, metastable, bound_energy, dimer: 4.0 * PI * bound_weight, monomer }
 }
 
