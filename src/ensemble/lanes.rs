@@ -151,8 +151,8 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, 'm, M, 
             return false;
         }
         let state = super::pair::reversed(drawn);
-        let system =
-            ReducedSystem::from_body(self.plan.molecule, self.plan.reduction, &state).with_min_pivot(self.plan.min_pivot);
+        let system = ReducedSystem::from_body(self.plan.molecule, self.plan.reduction, &state)
+            .with_min_pivot(self.plan.min_pivot);
         if system.reduce_body(&state, y0).is_err() {
             self.set_backward(index, Fate::Redo);
             return false;
