@@ -80,18 +80,40 @@ pub fn run_and_write<M, const N: usize, const NA: usize>(
 where
     M: Molecule<N, NA> + Sync,
 {
+    if options.resume {
+        return Err(scene
+            .source()
+            .error(
+                ensemble.method_span(),
+                "a collision ensemble cannot be resumed (`--resume`): it keeps no checkpoint",
+                "run the scene again without --resume (an interrupted run's final_states.csv keeps the \
+                 trajectories it completed; see docs/src/reference/ensemble.md)",
+            )
+            .into());
+    }
     std::fs::create_dir_all(&options.out_dir)
         .map_err(|e| Error::context(format!("cannot create {}", options.out_dir.display()), e))?;
     let _lock = crate::dir_lock::DirLock::acquire(&options.out_dir)?;
     let (report, wall, threads) = run(m, scene, ensemble.trajectories, ensemble.seed, ensemble.threads, c, options)?;
     let dir = &options.out_dir;
+    let interrupted = options.stop.load(std::sync::atomic::Ordering::Relaxed);
     let mut files = Vec::new();
     write_final_states(dir, &report.records)?;
     files.push(dir.join("final_states.csv"));
-    write_histograms(dir, &report, c)?;
-    files.push(dir.join("collision_histograms.csv"));
-
-    let interrupted = options.stop.load(std::sync::atomic::Ordering::Relaxed);
+    // The histograms are statistics of the whole ensemble: an interrupted run writes none (and
+    // leaves no earlier run's behind).
+    let histograms = dir.join("collision_histograms.csv");
+    if interrupted {
+        match std::fs::remove_file(&histograms) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(Error::context(format!("cannot remove {}", histograms.display()), e));
+            }
+            _ => {}
+        }
+    } else {
+        write_histograms(dir, &report, c)?;
+        files.push(histograms);
+    }
     let status = if interrupted {
         Status::Interrupted
     } else if report.records.is_empty() {
@@ -310,7 +332,21 @@ fn write_summary(
             json!({ "b_bohr": [st.low, st.high], "weight": st.weight, "area_bohr2": st.area(), "trajectories": n, "completed": done })
         })
         .collect();
-    let summary = json!({
+    let statistics = json!({
+        "outcomes": outcomes,
+        "cross_sections": sigma,
+        "energy_transfer": {
+            "over": "inelastic trajectories, each stratum weighted by its area; delta_e = E_trans(final) - E_trans(initial)",
+            "mean_delta_e": estimate(&s.delta_e, "hartree"),
+            "mean_delta_e_squared": estimate(&s.delta_e2, "hartree^2"),
+            "mean_delta_e_rot_a": estimate(&s.fragment_changes[0], "hartree"),
+            "mean_delta_e_vib_a": estimate(&s.fragment_changes[1], "hartree"),
+            "mean_delta_e_rot_b": estimate(&s.fragment_changes[2], "hartree"),
+            "mean_delta_e_vib_b": estimate(&s.fragment_changes[3], "hartree"),
+        },
+    });
+    let interrupted = matches!(status, Status::Interrupted);
+    let mut summary = json!({
         "status": status.name(),
         "method": "collision",
         "scene": scene.path,
@@ -326,17 +362,7 @@ fn write_summary(
         "r_stop_bohr": c.r_stop,
         "lifetime_radius_bohr": c.lifetime_radius,
         "strata": strata,
-        "outcomes": outcomes,
-        "cross_sections": sigma,
-        "energy_transfer": {
-            "over": "inelastic trajectories, each stratum weighted by its area; delta_e = E_trans(final) - E_trans(initial)",
-            "mean_delta_e": estimate(&s.delta_e, "hartree"),
-            "mean_delta_e_squared": estimate(&s.delta_e2, "hartree^2"),
-            "mean_delta_e_rot_a": estimate(&s.fragment_changes[0], "hartree"),
-            "mean_delta_e_vib_a": estimate(&s.fragment_changes[1], "hartree"),
-            "mean_delta_e_rot_b": estimate(&s.fragment_changes[2], "hartree"),
-            "mean_delta_e_vib_b": estimate(&s.fragment_changes[3], "hartree"),
-        },
+        "final": !interrupted,
         "conservation": {
             "max_energy_change_hartree": s.max_energy_change,
             "max_angular_momentum_change_hbar": s.max_angular_momentum_change,
@@ -344,6 +370,25 @@ fn write_summary(
         "wall_time_s": wall,
         "threads": threads,
     });
+    // An interrupted run's outcomes, cross sections and energy transfer are over the trajectories
+    // that happened to complete, not the scene's ensemble: written apart, as partial.
+    let (key, statistics) = if interrupted {
+        let mut partial = statistics;
+        partial["note"] = json!(
+            "interrupted: over the completed trajectories only (final_states.csv), not the scene's ensemble; \
+             not final statistics"
+        );
+        ("partial_statistics", partial)
+    } else {
+        ("statistics", statistics)
+    };
+    if let (Some(map), serde_json::Value::Object(stats)) = (summary.as_object_mut(), statistics) {
+        if key == "statistics" {
+            map.extend(stats);
+        } else {
+            map.insert(key.into(), serde_json::Value::Object(stats));
+        }
+    }
     let mut f = OutputFile::create(dir, "summary.json")?;
     f.line(&serde_json::to_string_pretty(&summary).map_err(|e| e.to_string())?)?;
     f.flush()

@@ -19,12 +19,18 @@
 //!
 //! Used by [`super::run_block`] when the plan asks for lanes and the run allows them:
 //! DOP853, no frozen coordinate, no kept trajectory files.
+//!
+//! With the pair estimator ([`super::pair`]) each trajectory is two lane jobs: the forward run
+//! of the sampled state and, in the next free lane, the forward run of its time-reversed state
+//! (the backward run). When both have ended, the two buffers are folded as the scalar path folds
+//! them ([`fold`], [`super::pair::fold_pair`], [`super::pair_states::fold`]), in index order.
 
 use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::runner::{Accumulators, Failure, Outcome, Plan, Stop, Tally, Watch, fold, run_block_scalar};
 use crate::runtime::Molecule;
+use crate::runtime::hamiltonian::BodyState;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
 use crate::runtime::integrate::{Dop853Lanes, LaneFailure, LaneFeeder, Method, Stats};
@@ -63,7 +69,6 @@ pub fn applies<M: Molecule<N, NA>, const N: usize, const NA: usize>(plan: &Plan<
         && plan.reduction.active.iter().all(|&a| a)
         && plan.reduction.rotation == crate::runtime::hamiltonian::fast::RotationPart::Free
         && plan.keep.is_none()
-        && !plan.spectrum.pair()
 }
 
 /// What became of one trajectory of the block.
@@ -82,6 +87,8 @@ enum Fate {
 /// One lane's running trajectory.
 struct Slot<'m, M, const N: usize, const NA: usize> {
     index: u64,
+    /// The backward run of the pair estimator (the reversed state's forward run).
+    backward: bool,
     system: ReducedSystem<'m, M, N, NA>,
     buffer: Vec<f64>,
     k: usize,
@@ -101,20 +108,71 @@ struct Feeder<'a, 'm, M, const N: usize, const NA: usize> {
     needs_dipole: bool,
     slots: Vec<Option<Slot<'m, M, N, NA>>>,
     results: Vec<Option<Fate>>,
+    /// The pair estimator: whether each trajectory also runs backward, the backward runs'
+    /// fates, the sampled states (for the pair-state classes), and the backward run next due.
+    pair: bool,
+    backward: Vec<Option<Fate>>,
+    drawn: Vec<Option<BodyState<N>>>,
+    pending: Option<(u64, BodyState<N>)>,
     first: u64,
     /// [`super::runner::PANIC_HOOK`], as the scalar path honours it.
     panic_at: Option<u64>,
 }
 
-impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, '_, M, N, NA> {
+impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, 'm, M, N, NA> {
     fn set(&mut self, index: u64, r: Fate) {
         self.results[(index - self.first) as usize] = Some(r);
+    }
+
+    fn set_backward(&mut self, index: u64, r: Fate) {
+        self.backward[(index - self.first) as usize] = Some(r);
+    }
+
+    fn slot(&self, index: u64, backward: bool, system: ReducedSystem<'m, M, N, NA>) -> Slot<'m, M, N, NA> {
+        Slot {
+            index,
+            backward,
+            system,
+            buffer: vec![0.0; self.plan.times.len() * self.plan.quantities.len()],
+            k: 0,
+            initial_energy: 0.0,
+            failure: None,
+            interrupted: false,
+            stopped: None,
+        }
+    }
+
+    /// Starts the backward run of `index` from the reversed `drawn` in `lane`, if it can start:
+    /// under the stop flag it is interrupted, and a state the lanes cannot take is left to the
+    /// scalar path.
+    fn start_backward(&mut self, lane: usize, index: u64, drawn: &BodyState<N>, y0: &mut [f64]) -> bool {
+        if self.stop.load(Ordering::Relaxed) {
+            self.set_backward(index, Fate::Interrupted);
+            return false;
+        }
+        let state = super::pair::reversed(drawn);
+        let system = ReducedSystem::from_body(self.plan.molecule, self.plan.reduction, &state)
+            .with_min_pivot(self.plan.min_pivot);
+        if system.reduce_body(&state, y0).is_err() {
+            self.set_backward(index, Fate::Redo);
+            return false;
+        }
+        self.slots[lane] = Some(self.slot(index, true, system));
+        true
     }
 }
 
 impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Feeder<'_, 'm, M, N, NA> {
     fn next(&mut self, lane: usize, y0: &mut [f64]) -> bool {
-        while self.next < self.end {
+        loop {
+            if let Some((index, drawn)) = self.pending.take()
+                && self.start_backward(lane, index, &drawn, y0)
+            {
+                return true;
+            }
+            if self.next >= self.end {
+                return false;
+            }
             let index = self.next;
             self.next += 1;
             if self.stop.load(Ordering::Relaxed) {
@@ -150,19 +208,13 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
                 self.set(index, Fate::Failed(failure("invalid initial state", Some(0.0), e.to_string())));
                 continue;
             }
-            self.slots[lane] = Some(Slot {
-                index,
-                system,
-                buffer: vec![0.0; self.plan.times.len() * self.plan.quantities.len()],
-                k: 0,
-                initial_energy: 0.0,
-                failure: None,
-                interrupted: false,
-                stopped: None,
-            });
+            if self.pair {
+                self.drawn[(index - self.first) as usize] = Some(state);
+                self.pending = Some((index, state));
+            }
+            self.slots[lane] = Some(self.slot(index, false, system));
             return true;
         }
-        false
     }
 
     fn observe(&mut self, lane: usize, t: f64, y: &[f64]) -> ControlFlow<()> {
@@ -204,7 +256,7 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             // A failed lane, an observer's failure or a short run: the scalar path reports it.
             _ => Fate::Redo,
         };
-        self.set(slot.index, r);
+        if slot.backward { self.set_backward(slot.index, r) } else { self.set(slot.index, r) }
     }
 }
 
@@ -235,6 +287,10 @@ where
         needs_dipole: plan.quantities.iter().any(super::quantity::Quantity::needs_dipole),
         slots: (0..LANES).map(|_| None).collect(),
         results: (0..count).map(|_| None).collect(),
+        pair: plan.spectrum.pair(),
+        backward: (0..count).map(|_| None).collect(),
+        drawn: vec![None; count],
+        pending: None,
         first: indices.start,
         panic_at: super::runner::panic_hook(),
     };
@@ -255,9 +311,45 @@ where
         (!plan.correlations.is_empty()).then(|| crate::runtime::ensemble::CorrelationWorkspace::new(lags));
     let mut series = vec![0.0; lags];
     let mut correlation = vec![0.0; lags];
-    for (offset, result) in feeder.results.into_iter().enumerate() {
+    let pair = feeder.pair;
+    let runs = feeder.results.into_iter().zip(feeder.backward).zip(feeder.drawn);
+    for (offset, ((result, backward), drawn)) in runs.enumerate() {
         let index = indices.start + offset as u64;
-        match result.unwrap_or(Fate::Interrupted) {
+        let result = result.unwrap_or(Fate::Interrupted);
+        if pair {
+            // Both runs of the pair estimator, combined as the scalar path combines them.
+            match (result, backward.unwrap_or(Fate::Interrupted), drawn) {
+                (
+                    Fate::Completed(forward, kf, stop, stats),
+                    Fate::Completed(backward, kb, _, back_stats),
+                    Some(drawn),
+                ) => {
+                    outcome.completed += 1;
+                    outcome.steps += stats.steps + back_stats.steps;
+                    outcome.rhs_evaluations += stats.rhs_evals + back_stats.rhs_evals;
+                    if switching {
+                        outcome.charts.add(index, &crate::runtime::charts::ChartReport::default());
+                    }
+                    outcome.count_lifetime(plan, index, kf, stop);
+                    fold(plan, &mut outcome.statistics, &forward, kf, None, &mut series, &mut correlation);
+                    super::pair::fold_pair(plan, &mut outcome.statistics, &forward, kf, &backward, kb);
+                    let classes = &mut outcome.pair_states;
+                    super::pair_states::fold(plan, &drawn, classes, &forward, kf, &backward, kb);
+                    progress.done();
+                }
+                (Fate::Failed(f), _, _) => {
+                    outcome.fail(f, progress);
+                    progress.done();
+                }
+                (Fate::Interrupted, _, _) | (Fate::Completed(..), Fate::Interrupted, _) => outcome.interrupted += 1,
+                // A failed run of either direction: the scalar path runs both and reports it.
+                _ => outcome
+                    .merge(&run_block_scalar(plan, sampler, index..index + 1, stop, progress))
+                    .expect("accumulators of one plan have one layout"),
+            }
+            continue;
+        }
+        match result {
             Fate::Completed(buffer, observed, stop, stats) => {
                 outcome.completed += 1;
                 outcome.steps += stats.steps;

@@ -311,7 +311,10 @@ impl Visit<'_, '_> {
     {
         if let MethodSpec::Collision(c) = &self.ensemble.method {
             if !matches!(self.link, Link::Alone) {
-                return Err(Error::Message("a collision ensemble runs in one process (no MPI)".into()));
+                let why = "a collision ensemble runs in one process: it cannot run under MPI";
+                let help = "run it without mpirun (its threads use the cores of one machine), or split the \
+                            trajectories over several scenes with different seeds";
+                return Err(self.scene.source().error(self.ensemble.method_span(), why, help).into());
             }
             return collision_output::run_and_write(&m, self.scene, self.ensemble, c, self.options).map(|r| Some(r.0));
         }

@@ -8,6 +8,7 @@
 mod common;
 
 mod co2ar_example;
+mod collision_interrupt;
 mod collisions;
 mod ensemble;
 mod ensemble_fuzz;
@@ -17,6 +18,7 @@ mod ensemble_stops;
 mod fuzz;
 mod linear_scenes;
 mod pair_ensemble;
+mod pair_lanes;
 mod pair_states;
 mod sampling;
 mod scene_limits;
