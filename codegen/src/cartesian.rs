@@ -11,7 +11,8 @@
 //!
 //! and the generated functions [`specs`] that evaluate them
 //! (`Kinematics::internal_coordinates`, `Molecule::cartesian_potential`,
-//! `Molecule::cartesian_potential_gradient`).
+//! `Molecule::cartesian_potential_gradient`), and [`lane_spec`], the gradient's lane-generic
+//! form `Molecule::cartesian_potential_gradient_lanes`.
 //!
 //! Where a coordinate's closed form is not differentiable in `x` (an angle at exactly 0 or π,
 //! a dihedral whose axis atoms are collinear) the generated gradient is not finite; the runtime
@@ -150,6 +151,50 @@ fn gradient_entries(gradient: &[[ExprId; 3]]) -> Vec<(TokenStream, ExprId)> {
             })
         })
         .collect()
+}
+
+/// `cartesian_potential_gradient_lanes<T: Real>`: the gradient of [`specs`] for `T::LANES`
+/// position sets at once, from the same expressions (emit it with `emit::Flavor::Lanes`), with
+/// positions and gradient as arrays `x[atom][axis]`.
+pub fn lane_spec(c: &CartesianExprs) -> FunctionSpec {
+    let nal = index(c.atoms);
+    let inputs: Vec<(u32, TokenStream)> = (0..c.atoms)
+        .flat_map(|i| {
+            (0..3).map(move |a| {
+                let (ai, ii) = (index(a), index(i));
+                (c.first_var + (3 * i + a) as u32, quote!(x[#ii][#ai]))
+            })
+        })
+        .collect();
+    let entries = c
+        .gradient
+        .iter()
+        .enumerate()
+        .flat_map(|(i, row)| {
+            row.iter().enumerate().map(move |(a, &e)| {
+                let (ai, ii) = (index(a), index(i));
+                (quote!([#ii][#ai]), e)
+            })
+        })
+        .collect();
+    FunctionSpec {
+        name: "cartesian_potential_gradient_lanes",
+        doc: "[`Molecule::cartesian_potential_gradient`] for `T::LANES` position sets at once (lane-generic,\n\
+              branch-free; `x[i]` and `grad[i]` are atom i); returns U."
+            .into(),
+        signature: quote!(
+            fn cartesian_potential_gradient_lanes<T: Real>(
+                &self,
+                x: &[[T; 3]; #nal],
+                grad: &mut [[T; 3]; #nal],
+            ) -> Option<T>
+        ),
+        inputs,
+        groups: vec![OutputGroup { target: quote!(grad), entries }],
+        ret: Some(c.potential),
+        ret_wrap: Some(|t| quote!(Some(#t))),
+        barrier: None,
+    }
 }
 
 /// The generated functions: `internal_coordinates`, `cartesian_potential` and

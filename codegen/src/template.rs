@@ -653,8 +653,17 @@ fn molecule_impl(
     let mut lanes = quote!();
     if parts.lanes() {
         let potential_lanes = if def.external.is_none() { parts.lane_functions().1 } else { quote!() };
+        let cartesian_lanes = match cartesian {
+            Some(c) => {
+                emit::emit_function_as(&def.graph, &crate::cartesian::lane_spec(c), &parts.idents, emit::Flavor::Lanes)
+                    .0
+            }
+            None => quote!(),
+        };
         lanes = quote! {
             #potential_lanes
+
+            #cartesian_lanes
 
             fn has_lane_forms(&self) -> bool {
                 true

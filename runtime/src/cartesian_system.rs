@@ -156,7 +156,11 @@ where
 
     /// `∂U/∂x` into `grad`, averaged symmetrically across a point where the generated gradient
     /// is not finite ([`KINK_AVERAGE`]).
-    fn gradient(&self, x: &SMatrix<f64, 3, NA>, grad: &mut SMatrix<f64, 3, NA>) -> Result<(), CartesianError> {
+    pub(crate) fn gradient(
+        &self,
+        x: &SMatrix<f64, 3, NA>,
+        grad: &mut SMatrix<f64, 3, NA>,
+    ) -> Result<(), CartesianError> {
         let none = || CartesianError::NoCartesianPotential { molecule: self.molecule.name() };
         self.molecule.cartesian_potential_gradient(x, grad).ok_or_else(none)?;
         if grad.iter().all(|g| g.is_finite()) {

@@ -10,6 +10,7 @@
 //! energies in hartree, time in ħ/E_h (≈ 0.024 188 fs). See [`units`] for the conversions.
 
 pub mod assembly;
+pub mod cartesian_lanes;
 pub mod cartesian_modes;
 pub mod cartesian_system;
 pub mod charts;

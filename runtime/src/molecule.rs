@@ -398,6 +398,16 @@ pub trait Molecule<const N: usize, const NA: usize>: Kinematics<N, NA> {
         None
     }
 
+    /// [`Molecule::cartesian_potential_gradient`] for `T::LANES` position sets at once (`x[i]`
+    /// and `grad[i]` are atom i, one position set per lane), or `None` when there is no lane
+    /// form. Generated, with the `f64` function's operations (`T`'s transcendental functions),
+    /// for definitions with coordinates by kind that have lane forms
+    /// ([`Molecule::has_lane_forms`]); the default has none.
+    fn cartesian_potential_gradient_lanes<T: Real>(&self, x: &[[T; 3]; NA], grad: &mut [[T; 3]; NA]) -> Option<T> {
+        let _ = (x, grad);
+        None
+    }
+
     /// [`Molecule::cartesian_potential`] with the parameters `params` (see
     /// [`Molecule::potential_with`]). Generated for definitions with coordinates by kind and
     /// parameters; the default (no parameters, or no closed form) ignores `params`.

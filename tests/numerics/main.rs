@@ -10,6 +10,7 @@ mod common;
 
 mod bench_units;
 mod cartesian;
+mod cartesian_lanes;
 mod cartesian_potential;
 #[cfg(feature = "surface-demos")]
 mod compiled_surfaces;
