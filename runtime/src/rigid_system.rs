@@ -258,13 +258,17 @@ impl RigidLayout {
         }
     }
 
-    /// The positions of a flat state (column `i` is atom `i`).
+    /// The positions of a flat state (column `i` is atom `i`), with each fragment's axis taken
+    /// as `u/|u|`: the integrator's intermediate stages leave `|u| = 1` by their local error
+    /// (the equations keep it, a Runge–Kutta stage does not), and the fit of the molecule's
+    /// geometry needs the fragments' own lengths. The state itself is not changed.
     pub fn positions<const NA: usize>(&self, y: &[f64]) -> SMatrix<f64, 3, NA> {
         let mut x = SMatrix::<f64, 3, NA>::zeros();
         for b in &self.bodies {
             let c = v3(y, b.offset);
             if b.is_fragment() {
                 let u = v3(y, b.offset + 6);
+                let u = u / u.norm();
                 for &(i, s) in &b.atoms {
                     x.set_column(i, &(c + u * s));
                 }
