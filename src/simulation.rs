@@ -623,6 +623,17 @@ fn uses_charts<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 fn charts_json(report: Option<&ChartReport>, scene: &Scene) -> serde_json::Value {
     let per_unit = 1.0 / scene.time_unit.in_au();
     match report {
+        Some(r) if r.rigid_time > 0.0 || r.last_chart == Some(charts::Chart::Rigid) => serde_json::json!({
+            "switch_pivot": charts::SWITCH_PIVOT,
+            "return_pivot": charts::RETURN_PIVOT,
+            "switches": r.switches,
+            "rigid_time": r.rigid_time * per_unit,
+            "last_chart": r.last_chart.map(|c| match c {
+                charts::Chart::Internal => "internal",
+                charts::Chart::Cartesian => "cartesian",
+                charts::Chart::Rigid => "rigid",
+            }),
+        }),
         Some(r) => serde_json::json!({
             "switch_pivot": charts::SWITCH_PIVOT,
             "return_pivot": charts::RETURN_PIVOT,
@@ -631,6 +642,7 @@ fn charts_json(report: Option<&ChartReport>, scene: &Scene) -> serde_json::Value
             "last_chart": r.last_chart.map(|c| match c {
                 charts::Chart::Internal => "internal",
                 charts::Chart::Cartesian => "cartesian",
+                charts::Chart::Rigid => "rigid",
             }),
         }),
         None => serde_json::json!({

@@ -14,6 +14,14 @@
 //! up to rounding in both directions, so the trajectory is that of one Hamiltonian; only the
 //! integrator's step history restarts at a switch (docs/src/reference/equations.md, "Chart switch").
 //!
+//! A molecule without a Cartesian potential that is a complex of rigid linear fragments and
+//! single atoms ([`RigidLayout::detect`]) switches the same way to the lab-frame rigid chart
+//! ([`RigidSystem`]: each fragment's centre of mass, momentum, axis and angular momentum, each
+//! atom's position and momentum), with the same thresholds; the conversion back fits `q` and the
+//! orientation to the positions (Kabsch, then Gauss–Newton from the last `q`) and projects the
+//! velocities as above. While a run is in the rigid chart its outputs are handed to the observer
+//! as internal-chart states (the same conversion), so observers need no third kind of state.
+//!
 //! Only DOP853 switches (an adaptive method can restart at any time); frozen coordinates have
 //! no Cartesian counterpart, so a reduction with frozen coordinates does not switch (the run
 //! stops at the singular geometry as before).
@@ -26,6 +34,7 @@ use crate::hamiltonian::BodyState;
 use crate::hamiltonian::{HamiltonianError, ReducedSystem, RotationPart};
 use crate::integrate::{Dop853, Dop853Options, Dop853Resume, InvalidInput, OdeSystem, SolveError, Stats};
 use crate::molecule::Molecule;
+use crate::rigid_system::{RigidError, RigidSystem};
 use nalgebra::Vector3;
 
 /// The relative pivot of the kinetic metric below which the run leaves the internal chart.
@@ -42,6 +51,9 @@ pub enum Chart {
     /// Lab-frame Cartesian positions and velocities about the centre of mass: a
     /// [`CartesianSystem`] flat state.
     Cartesian,
+    /// Lab-frame rigid fragments and atoms: a [`RigidSystem`] flat state (outputs are handed on
+    /// as [`ChartState::Internal`]).
+    Rigid,
 }
 
 /// A state handed to a [`ChartObserver`], in the chart it is in.
@@ -68,6 +80,9 @@ pub enum ChartError {
     /// In the Cartesian chart.
     #[error(transparent)]
     Cartesian(#[from] CartesianError),
+    /// In the rigid chart.
+    #[error(transparent)]
+    Rigid(#[from] RigidError),
     /// A state could not be converted between the charts.
     #[error("switching from the {from:?} chart to the other at t = {t}: {reason}")]
     Switch {
@@ -89,6 +104,8 @@ pub struct ChartReport {
     pub switches: u64,
     /// Time spent in the Cartesian chart, a.u.
     pub cartesian_time: f64,
+    /// Time spent in the rigid chart, a.u.
+    pub rigid_time: f64,
     /// Where the run stood at its end, for `rovib run --resume`, if it ended in the internal
     /// chart (a continuation then repeats the internal segment's steps).
     pub resume: Option<Dop853Resume>,
@@ -108,12 +125,26 @@ fn is_switch(e: &HamiltonianError) -> bool {
     matches!(e, HamiltonianError::IllConditionedMetric { .. } | HamiltonianError::SingularMetric { .. })
 }
 
-/// Whether a reduction can switch: every coordinate active (the Cartesian chart has no
-/// constraints).
+/// Whether a reduction can switch: every coordinate active (the Cartesian and rigid charts
+/// have no constraints) and a Cartesian potential or a rigid layout ([`RigidSystem::new`]).
 pub fn can_switch<M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize>(
     system: &ReducedSystem<'_, M, N, NA>,
 ) -> bool {
-    system.reduction().active.iter().all(|&a| a) && CartesianSystem::new(system.molecule()).is_ok()
+    system.reduction().active.iter().all(|&a| a)
+        && (CartesianSystem::new(system.molecule()).is_ok() || RigidSystem::new(system.molecule()).is_some())
+}
+
+/// The internal flat state of `system` for a body state, with `J` set to exactly zero for a
+/// system that integrates `J = 0`.
+fn reduce<M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize>(
+    system: &ReducedSystem<'_, M, N, NA>,
+    mut body: BodyState<N>,
+    out: &mut [f64],
+) -> Result<(), String> {
+    if system.reduction().rotation != RotationPart::Free {
+        body.j = Vector3::zeros();
+    }
+    system.reduce_body(&body, out).map_err(|e| e.to_string())
 }
 
 /// The Cartesian flat state of a body-formulation state (centre of mass at rest at the origin;
@@ -178,7 +209,7 @@ impl<O: ChartObserver + ?Sized> crate::integrate::Observer for Served<'_, O> {
         *self.served = Some(self.served.map_or(0, |s| s + 1));
         let state = match self.chart {
             Chart::Internal => ChartState::Internal(y),
-            Chart::Cartesian => ChartState::Cartesian(y),
+            Chart::Cartesian | Chart::Rigid => ChartState::Cartesian(y),
         };
         self.observer.observe(t, state)
     }
@@ -219,18 +250,23 @@ where
     ChartIntegrator::new(system.dim(), NA, options)?.integrate(system, t0, start, t_end, interval, observer, report)
 }
 
-/// The two DOP853 integrators of a run with chart switching (one per chart), made once and
-/// reused for many runs (an ensemble's trajectories), so that a run allocates nothing but the
-/// states it hands over at a switch.
+/// The DOP853 integrators of a run with chart switching (one per chart; the rigid chart's made
+/// at its first use), made once and reused for many runs (an ensemble's trajectories), so that
+/// a run allocates nothing but the states it hands over at a switch.
 pub struct ChartIntegrator {
     internal: Dop853,
     cartesian: Dop853,
+    rigid: Option<Dop853>,
 }
 
 impl ChartIntegrator {
     /// For systems of `internal_dim` internal-chart components and `atoms` atoms.
     pub fn new(internal_dim: usize, atoms: usize, options: Dop853Options) -> Result<Self, InvalidInput> {
-        Ok(Self { internal: Dop853::new(internal_dim, options)?, cartesian: Dop853::new(6 * atoms, options)? })
+        Ok(Self {
+            internal: Dop853::new(internal_dim, options)?,
+            cartesian: Dop853::new(6 * atoms, options)?,
+            rigid: None,
+        })
     }
 
     /// [`integrate`] with these integrators (`system.dim()` and the atom count as made).
@@ -258,14 +294,52 @@ impl ChartIntegrator {
                 6 * NA
             )));
         }
-        run(&mut self.internal, &mut self.cartesian, system, t0, start, t_end, interval, observer, report)
+        let dops = Integrators { internal: &mut self.internal, cartesian: &mut self.cartesian, rigid: &mut self.rigid };
+        run(dops, system, t0, start, t_end, interval, observer, report)
+    }
+}
+
+/// The integrators of [`run`].
+struct Integrators<'d> {
+    internal: &'d mut Dop853,
+    cartesian: &'d mut Dop853,
+    rigid: &'d mut Option<Dop853>,
+}
+
+/// Serves the outputs of a rigid-chart segment as internal-chart states of `internal`.
+struct RigidServed<'o, 'm, O: ?Sized, M: ?Sized, const N: usize, const NA: usize> {
+    observer: &'o mut O,
+    served: &'o mut Option<u64>,
+    /// A copy of the segment's system for the conversions (its position fit has its own start).
+    rigid: RigidSystem<'m, M, N, NA>,
+    internal: &'o ReducedSystem<'m, M, N, NA>,
+    buffer: &'o mut [f64],
+    /// An output that could not be converted: when and why.
+    failure: Option<(f64, String)>,
+}
+
+impl<O, M, const N: usize, const NA: usize> crate::integrate::Observer for RigidServed<'_, '_, O, M, N, NA>
+where
+    O: ChartObserver + ?Sized,
+    M: Molecule<N, NA> + ?Sized,
+{
+    fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
+        *self.served = Some(self.served.map_or(0, |s| s + 1));
+        let converted =
+            self.rigid.body_of_flat(y).map_err(|e| e.to_string()).and_then(|b| reduce(self.internal, b, self.buffer));
+        match converted {
+            Ok(()) => self.observer.observe(t, ChartState::Internal(self.buffer)),
+            Err(reason) => {
+                self.failure = Some((t, reason));
+                ControlFlow::Break(())
+            }
+        }
     }
 }
 
 #[allow(clippy::too_many_arguments)]
 fn run<M, O, const N: usize, const NA: usize>(
-    dop_i: &mut Dop853,
-    dop_c: &mut Dop853,
+    dops: Integrators<'_>,
     system: &ReducedSystem<'_, M, N, NA>,
     t0: f64,
     start: ChartStart<'_, N>,
@@ -278,10 +352,19 @@ where
     M: Molecule<N, NA> + ?Sized,
     O: ChartObserver + ?Sized,
 {
+    let Integrators { internal: dop_i, cartesian: dop_c, rigid: dop_r } = dops;
     let m = system.molecule();
     let mut internal = system.with_min_pivot(SWITCH_PIVOT);
-    let mut cartesian =
-        CartesianSystem::new(m).map_err(|e| SolveError::InvalidInput(e.to_string()))?.with_return_pivot(RETURN_PIVOT);
+    // The Cartesian chart where the molecule has one, else the rigid chart.
+    let (mut cartesian, mut rigid) = match CartesianSystem::new(m) {
+        Ok(c) => (Some(c.with_return_pivot(RETURN_PIVOT)), None),
+        Err(e) => match RigidSystem::new(m) {
+            Some(r) => (None, Some(r.with_return_pivot(RETURN_PIVOT))),
+            None => return Err(SolveError::InvalidInput(e.to_string())),
+        },
+    };
+    let fallback = if rigid.is_some() { Chart::Rigid } else { Chart::Cartesian };
+    let mut buffer = vec![0.0; internal.dim()];
     let mut served: Option<u64> = None;
     let mut last_q = nalgebra::SVector::<f64, N>::zeros();
     let mut entered = t0;
@@ -306,6 +389,16 @@ where
                     let regular = internal.reduce_body(body, &mut y).is_ok() && internal.rhs(t0, &y, &mut dy).is_ok();
                     let cartesian_y = if regular {
                         Vec::new()
+                    } else if let Some(r) = &mut rigid {
+                        let mut yr = vec![0.0; r.dim()];
+                        r.flat_of_body(body, &mut yr).map_err(|reason| {
+                            SolveError::InvalidInput(format!(
+                                "the start is singular for internal coordinates and cannot be put in the rigid \
+                                 chart: {reason}"
+                            ))
+                        })?;
+                        r.set_near(&body.q);
+                        yr
                     } else {
                         to_cartesian(m, body).map_err(|reason| {
                             SolveError::InvalidInput(format!(
@@ -318,10 +411,16 @@ where
                 }
                 ChartStart::FreshCartesian(y) => {
                     let lab = CartesianSystem::<M, N, NA>::lab(y);
-                    if let Ok((body, _)) = body_of_lab_exact(m, &lab, &last_q) {
-                        last_q = body.q;
+                    if let Some(r) = &rigid {
+                        let mut yr = vec![0.0; r.dim()];
+                        r.layout().flat(r.masses(), &lab, &mut yr);
+                        (false, Vec::new(), yr)
+                    } else {
+                        if let Ok((body, _)) = body_of_lab_exact(m, &lab, &last_q) {
+                            last_q = body.q;
+                        }
+                        (false, Vec::new(), y.to_vec())
                     }
-                    (false, Vec::new(), y.to_vec())
                 }
                 ChartStart::Resume(_) => unreachable!("matched above"),
             };
@@ -329,16 +428,24 @@ where
                 (Chart::Internal, Next::Fresh(y))
             } else {
                 let y = cartesian_y;
-                report.last_chart = Some(Chart::Cartesian);
+                report.last_chart = Some(fallback);
                 served = Some(0);
-                if observer.observe(t0, ChartState::Cartesian(&y)).is_break() || t_end <= t0 {
+                let first = match &rigid {
+                    None => ChartState::Cartesian(&y),
+                    Some(r) => {
+                        let body = r.clone().body_of_flat(&y).map_err(|e| {
+                            SolveError::InvalidInput(format!("the start in the rigid chart does not fit: {e}"))
+                        })?;
+                        last_q = body.q;
+                        reduce(&internal, body, &mut buffer).map_err(SolveError::InvalidInput)?;
+                        ChartState::Internal(&buffer)
+                    }
+                };
+                if observer.observe(t0, first).is_break() || t_end <= t0 {
                     return Ok(());
                 }
                 let h = interval.min(t_end - t0) * 1e-3;
-                (
-                    Chart::Cartesian,
-                    Next::Point(Dop853Resume { t: t0, y, h, fac_old: 1e-4, reject: false, outputs_done: 0 }),
-                )
+                (fallback, Next::Point(Dop853Resume { t: t0, y, h, fac_old: 1e-4, reject: false, outputs_done: 0 }))
             }
         }
     };
@@ -369,12 +476,25 @@ where
                         };
                         let body = internal.expand_body(y).map_err(|e| fail(e.to_string()))?;
                         last_q = body.q;
-                        let yc = to_cartesian(m, &body).map_err(fail)?;
-                        // The Cartesian segment takes at least the step the internal one failed in.
-                        cartesian.check_after(t + h);
+                        let yc = match (&mut cartesian, &mut rigid) {
+                            (Some(cartesian), _) => {
+                                let yc = to_cartesian(m, &body).map_err(fail)?;
+                                // The Cartesian segment takes at least the step the internal one failed in.
+                                cartesian.check_after(t + h);
+                                yc
+                            }
+                            (None, Some(r)) => {
+                                let mut yr = vec![0.0; r.dim()];
+                                r.flat_of_body(&body, &mut yr).map_err(fail)?;
+                                r.set_near(&body.q);
+                                r.check_after(t + h);
+                                yr
+                            }
+                            (None, None) => unreachable!("a fallback chart was made above"),
+                        };
                         let outputs_done = served.unwrap_or(0);
                         next = Next::Point(Dop853Resume { t, y: yc, h, fac_old: 1e-4, reject: false, outputs_done });
-                        chart = Chart::Cartesian;
+                        chart = fallback;
                         report.switches += 1;
                         entered = t;
                     }
@@ -386,7 +506,8 @@ where
             }
             Chart::Cartesian => {
                 let Next::Point(p) = &next else { unreachable!("a Cartesian segment starts from a point") };
-                match dop_c.resume(&mut cartesian, t0, p, t_end, interval, &mut out) {
+                let Some(cartesian) = &mut cartesian else { unreachable!("the Cartesian chart is the fallback") };
+                match dop_c.resume(cartesian, t0, p, t_end, interval, &mut out) {
                     Ok((stats, _)) => {
                         add(&mut report.stats, &stats);
                         report.cartesian_time += t_end - entered;
@@ -426,6 +547,78 @@ where
                     Err(e) => {
                         add(&mut report.stats, &dop_c.last_accepted().3);
                         return Err(map_error(e, ChartError::Cartesian));
+                    }
+                }
+            }
+            Chart::Rigid => {
+                let Next::Point(p) = &next else { unreachable!("a rigid segment starts from a point") };
+                let Some(rigid) = &mut rigid else { unreachable!("the rigid chart is the fallback") };
+                if dop_r.as_ref().is_none_or(|d| d.dim() != rigid.dim()) {
+                    *dop_r = Some(
+                        Dop853::new(rigid.dim(), *dop_i.options())
+                            .map_err(|e| SolveError::InvalidInput(e.to_string()))?,
+                    );
+                }
+                let Some(dop_r) = dop_r.as_mut() else { unreachable!("made above") };
+                let mut out = RigidServed {
+                    observer: &mut *observer,
+                    served: &mut served,
+                    rigid: rigid.clone(),
+                    internal: &internal,
+                    buffer: &mut buffer,
+                    failure: None,
+                };
+                out.rigid.set_near(&last_q);
+                let result = dop_r.resume(rigid, t0, p, t_end, interval, &mut out);
+                if let Some((t, reason)) = out.failure.take() {
+                    add(&mut report.stats, &dop_r.last_accepted().3);
+                    let y = dop_r.last_accepted().1.to_vec();
+                    return Err(SolveError::Rhs { t, y, source: ChartError::Switch { from: Chart::Rigid, t, reason } });
+                }
+                match result {
+                    Ok((stats, _)) => {
+                        add(&mut report.stats, &stats);
+                        report.rigid_time += t_end - entered;
+                        return Ok(());
+                    }
+                    Err(SolveError::Rhs { source: RigidError::Regular { .. }, .. }) => {
+                        let (t, y, h, stats) = dop_r.last_accepted();
+                        add(&mut report.stats, &stats);
+                        let outputs_done = served.unwrap_or(0);
+                        let fail = |reason: String| SolveError::Rhs {
+                            t,
+                            y: y.to_vec(),
+                            source: ChartError::Switch { from: Chart::Rigid, t, reason },
+                        };
+                        rigid.set_near(&last_q);
+                        let body = rigid.body_of_flat(y).map_err(|e| fail(e.to_string()))?;
+                        let mut k = crate::molecule::KineticMatrices::<N>::default();
+                        m.kinetic(&body.q, &mut k);
+                        if crate::hamiltonian::MetricFactor::is_regular(&k, SWITCH_PIVOT) {
+                            let mut yi = vec![0.0; internal.dim()];
+                            reduce(&internal, body, &mut yi).map_err(fail)?;
+                            last_q = body.q;
+                            next =
+                                Next::Point(Dop853Resume { t, y: yi, h, fac_old: 1e-4, reject: false, outputs_done });
+                            chart = Chart::Internal;
+                            report.switches += 1;
+                            report.rigid_time += t - entered;
+                        } else {
+                            last_q = body.q;
+                            rigid.check_after(t + h);
+                            next = Next::Point(Dop853Resume {
+                                t,
+                                y: y.to_vec(),
+                                h,
+                                fac_old: 1e-4,
+                                reject: false,
+                                outputs_done,
+                            });
+                        }
+                    }
+                    Err(e) => {
+                        add(&mut report.stats, &dop_r.last_accepted().3);
+                        return Err(map_error(e, ChartError::Rigid));
                     }
                 }
             }

@@ -503,7 +503,7 @@ pub fn lab_angular_momentum<const N: usize>(state: &PhaseState<N>) -> Result<Vec
 /// maximises `tr(Rᵀ c) = Σ m_i y_i · R R_i`); for a nearly orthogonal `c` it re-orthonormalises.
 /// The det correction flips the axis of the smallest singular value, which is what keeps the
 /// result proper for a planar molecule (one singular value zero).
-fn nearest_rotation(c: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+pub(crate) fn nearest_rotation(c: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     let svd = c.svd(true, true);
     let (u, v_t) = (svd.u?, svd.v_t?);
     // nalgebra does not sort singular values; find the smallest to flip.
@@ -946,7 +946,7 @@ where
 /// `(Σ m_i R_i × w_i, Σ m_i ∂R_i/∂q_j · w_i)` of a body-frame field `w_i`: the projections of
 /// `w` onto the rotational and vibrational displacement fields. For residuals they are the
 /// right-hand side of the fit's normal equations; for velocities they are `(J, p)`.
-fn projections<const N: usize, const NA: usize>(
+pub(crate) fn projections<const N: usize, const NA: usize>(
     masses: &[f64; NA],
     r: &SMatrix<f64, 3, NA>,
     dr: &[SMatrix<f64, 3, NA>; N],

@@ -26,6 +26,7 @@ pub mod modes;
 pub mod molecule;
 pub mod polarization;
 pub mod position_surface;
+pub mod rigid_system;
 pub mod sample;
 pub mod special;
 pub mod spectrum;

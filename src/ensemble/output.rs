@@ -380,11 +380,12 @@ fn charts_json<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         } else if !plan.reduction.active.iter().all(|&a| a) {
             "frozen coordinates have no Cartesian counterpart"
         } else {
-            "the molecule has no Cartesian potential (its definition gives positions, not coordinates by kind)"
+            "the molecule has no Cartesian potential (its definition gives positions, not coordinates by kind) and \
+             is not a complex of rigid linear fragments and atoms"
         };
         return json!({ "switching": false, "why": why });
     }
-    json!({
+    let mut out = json!({
         "switching": true,
         "switch_pivot": SWITCH_PIVOT,
         "return_pivot": RETURN_PIVOT,
@@ -398,7 +399,12 @@ fn charts_json<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             "switches": t.switches,
             "cartesian_time": t.cartesian_time / ts,
         })).collect::<Vec<_>>(),
-    })
+    });
+    if plan.uses_rigid_chart() {
+        out["chart"] = json!("rigid");
+        out["rigid_time"] = json!(c.rigid_time / ts);
+    }
+    out
 }
 
 fn tick_time(t: f64) -> String {

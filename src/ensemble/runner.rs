@@ -27,6 +27,7 @@ use crate::runtime::hamiltonian::fast::BodyState;
 use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use crate::runtime::integrate::{InvalidInput, Method, Observer, SolveError, Stats};
 use crate::runtime::nalgebra::Vector3;
+use crate::runtime::rigid_system::RigidError;
 use crate::runtime::sample::Sampler;
 use crate::runtime::surface::Dipole;
 
@@ -90,12 +91,19 @@ pub type StopCondition = (usize, &'static str, [f64; 2]);
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Plan<'_, M, N, NA> {
     /// Whether the trajectories switch charts: `cartesian_fallback`, DOP853 (an adaptive method
     /// restarts at any time), no frozen coordinates (they have no Cartesian counterpart) and a
-    /// molecule with a Cartesian potential (coordinates declared by kind).
+    /// molecule with a Cartesian potential (coordinates declared by kind) or made of rigid linear
+    /// fragments and atoms (the rigid chart).
     pub fn switches_charts(&self) -> bool {
         self.cartesian_fallback
             && matches!(self.method, Method::Dop853(_))
             && self.reduction.active.iter().all(|&a| a)
-            && CartesianSystem::new(self.molecule).is_ok()
+            && (CartesianSystem::new(self.molecule).is_ok() || self.uses_rigid_chart())
+    }
+
+    /// Whether the fallback chart is the rigid one (no Cartesian potential, a rigid layout).
+    pub fn uses_rigid_chart(&self) -> bool {
+        CartesianSystem::new(self.molecule).is_err()
+            && crate::runtime::rigid_system::RigidLayout::detect(self.molecule).is_some()
     }
 }
 
@@ -193,6 +201,9 @@ pub struct ChartCounts {
     pub switches: u64,
     /// Time spent in the Cartesian chart, summed over trajectories, a.u.
     pub cartesian_time: f64,
+    /// Time spent in the rigid chart, summed over trajectories, a.u.
+    #[serde(default)]
+    pub rigid_time: f64,
     /// Completed trajectories by their number of switches (0 included): `[switches, count]`
     /// pairs in increasing order of switches (a list, not a map: the checkpoint's untagged
     /// records cannot read integer map keys back).
@@ -218,6 +229,7 @@ impl ChartCounts {
         self.trajectories_switched += 1;
         self.switches += report.switches;
         self.cartesian_time += report.cartesian_time;
+        self.rigid_time += report.rigid_time;
         if self.first.len() < LISTED_SWITCHING {
             self.first.push(SwitchingTrajectory {
                 index,
@@ -231,6 +243,7 @@ impl ChartCounts {
         self.trajectories_switched += other.trajectories_switched;
         self.switches += other.switches;
         self.cartesian_time += other.cartesian_time;
+        self.rigid_time += other.rigid_time;
         for &[k, v] in &other.by_switches {
             self.count(k, v);
         }
@@ -546,6 +559,8 @@ fn chart_reason(e: &ChartError) -> &'static str {
         ChartError::Internal(h) => hamiltonian_reason(h),
         ChartError::Cartesian(CartesianError::NonFinite { .. }) => "non-finite",
         ChartError::Cartesian(_) => "right-hand side",
+        ChartError::Rigid(RigidError::NonFinite { .. }) => "non-finite",
+        ChartError::Rigid(_) => "right-hand side",
         ChartError::Switch { .. } => "chart switch",
     }
 }
@@ -899,6 +914,7 @@ where
                             total.rhs_evals += stats.rhs_evals;
                             report.switches += chart_report.switches;
                             report.cartesian_time += chart_report.cartesian_time;
+                            report.rigid_time += chart_report.rigid_time;
                             (kf, sf, total, report, Some(k))
                         }
                         None => (k, stopped, stats, chart_report, None),
@@ -938,14 +954,18 @@ where
 /// Writes `charts.json` (switches, time in the Cartesian chart in the scene's unit, the chart at
 /// the end) of one kept trajectory into `dir`.
 fn write_chart_report(dir: &std::path::Path, r: &ChartReport, time_scale: f64) -> Result<(), crate::Error> {
-    let json = serde_json::json!({
+    let mut json = serde_json::json!({
         "switches": r.switches,
         "cartesian_time": r.cartesian_time / time_scale,
         "last_chart": r.last_chart.map(|c| match c {
             crate::runtime::charts::Chart::Internal => "internal",
             crate::runtime::charts::Chart::Cartesian => "cartesian",
+            crate::runtime::charts::Chart::Rigid => "rigid",
         }),
     });
+    if r.rigid_time > 0.0 {
+        json["rigid_time"] = serde_json::json!(r.rigid_time / time_scale);
+    }
     let mut f = crate::output::OutputFile::create(dir, "charts.json")?;
     f.line(&json.to_string())?;
     f.flush()
