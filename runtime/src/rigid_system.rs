@@ -580,7 +580,7 @@ where
             converged = moved <= FIT_STEP || !moved.is_finite();
             iterations += 1;
         }
-        if !(residual <= FIT_RESIDUAL) {
+        if residual.is_nan() || residual > FIT_RESIDUAL {
             return Err(RigidError::Fit {
                 molecule: self.molecule.name(),
                 residual,

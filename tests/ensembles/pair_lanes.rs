@@ -13,7 +13,7 @@ use rovib::ensemble::run_ensemble;
 use rovib::scene::parse_scene;
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-pairlanes-{name}"));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-pairlanes-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     d
 }
