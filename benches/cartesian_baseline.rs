@@ -5,7 +5,9 @@
 //! DOP853 and the potential's Cartesian gradient `∂U/∂x` that the generator emits for molecules
 //! declared by kind. No internal coordinate, no orientation, no kinetic matrix: what a user
 //! without rovib would write. rovib integrates the same states in internal coordinates and a
-//! quaternion (`2N + 7` components), one trajectory at a time and on SIMD lanes.
+//! quaternion (`2N + 7` components), one trajectory at a time and on SIMD lanes, and in its own
+//! Cartesian chart on SIMD lanes (the Cartesian code's equations, `CartesianLanes`, with the
+//! generated lane form of `∂U/∂x`).
 //!
 //! For every contender and tolerance (rtol = atol) it measures:
 //! States: the canonical distribution at 300 K, or normal-mode sampling (kT per mode on average)
@@ -37,6 +39,7 @@ use std::ops::ControlFlow;
 use nix::time::{ClockId, clock_gettime};
 use rovib::molecules::{H2o, H2o2, Nh3};
 use rovib::runtime::Molecule;
+use rovib::runtime::cartesian_lanes::CartesianLanes;
 use rovib::runtime::cartesian_system::CartesianSystem;
 use rovib::runtime::frames::{CentreOfMass, to_lab_body};
 use rovib::runtime::hamiltonian::BodyState;
@@ -155,6 +158,19 @@ where
         (self.positions(&system, &feed.last), cost)
     }
 
+    /// rovib's Cartesian chart on `T::LANES` SIMD lanes (the same equations as the Cartesian
+    /// code, with the generated lane form of `∂U/∂x`).
+    fn cartesian_lanes<T: Real>(&self, tol: f64) -> (Vec<SMatrix<f64, 3, NA>>, f64) {
+        let mut solver = Dop853Lanes::<T>::new(6 * NA, options(tol)).expect("valid options");
+        let mut system = CartesianLanes::new(self.molecule).expect("a lane form of the Cartesian gradient");
+        let mut feed =
+            Feed { starts: &self.cartesian, next: 0, held: [0; 8], last: vec![Vec::new(); self.cartesian.len()] };
+        let t0 = cpu();
+        solver.integrate(&mut system, 0.0, T_END, INTERVAL, &mut feed).expect("a run");
+        let cost = (cpu() - t0) / self.cartesian.len() as f64;
+        (feed.last.iter().map(|y| CartesianSystem::<M, N, NA>::positions(y)).collect(), cost)
+    }
+
     fn positions(&self, system: &ReducedSystem<'_, M, N, NA>, states: &[Vec<f64>]) -> Vec<SMatrix<f64, 3, NA>> {
         states
             .iter()
@@ -221,7 +237,8 @@ fn cost_at(curve: &[(f64, f64)], target: f64) -> Option<f64> {
     })
 }
 
-const CONTENDERS: [&str; 4] = ["cartesian", "internal", "lanes x2", "lanes x4"];
+const CONTENDERS: [&str; 6] =
+    ["cartesian", "internal", "lanes x2", "lanes x4", "cartesian lanes x2", "cartesian lanes x4"];
 
 fn compare<M, const N: usize, const NA: usize>(name: &str, molecule: &M, spec: &Spec<N>, rounds: usize, count: usize)
 where
@@ -239,7 +256,9 @@ where
         0 => case.cartesian(tol),
         1 => case.internal(tol),
         2 => case.lanes::<F64x2>(tol),
-        _ => case.lanes::<F64x4>(tol),
+        3 => case.lanes::<F64x4>(tol),
+        4 => case.cartesian_lanes::<F64x2>(tol),
+        _ => case.cartesian_lanes::<F64x4>(tol),
     };
     // errors[c][k] and costs[c][k][round]
     let mut errors = [[0.0; TOLERANCES.len()]; CONTENDERS.len()];
