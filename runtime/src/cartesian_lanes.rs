@@ -4,8 +4,8 @@
 //! The state layout is [`CartesianSystem`]'s (`6·NA` components: positions, then velocities,
 //! relative to the centre of mass). The gradient is the molecule's generated lane form
 //! [`Molecule::cartesian_potential_gradient_lanes`]: the `f64` gradient's operations, so each
-//! lane computes [`CartesianSystem::rhs`]'s numbers to round-off (`T`'s transcendental functions
-//! are polynomials within 2 ulp of libm). A lane whose gradient is not finite (an angle at
+//! lane computes the numbers of [`CartesianSystem`]'s right-hand side to round-off (`T`'s
+//! transcendental functions are polynomials within 2 ulp of libm). A lane whose gradient is not finite (an angle at
 //! exactly π) takes [`CartesianSystem`]'s symmetric average across that point, lane by lane; a
 //! lane whose state or derivative is still not finite fails. No allocation.
 

@@ -15,7 +15,8 @@
 //! integrator's step history restarts at a switch (docs/src/reference/equations.md, "Chart switch").
 //!
 //! A molecule without a Cartesian potential that is a complex of rigid linear fragments and
-//! single atoms ([`RigidLayout::detect`]) switches the same way to the lab-frame rigid chart
+//! single atoms ([`RigidLayout::detect`](crate::rigid_system::RigidLayout::detect)) switches
+//! the same way to the lab-frame rigid chart
 //! ([`RigidSystem`]: each fragment's centre of mass, momentum, axis and angular momentum, each
 //! atom's position and momentum), with the same thresholds; the conversion back fits `q` and the
 //! orientation to the positions (Kabsch, then Gauss–Newton from the last `q`) and projects the

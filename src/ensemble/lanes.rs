@@ -23,7 +23,7 @@
 //! With the pair estimator ([`super::pair`]) each trajectory is two lane jobs: the forward run
 //! of the sampled state and, in the next free lane, the forward run of its time-reversed state
 //! (the backward run). When both have ended, the two buffers are folded as the scalar path folds
-//! them ([`fold`], [`super::pair::fold_pair`], [`super::pair_states::fold`]), in index order.
+//! them (`runner::fold`, `pair::fold_pair`, `pair_states::fold`), in index order.
 
 use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
