@@ -623,28 +623,24 @@ fn uses_charts<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 fn charts_json(report: Option<&ChartReport>, scene: &Scene) -> serde_json::Value {
     let per_unit = 1.0 / scene.time_unit.in_au();
     match report {
-        Some(r) if r.rigid_time > 0.0 || r.last_chart == Some(charts::Chart::Rigid) => serde_json::json!({
-            "switch_pivot": charts::SWITCH_PIVOT,
-            "return_pivot": charts::RETURN_PIVOT,
-            "switches": r.switches,
-            "rigid_time": r.rigid_time * per_unit,
-            "last_chart": r.last_chart.map(|c| match c {
-                charts::Chart::Internal => "internal",
-                charts::Chart::Cartesian => "cartesian",
-                charts::Chart::Rigid => "rigid",
-            }),
-        }),
-        Some(r) => serde_json::json!({
-            "switch_pivot": charts::SWITCH_PIVOT,
-            "return_pivot": charts::RETURN_PIVOT,
-            "switches": r.switches,
-            "cartesian_time": r.cartesian_time * per_unit,
-            "last_chart": r.last_chart.map(|c| match c {
-                charts::Chart::Internal => "internal",
-                charts::Chart::Cartesian => "cartesian",
-                charts::Chart::Rigid => "rigid",
-            }),
-        }),
+        Some(r) => {
+            // The time spent in the fallback chart the run used: the rigid chart for rigid
+            // complexes, the Cartesian chart otherwise.
+            let rigid = r.rigid_time > 0.0 || r.last_chart == Some(charts::Chart::Rigid);
+            let (key, time) = if rigid { ("rigid_time", r.rigid_time) } else { ("cartesian_time", r.cartesian_time) };
+            let mut value = serde_json::json!({
+                "switch_pivot": charts::SWITCH_PIVOT,
+                "return_pivot": charts::RETURN_PIVOT,
+                "switches": r.switches,
+                "last_chart": r.last_chart.map(|c| match c {
+                    charts::Chart::Internal => "internal",
+                    charts::Chart::Cartesian => "cartesian",
+                    charts::Chart::Rigid => "rigid",
+                }),
+            });
+            value[key] = (time * per_unit).into();
+            value
+        }
         None => serde_json::json!({
             "switch_pivot": charts::SWITCH_PIVOT,
             "return_pivot": charts::RETURN_PIVOT,
