@@ -32,6 +32,7 @@ pub mod parameters;
 #[cfg(feature = "svg")]
 pub mod plot;
 pub mod progress;
+pub mod report;
 pub mod restart;
 pub mod scene;
 pub mod simulation;

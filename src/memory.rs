@@ -16,6 +16,7 @@ use toml::Spanned;
 
 use crate::Progress;
 use crate::error::Error;
+use crate::report::{Frame, Needs, Reporter};
 use crate::runtime::molecule::Molecule;
 use crate::runtime::nalgebra::SVector;
 use crate::runtime::surface::{GradientCheck, GradientError, Potential, check_gradient};
@@ -23,38 +24,11 @@ use crate::scene::{Outputs, parse_scene};
 use crate::simulation::{RunReport, Simulation};
 
 /// One output record of a run in memory, in the units of trajectory.csv: the time in the
-/// scene's time unit, everything else in atomic units.
-pub struct Record<'a> {
-    /// Time, in the scene's time unit (`units.time`).
-    pub t: f64,
-    /// The internal coordinates (bohr or rad), in the molecule's order.
-    pub q: &'a [f64],
-    /// Their momenta (ħ/bohr or ħ).
-    pub p: &'a [f64],
-    /// Euler angles φ, θ, ψ (rad, z-x-z).
-    pub euler: [f64; 3],
-    /// Their conjugate momenta (ħ).
-    pub pe: [f64; 3],
-    /// The body-frame angular momentum (ħ).
-    pub j: [f64; 3],
-    /// H (hartree).
-    pub energy: f64,
-    /// The lab frame (the rows of lab.xyz), when the scene's `run.outputs` names "lab".
-    pub lab: Option<LabRecord<'a>>,
-    /// The lab-frame dipole moment (e·bohr, the row of dipole.csv), when `run.outputs` names
-    /// "dipole".
-    pub dipole: Option<[f64; 3]>,
-}
-
+/// scene's time unit, everything else in atomic units; `lab` when the scene's `run.outputs`
+/// names "lab", `dipole` when it names "dipole".
+pub use crate::report::Frame as Record;
 /// The lab frame at one output time.
-pub struct LabRecord<'a> {
-    /// Positions, bohr: x, y, z of each atom in the molecule's order (3 × atoms values).
-    pub positions: &'a [f64],
-    /// Velocities, bohr per ħ/E_h, in the same layout.
-    pub velocities: &'a [f64],
-    /// U at this state, hartree.
-    pub potential: f64,
-}
+pub use crate::report::LabFrame as LabRecord;
 
 /// Where a run in memory puts its output.
 pub trait RecordSink: Send {
@@ -76,13 +50,30 @@ pub trait ExternalPotential: Sync {
     fn describe(&self) -> String;
 }
 
-/// The sink of a run in memory and what the scene asked of it.
-pub(crate) struct Tap<'a> {
-    pub sink: &'a mut dyn RecordSink,
+/// The sink of a run in memory and what the scene asked of it: the reporter of a run in memory.
+struct Tap<'a> {
+    sink: &'a mut dyn RecordSink,
     /// Lab-frame records ("lab" in `run.outputs`).
-    pub lab: bool,
+    lab: bool,
     /// Dipole records ("dipole" in `run.outputs`).
-    pub dipole: bool,
+    dipole: bool,
+}
+
+impl Reporter for Tap<'_> {
+    fn needs(&self) -> Needs {
+        Needs { lab: self.lab, dipole: self.dipole, orientation: false }
+    }
+
+    fn report(&mut self, frame: &Frame<'_>) -> Result<(), Error> {
+        let record =
+            Frame { lab: frame.lab.filter(|_| self.lab), dipole: frame.dipole.filter(|_| self.dipole), ..*frame };
+        self.sink.record(&record);
+        Ok(())
+    }
+
+    fn summary(&mut self, summary: &serde_json::Value) {
+        self.sink.summary(summary);
+    }
 }
 
 /// An [`ExternalPotential`] as the [`Potential`] of a molecule with `N` coordinates.
@@ -184,8 +175,8 @@ pub fn run_in_memory(
                 .into());
         }
     }
-    let wanted = scene.outputs;
-    scene.outputs = Outputs { trajectory: false, lab: false, summary: false, restart: false, dipole: false };
+    let wanted = scene.outputs.files.needs();
+    scene.outputs = Outputs::NONE;
     let tap = Tap { sink, lab: wanted.lab, dipole: wanted.dipole };
-    Simulation::from_scene(scene, PathBuf::new()).run_with(stop, progress, Some(tap), potential)
+    Simulation::from_scene(scene, PathBuf::new()).run_with(stop, progress, vec![Box::new(tap)], true, potential)
 }

@@ -1,9 +1,11 @@
-//! What a run writes: `trajectory.csv`, `lab.xyz` (extended XYZ) and `summary.json`.
+//! What a run writes besides its reporters' files (`crate::report`: `trajectory.csv`, `lab.xyz`,
+//! `dipole.csv`): the buffered [`OutputFile`] they write through, `summary.json`, and the energy
+//! guard.
 //!
 //! Files are written as the run goes, through buffers that are flushed when the run ends, also
 //! when it ends with an error or an interrupt, so that everything up to that point is kept.
 //!
-//! Stale files: before a run writes anything it removes every file of [`RUN_FILES`] that it will
+//! Stale files: before a run writes anything it removes every file of [`crate::report::run_files`] that it will
 //! not write itself, and `summary.json` always (see [`remove_stale_outputs`]); the files it does
 //! write are truncated when created. `summary.json` is written last, under a temporary name that
 //! is renamed over the final one, so it is either absent or complete and always this run's.
@@ -15,11 +17,13 @@ use std::path::{Path, PathBuf};
 use serde_json::{Value, json};
 
 use crate::error::Error;
-use crate::runtime::Coordinate;
 use crate::runtime::integrate::{Method, Stats};
 use crate::runtime::nalgebra::Vector3;
-use crate::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM, HARTREE_IN_EV};
 use crate::scene::Scene;
+
+pub use crate::report::{
+    ASE_TIME_IN_FS, DipoleCsv, LAB_XYZ_PROPERTIES, LabXyz, TRAJECTORY_UNITS_FILE, TrajectoryCsv, trajectory_columns,
+};
 
 /// The longest line [`OutputFile::append`] reads from a file it continues: 1 MiB, far above a
 /// trajectory.csv row (tens of columns of at most 25 characters) or a lab.xyz line.
@@ -127,311 +131,6 @@ impl OutputFile {
     /// The file's path.
     pub fn path(&self) -> &Path {
         &self.path
-    }
-}
-
-/// `trajectory.csv`: one row per output time, with its units in `trajectory.units.json`.
-///
-/// Columns (no name can collide with another, whatever the coordinates are called: every
-/// coordinate column has a `q_` or `p_` prefix, and the fixed names have none of them):
-/// `t` (the scene's time unit), `q_NAME` per coordinate (bohr or rad), `p_NAME` per coordinate
-/// (ħ/bohr or ħ), `euler_phi`, `euler_theta`, `euler_psi` (rad, z-x-z), `pe_phi`, `pe_theta`,
-/// `pe_psi` (the momenta conjugate to the Euler angles, ħ), `Jx`, `Jy`, `Jz` (the body-frame
-/// angular momentum, ħ: the Euler momenta do not determine it at θ = 0 or π, so a row is a
-/// complete state everywhere), `H` (hartree), and with
-/// `run.euler_unwrapped = true` also `euler_phi_unwrapped`, `euler_psi_unwrapped` (rad,
-/// continuous: each output adds the change since the last one, taken in (−π, π]).
-pub struct TrajectoryCsv {
-    file: OutputFile,
-    row: String,
-    /// The unwrapped φ and ψ and the last raw values, when asked for.
-    unwrap: Option<Unwrapper>,
-}
-
-/// The file that states the units of `trajectory.csv`'s columns.
-pub const TRAJECTORY_UNITS_FILE: &str = "trajectory.units.json";
-
-/// The header of `trajectory.csv` and the unit of each column (see [`TrajectoryCsv`]).
-/// `coordinates` are the molecule's coordinates, `time_unit` the scene's.
-pub fn trajectory_columns(
-    coordinates: &[Coordinate],
-    time_unit: &str,
-    euler_unwrapped: bool,
-) -> Vec<(String, &'static str)> {
-    let unit = |c: &Coordinate| c.unit.atomic().name();
-    let time: &'static str = match time_unit {
-        "au" => "au",
-        "fs" => "fs",
-        "ps" => "ps",
-        _ => "unknown",
-    };
-    let mut columns = vec![("t".to_owned(), time)];
-    columns.extend(coordinates.iter().map(|c| (format!("q_{}", c.name), unit(c))));
-    columns.extend(coordinates.iter().map(|c| {
-        let momentum = if unit(c) == "rad" { "hbar" } else { "hbar/bohr" };
-        (format!("p_{}", c.name), momentum)
-    }));
-    for name in ["euler_phi", "euler_theta", "euler_psi"] {
-        columns.push((name.to_owned(), "rad"));
-    }
-    for name in ["pe_phi", "pe_theta", "pe_psi", "Jx", "Jy", "Jz"] {
-        columns.push((name.to_owned(), "hbar"));
-    }
-    columns.push(("H".to_owned(), "hartree"));
-    if euler_unwrapped {
-        columns.push(("euler_phi_unwrapped".to_owned(), "rad"));
-        columns.push(("euler_psi_unwrapped".to_owned(), "rad"));
-    }
-    columns
-}
-
-/// Continuous φ and ψ from values wrapped into an interval of length 2π.
-#[derive(Clone, Copy, Debug)]
-struct Unwrapper {
-    /// The last raw (φ, ψ) and the unwrapped ones; `None` before the first output.
-    last: Option<([f64; 2], [f64; 2])>,
-}
-
-impl Unwrapper {
-    /// The unwrapped (φ, ψ) for raw ones: the first output as given, then each adds the change
-    /// since the last output reduced to (−π, π] (so the output interval must be short enough
-    /// that φ and ψ turn by less than π between outputs).
-    fn next(&mut self, raw: [f64; 2]) -> [f64; 2] {
-        use std::f64::consts::{PI, TAU};
-        let unwrapped = match self.last {
-            None => raw,
-            Some((last_raw, last)) => std::array::from_fn(|i| {
-                let mut d = (raw[i] - last_raw[i]) % TAU;
-                if d > PI {
-                    d -= TAU;
-                } else if d <= -PI {
-                    d += TAU;
-                }
-                last[i] + d
-            }),
-        };
-        self.last = Some((raw, unwrapped));
-        unwrapped
-    }
-}
-
-impl TrajectoryCsv {
-    /// Creates `trajectory.csv` with its header and `trajectory.units.json` (written at once and
-    /// whole: `{"file", "time_unit", "columns": {NAME: UNIT}, "order": [NAME, ...], "euler"}`).
-    pub fn create(
-        dir: &Path,
-        coordinates: &[Coordinate],
-        time_unit: &str,
-        euler_unwrapped: bool,
-    ) -> Result<Self, Error> {
-        let columns = trajectory_columns(coordinates, time_unit, euler_unwrapped);
-        let units = json!({
-            "file": "trajectory.csv",
-            "time_unit": time_unit,
-            "columns": columns.iter().map(|(n, u)| (n.clone(), Value::from(*u))).collect::<serde_json::Map<_, _>>(),
-            "order": columns.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>(),
-            "euler": "z-x-z, body to lab R = Rz(phi) Rx(theta) Rz(psi); pe are the momenta conjugate to phi, theta, psi",
-        });
-        write_atomically(dir, TRAJECTORY_UNITS_FILE, &units)?;
-        let mut file = OutputFile::create(dir, "trajectory.csv")?;
-        let header: Vec<&str> = columns.iter().map(|(n, _)| n.as_str()).collect();
-        file.line(&header.join(","))?;
-        Ok(TrajectoryCsv { file, row: String::new(), unwrap: euler_unwrapped.then_some(Unwrapper { last: None }) })
-    }
-
-    /// Opens an existing `trajectory.csv` to append rows (a resumed run), after checking that its
-    /// header is the one this run would write. `last_euler` is the raw and unwrapped (φ, ψ) of
-    /// the last row written, for the unwrapped columns.
-    pub fn append(
-        dir: &Path,
-        coordinates: &[Coordinate],
-        time_unit: &str,
-        last_euler: Option<([f64; 2], [f64; 2])>,
-        rows: usize,
-    ) -> Result<Self, Error> {
-        let euler_unwrapped = last_euler.is_some();
-        let columns = trajectory_columns(coordinates, time_unit, euler_unwrapped);
-        let header: Vec<&str> = columns.iter().map(|(n, _)| n.as_str()).collect();
-        let header = header.join(",");
-        let file = OutputFile::append(dir, "trajectory.csv", &header, rows + 1)?;
-        Ok(TrajectoryCsv {
-            file,
-            row: String::new(),
-            unwrap: euler_unwrapped.then_some(Unwrapper { last: last_euler }),
-        })
-    }
-
-    /// Writes one row: time (scene unit), q, p, the Euler angles, their momenta, the body-frame J
-    /// and H, then the unwrapped φ and ψ if asked for. Numbers are written with full round-trip
-    /// precision.
-    pub fn state_row(
-        &mut self,
-        t: f64,
-        q: &[f64],
-        p: &[f64],
-        euler: [f64; 3],
-        pe: [f64; 3],
-        j: [f64; 3],
-        energy: f64,
-    ) -> Result<(), Error> {
-        use std::fmt::Write as _;
-        self.row.clear();
-        let _ = write!(self.row, "{t:?}");
-        for v in q.iter().chain(p).chain(&euler).chain(&pe).chain(&j).chain([&energy]) {
-            let _ = write!(self.row, ",{v:?}");
-        }
-        if let Some(u) = &mut self.unwrap {
-            let [phi, psi] = u.next([euler[0], euler[2]]);
-            let _ = write!(self.row, ",{phi:?},{psi:?}");
-        }
-        let row = std::mem::take(&mut self.row);
-        let result = self.file.line(&row);
-        self.row = row;
-        result
-    }
-
-    /// The raw and unwrapped (φ, ψ) of the last row, if the unwrapped columns are written.
-    pub fn last_unwrapped(&self) -> Option<([f64; 2], [f64; 2])> {
-        self.unwrap.and_then(|u| u.last)
-    }
-
-    /// Flushes to disk.
-    pub fn flush(&mut self) -> Result<(), Error> {
-        self.file.flush()
-    }
-}
-
-/// `dipole.csv`: the lab-frame dipole moment μ_lab = S μ(q), one row per output time.
-///
-/// Columns: `t` (in the scene's time unit), `mu_x`, `mu_y`, `mu_z` (e·bohr, in the lab frame
-/// of `lab.xyz`; the centre of mass's motion does not change it for a neutral molecule).
-pub struct DipoleCsv {
-    file: OutputFile,
-    row: String,
-}
-
-/// The header of `dipole.csv`.
-const DIPOLE_HEADER: &str = "t,mu_x,mu_y,mu_z";
-
-impl DipoleCsv {
-    /// Creates the file and writes the header.
-    pub fn create(dir: &Path) -> Result<Self, Error> {
-        let mut file = OutputFile::create(dir, "dipole.csv")?;
-        file.line(DIPOLE_HEADER)?;
-        Ok(DipoleCsv { file, row: String::new() })
-    }
-
-    /// Opens an existing `dipole.csv` holding `rows` rows to append to it (a resumed run).
-    pub fn append(dir: &Path, rows: usize) -> Result<Self, Error> {
-        let file = OutputFile::append(dir, "dipole.csv", DIPOLE_HEADER, rows + 1)?;
-        Ok(DipoleCsv { file, row: String::new() })
-    }
-
-    /// Writes one row: time and μ_lab in e·bohr, with full round-trip precision.
-    pub fn row(&mut self, t: f64, mu: &Vector3<f64>) -> Result<(), Error> {
-        use std::fmt::Write as _;
-        self.row.clear();
-        let _ = write!(self.row, "{t:?},{:?},{:?},{:?}", mu[0], mu[1], mu[2]);
-        let row = std::mem::take(&mut self.row);
-        let result = self.file.line(&row);
-        self.row = row;
-        result
-    }
-
-    /// Flushes to disk.
-    pub fn flush(&mut self) -> Result<(), Error> {
-        self.file.flush()
-    }
-}
-
-/// One ASE time unit in femtoseconds, the unit of the `momenta` column ASE reads: `1e15 / (1e10 ·
-/// √(e/u))` with ASE's default (CODATA 2014) elementary charge and atomic mass unit.
-pub const ASE_TIME_IN_FS: f64 = 10.180_505_671_156_348;
-
-/// The `Properties=` value of every `lab.xyz` frame: per atom the element, the position (Å), the
-/// mass (u), the momentum in ASE's units (u·Å per ASE time unit, so that ASE's `Atoms` get the
-/// masses and velocities) and the velocity in Å/fs.
-pub const LAB_XYZ_PROPERTIES: &str = "species:S:1:pos:R:3:masses:R:1:momenta:R:3:vel:R:3";
-
-/// `lab.xyz`: extended XYZ, one frame per output time, readable by ASE (`ase.io.read(path,
-/// index=":")` gives `Atoms` with positions, masses, velocities and the potential energy), VMD
-/// and OVITO. Per atom: element, position (Å), mass (u), momentum (ASE units) and velocity
-/// (Å/fs), all with full round-trip precision. The comment line carries `Time` and
-/// `time_unit`, `energy` (the potential energy U in eV, the key ASE reads as
-/// `get_potential_energy()`), `H_hartree`, `U_hartree` and `H_eV` (eV = 27.211386245988 per
-/// hartree, CODATA 2018) and `pbc="F F F"`.
-pub struct LabXyz {
-    file: OutputFile,
-    elements: Vec<&'static str>,
-    /// Atom masses, u (Da).
-    masses: Vec<f64>,
-    time_unit: &'static str,
-    line: String,
-}
-
-impl LabXyz {
-    /// Creates the file for atoms of the given elements and masses (Da).
-    pub fn create(
-        dir: &Path,
-        elements: Vec<&'static str>,
-        masses: Vec<f64>,
-        time_unit: &'static str,
-    ) -> Result<Self, Error> {
-        Ok(LabXyz { file: OutputFile::create(dir, "lab.xyz")?, elements, masses, time_unit, line: String::new() })
-    }
-
-    /// Opens an existing `lab.xyz` of `frames` frames to append frames (a resumed run).
-    pub fn append(
-        dir: &Path,
-        elements: Vec<&'static str>,
-        masses: Vec<f64>,
-        time_unit: &'static str,
-        frames: usize,
-    ) -> Result<Self, Error> {
-        let file = OutputFile::append(dir, "lab.xyz", &elements.len().to_string(), frames * (elements.len() + 2))?;
-        Ok(LabXyz { file, elements, masses, time_unit, line: String::new() })
-    }
-
-    /// Writes one frame: `energy` = H and `potential` = U (hartree), `atoms` = per atom the
-    /// lab-frame position (bohr) and velocity (bohr per ħ/E_h).
-    pub fn frame(
-        &mut self,
-        t: f64,
-        energy: f64,
-        potential: f64,
-        atoms: impl IntoIterator<Item = ([f64; 3], [f64; 3])>,
-    ) -> Result<(), Error> {
-        use std::fmt::Write as _;
-        self.file.line(&self.elements.len().to_string())?;
-        self.file.line(&format!(
-            "Properties={LAB_XYZ_PROPERTIES} Time={t:?} time_unit={} energy={:?} H_hartree={energy:?} \
-             U_hartree={potential:?} H_eV={:?} pbc=\"F F F\"",
-            self.time_unit,
-            potential * HARTREE_IN_EV,
-            energy * HARTREE_IN_EV,
-        ))?;
-        // Å/fs per bohr/(ħ/E_h).
-        let velocity_scale = BOHR_IN_ANGSTROM / AU_TIME_IN_FS;
-        for ((element, mass), (x, v)) in self.elements.iter().zip(&self.masses).zip(atoms) {
-            let x = x.map(|c| c * BOHR_IN_ANGSTROM);
-            let v = v.map(|c| c * velocity_scale);
-            let momentum = v.map(|c| mass * c * ASE_TIME_IN_FS);
-            self.line.clear();
-            let _ = write!(self.line, "{element}");
-            for c in x.iter().chain([mass]).chain(&momentum).chain(&v) {
-                let _ = write!(self.line, " {c:?}");
-            }
-            let line = std::mem::take(&mut self.line);
-            let result = self.file.line(&line);
-            self.line = line;
-            result?;
-        }
-        Ok(())
-    }
-
-    /// Flushes to disk.
-    pub fn flush(&mut self) -> Result<(), Error> {
-        self.file.flush()
     }
 }
 
@@ -550,16 +249,12 @@ impl Conservation {
 /// The restart file's name in a run's output directory (written by [`crate::restart`]).
 pub const RESTART_FILE: &str = "restart.json";
 
-/// Every file `rovib run` may write into its output directory.
-pub const RUN_FILES: [&str; 6] =
-    ["trajectory.csv", TRAJECTORY_UNITS_FILE, "lab.xyz", "dipole.csv", "summary.json", RESTART_FILE];
-
-/// Removes the files of [`RUN_FILES`] in `dir` that this run will not write (not in `keep`),
+/// Removes the files of [`crate::report::run_files`] in `dir` that this run will not write (not in `keep`),
 /// and `summary.json` and `restart.json` in any case (they are written at the end, atomically,
 /// and only a run that ends well writes `restart.json`), so that no file of an earlier run
 /// remains looking like this run's. Missing files are fine.
 pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), Error> {
-    for name in RUN_FILES {
+    for name in crate::report::run_files() {
         if name != "summary.json" && name != RESTART_FILE && keep.contains(&name) {
             continue;
         }

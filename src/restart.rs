@@ -28,7 +28,7 @@ use crate::error::Error;
 use crate::output::Conservation;
 use crate::runtime::integrate::Dop853Resume;
 
-/// The file name in a run's output directory (one of [`crate::output::RUN_FILES`]).
+/// The file name in a run's output directory (one of [`crate::report::run_files`]).
 pub use crate::output::RESTART_FILE;
 
 /// The largest `restart.json` read: the scene's text (at most

@@ -86,16 +86,18 @@ impl TimeUnit {
 /// Which files a run writes.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub struct Outputs {
-    /// `trajectory.csv`: t, q, p, Euler angles, p_e, H at every output time.
-    pub trajectory: bool,
-    /// `lab.xyz`: extended XYZ lab-frame positions in Å at every output time.
-    pub lab: bool,
+    /// The files written at every output time (`crate::report::OUTPUTS`: `trajectory.csv`,
+    /// `lab.xyz`, `dipole.csv`).
+    pub files: crate::report::Selection,
     /// `summary.json`: work counters and conservation diagnostics.
     pub summary: bool,
     /// `restart.json`: the final state, to continue the run (`rovib run --resume`).
     pub restart: bool,
-    /// `dipole.csv`: the lab-frame dipole moment at every output time (only when asked for).
-    pub dipole: bool,
+}
+
+impl Outputs {
+    /// Nothing written.
+    pub const NONE: Outputs = Outputs { files: crate::report::Selection::EMPTY, summary: false, restart: false };
 }
 
 /// A name in the file with its place.
@@ -441,22 +443,23 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         ));
     }
     let outputs = match &run.outputs {
-        None => Outputs { trajectory: true, lab: true, summary: true, restart: true, dipole: false },
+        None => Outputs { files: crate::report::Selection::defaults(), summary: true, restart: true },
         Some(list) => {
-            let mut o = Outputs { trajectory: false, lab: false, summary: false, restart: false, dipole: false };
+            let mut o = Outputs::NONE;
             for name in list.get_ref() {
                 match name.get_ref().as_str() {
-                    "trajectory" => o.trajectory = true,
-                    "lab" => o.lab = true,
                     "summary" => o.summary = true,
                     "restart" => o.restart = true,
-                    "dipole" => o.dipole = true,
+                    other if o.files.insert(other) => {}
                     other => {
+                        let names = crate::report::describe_outputs();
                         return Err(src.error(
                             name.span(),
                             format!("unknown output `{other}`"),
-                            "outputs are \"trajectory\" (trajectory.csv), \"lab\" (lab.xyz), \"summary\" (summary.json), \
-                             \"restart\" (restart.json) and \"dipole\" (dipole.csv)",
+                            match did_you_mean(other, crate::report::output_names()) {
+                                Some(m) => format!("did you mean \"{m}\"? outputs are {names}"),
+                                None => format!("outputs are {names}"),
+                            },
                         ));
                     }
                 }

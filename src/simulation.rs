@@ -10,13 +10,11 @@ use std::time::Instant;
 use crate::Progress;
 use crate::dir_lock::DirLock;
 use crate::error::Error;
-use crate::memory::{External, ExternalPotential, LabRecord, Record, Tap};
+use crate::memory::{External, ExternalPotential};
 use crate::molecules;
-use crate::output::{
-    Conservation, DipoleCsv, LabXyz, RunSummary, TRAJECTORY_UNITS_FILE, TrajectoryCsv, energy_guard,
-    remove_stale_outputs, write_summary,
-};
+use crate::output::{Conservation, RunSummary, energy_guard, remove_stale_outputs, write_summary};
 use crate::parameters::{WithParameters, scene_parameters};
+use crate::report::{Frame, LabFrame, Needs, Open, Reporter};
 use crate::restart::{Dop853Point, FinalState, Restart};
 use crate::runtime::cartesian_system::CartesianSystem;
 use crate::runtime::charts::{self, ChartError, ChartObserver, ChartReport, ChartStart, ChartState};
@@ -121,24 +119,36 @@ impl Simulation {
     /// whole row and frame, summary.json and restart.json written, and returns
     /// [`Error::Interrupted`]. A run that fails keeps what it wrote and says where.
     pub fn run(&self, stop: &AtomicBool, progress: &mut dyn FnMut(Progress)) -> Result<RunReport, Error> {
-        std::fs::create_dir_all(&self.out_dir).map_err(|e| Error::io("cannot create", &self.out_dir, e))?;
-        self.run_with(stop, progress, None, None)
+        self.run_with_reporters(stop, progress, Vec::new())
     }
 
-    /// [`Simulation::run`], with the records going to `tap` instead of files (then nothing is
-    /// written: `crate::memory`) and the molecule on `potential` if given.
-    pub(crate) fn run_with(
+    /// [`Simulation::run`], with `reporters` called at every output time after the scene's own
+    /// outputs (each gets what its [`Reporter::needs`] asks for).
+    pub fn run_with_reporters(
         &self,
         stop: &AtomicBool,
         progress: &mut dyn FnMut(Progress),
-        tap: Option<Tap<'_>>,
-        potential: Option<&dyn ExternalPotential>,
+        reporters: Vec<Box<dyn Reporter + '_>>,
+    ) -> Result<RunReport, Error> {
+        std::fs::create_dir_all(&self.out_dir).map_err(|e| Error::io("cannot create", &self.out_dir, e))?;
+        self.run_with(stop, progress, reporters, false, None)
+    }
+
+    /// [`Simulation::run`] with `extra` reporters, and `in_memory` when nothing is to be written
+    /// (`crate::memory`: no folder, no lock; the summary goes to the reporters), and the
+    /// molecule on `potential` if given.
+    pub(crate) fn run_with<'a>(
+        &'a self,
+        stop: &'a AtomicBool,
+        progress: &'a mut dyn FnMut(Progress),
+        extra: Vec<Box<dyn Reporter + 'a>>,
+        in_memory: bool,
+        potential: Option<&'a dyn ExternalPotential>,
     ) -> Result<RunReport, Error> {
         let name = self.scene.molecule.get_ref().clone();
         let resume = self.restart.as_ref();
-        // Rebuilt so that the sink's borrow shortens to the visitor's.
-        let tap = tap.map(|t| Tap { sink: t.sink, lab: t.lab, dipole: t.dipole });
-        let visitor = Run { scene: &self.scene, out_dir: &self.out_dir, stop, progress, resume, tap, potential };
+        let visitor =
+            Run { scene: &self.scene, out_dir: &self.out_dir, stop, progress, resume, extra, in_memory, potential };
         molecules::visit(&name, visitor).ok_or_else(|| {
             let e = Error::unknown_molecule(&name);
             Error::File(self.scene.source().error(
@@ -209,8 +219,10 @@ struct Run<'a> {
     stop: &'a AtomicBool,
     progress: &'a mut dyn FnMut(Progress),
     resume: Option<&'a Restart>,
-    /// Where the records go in a run in memory (then no file is written).
-    tap: Option<Tap<'a>>,
+    /// Reporters beyond the scene's outputs (a run in memory's sink).
+    extra: Vec<Box<dyn Reporter + 'a>>,
+    /// Whether the run writes nothing (a run in memory).
+    in_memory: bool,
     /// A potential given at run time, replacing the molecule's.
     potential: Option<&'a dyn ExternalPotential>,
 }
@@ -271,13 +283,6 @@ struct Begin<'m, M, const N: usize, const NA: usize> {
     lab: Option<Vec<f64>>,
 }
 
-/// The output files a run writes as it goes (each only if the scene asks for it).
-struct Writers {
-    trajectory: Option<TrajectoryCsv>,
-    lab: Option<LabXyz>,
-    dipole: Option<DipoleCsv>,
-}
-
 /// What the integration gave: its statistics and DOP853 continuation point, or its error; the
 /// time it took; the chart switches (if the run could switch); right-hand sides evaluated.
 struct Integrated {
@@ -292,13 +297,19 @@ impl Run<'_> {
     /// integration with its recorder, then the restart file, the summary and the report.
     fn go<M: Molecule<N, NA>, const N: usize, const NA: usize>(self, m: M) -> Result<RunReport, Error> {
         let scene = self.scene;
-        let in_memory = self.tap.is_some();
-        if (scene.outputs.dipole || self.tap.as_ref().is_some_and(|t| t.dipole)) && !m.has_dipole() {
+        let in_memory = self.in_memory;
+        let needs = self.extra.iter().fold(scene.outputs.files.needs(), |n, r| n.union(r.needs()));
+        if needs.dipole && !m.has_dipole() {
+            let output = scene.outputs.files.iter().find(|o| o.needs.dipole).map_or("dipole", |o| o.name);
             return Err(Error::File(scene.source().error(
                 scene.molecule.span(),
-                format!("the scene asks for the \"dipole\" output, but molecule `{}` has no dipole surface", m.name()),
                 format!(
-                    "add a [dipole] table to {} (see docs/src/reference/definition.md), or remove \"dipole\" from run.outputs",
+                    "the scene asks for the \"{output}\" output, but molecule `{}` has no dipole surface",
+                    m.name()
+                ),
+                format!(
+                    "add a [dipole] table to {} (see docs/src/reference/definition.md), or remove \"{output}\" from \
+                     run.outputs",
                     m.source()
                 ),
             )));
@@ -313,25 +324,23 @@ impl Run<'_> {
 
         // One run per directory, then no file of an earlier run may remain looking like this one's.
         let _lock = if in_memory { None } else { Some(DirLock::acquire(self.out_dir)?) };
-        let writers = if in_memory {
-            Writers { trajectory: None, lab: None, dipole: None }
+        let mut reporters = if in_memory {
+            Vec::new()
         } else {
             crate::ensemble::output::clear_for_run(self.out_dir)?;
-            self.open_writers(&m)?
+            self.open_reporters(&m)?
         };
         let records = self.resume.map_or(0, |r| r.outputs_done + 1);
-        let Run { scene, out_dir, stop, progress, resume, tap, .. } = self;
+        let Run { scene, out_dir, stop, progress, resume, extra, .. } = self;
+        reporters.extend(extra);
         let mut recorder = Recorder::<M, N, NA> {
             system: begin.system,
             layout: layout.clone(),
             time_scale: scene.time_unit.in_au(),
             time_unit: scene.time_unit.name(),
             com: begin.com,
-            outputs: Outputs {
-                files: writers,
-                // Rebuilt so that the sink's borrow shortens to the recorder's.
-                tap: tap.map(|t| Tap { sink: t.sink, lab: t.lab, dipole: t.dipole }),
-            },
+            reporters,
+            in_memory,
             guard: EnergyGuard {
                 diagnostics: scene.outputs.summary || scene.outputs.restart || in_memory,
                 conservation: resume.map_or_else(Conservation::default, |r| r.conservation.clone()),
@@ -401,45 +410,23 @@ impl Run<'_> {
 
     /// Removes the files of an earlier run this one will not write, then creates (or, when
     /// resuming, checks and opens for appending) the ones it writes as it goes.
-    fn open_writers<M: Molecule<N, NA>, const N: usize, const NA: usize>(&self, m: &M) -> Result<Writers, Error> {
+    fn open_reporters<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+        &self,
+        m: &M,
+    ) -> Result<Vec<Box<dyn Reporter + 'static>>, Error> {
         let (scene, dir) = (self.scene, self.out_dir);
-        let mut keep = Vec::new();
-        if scene.outputs.trajectory {
-            keep.extend(["trajectory.csv", TRAJECTORY_UNITS_FILE]);
-        }
-        if scene.outputs.lab {
-            keep.push("lab.xyz");
-        }
-        if scene.outputs.dipole {
-            keep.push("dipole.csv");
-        }
+        let keep: Vec<&str> = scene.outputs.files.files().collect();
         remove_stale_outputs(dir, &keep)?;
-        let coordinates = m.coordinates();
-        let elements: Vec<&'static str> = m.atoms().iter().map(|a| a.element).collect();
-        let masses: Vec<f64> = m.atoms().iter().map(|a| a.mass_da).collect();
-        let unit = scene.time_unit.name();
-        let outputs = &scene.outputs;
-        Ok(match self.resume {
-            None => Writers {
-                trajectory: outputs
-                    .trajectory
-                    .then(|| TrajectoryCsv::create(dir, &coordinates, unit, scene.euler_unwrapped))
-                    .transpose()?,
-                lab: outputs.lab.then(|| LabXyz::create(dir, elements, masses, unit)).transpose()?,
-                dipole: outputs.dipole.then(|| DipoleCsv::create(dir)).transpose()?,
-            },
-            Some(r) => {
-                let records = (r.outputs_done + 1) as usize;
-                Writers {
-                    trajectory: outputs
-                        .trajectory
-                        .then(|| TrajectoryCsv::append(dir, &coordinates, unit, r.euler_unwrapped, records))
-                        .transpose()?,
-                    lab: outputs.lab.then(|| LabXyz::append(dir, elements, masses, unit, records)).transpose()?,
-                    dipole: outputs.dipole.then(|| DipoleCsv::append(dir, records)).transpose()?,
-                }
-            }
-        })
+        let (coordinates, atoms) = (m.coordinates(), m.atoms());
+        let open = Open {
+            dir,
+            coordinates: &coordinates,
+            atoms: &atoms,
+            time_unit: scene.time_unit.name(),
+            euler_unwrapped: scene.euler_unwrapped,
+            resume: self.resume,
+        };
+        scene.outputs.files.iter().map(|o| (o.open)(&open)).collect()
     }
 }
 
@@ -478,17 +465,7 @@ impl Finish<'_> {
         let interrupted = recorder.stops.interrupted && failure.is_none();
         let stopped = recorder.stops.met.take().filter(|_| failure.is_none());
         let t_reached = recorder.t_reached.map(|t| t / scene.time_unit.in_au());
-        let mut files: Vec<PathBuf> = Vec::new();
-        if scene.outputs.trajectory {
-            files.push(self.out_dir.join("trajectory.csv"));
-            files.push(self.out_dir.join(TRAJECTORY_UNITS_FILE));
-        }
-        if scene.outputs.lab {
-            files.push(self.out_dir.join("lab.xyz"));
-        }
-        if scene.outputs.dipole {
-            files.push(self.out_dir.join("dipole.csv"));
-        }
+        let mut files: Vec<PathBuf> = scene.outputs.files.files().map(|f| self.out_dir.join(f)).collect();
         let mut summary_error = None;
         if scene.outputs.restart
             && failure.is_none()
@@ -500,7 +477,7 @@ impl Finish<'_> {
                 Err(e) => summary_error = Some(e.to_string()),
             }
         }
-        let in_memory = recorder.outputs.tap.is_some();
+        let in_memory = recorder.in_memory;
         if scene.outputs.summary || in_memory {
             let summary = RunSummary {
                 scene,
@@ -521,13 +498,15 @@ impl Finish<'_> {
                 warnings: &warnings,
                 charts: chart_report.is_some().then(|| charts_json(chart_report.as_ref(), scene)),
             };
-            match &mut recorder.outputs.tap {
-                Some(tap) if failure.is_none() => tap.sink.summary(&summary.to_json()),
-                Some(_) => {}
-                None => match write_summary(self.out_dir, &summary.to_json()) {
+            let json = summary.to_json();
+            if !in_memory {
+                match write_summary(self.out_dir, &json) {
                     Ok(path) => files.push(path),
                     Err(e) => summary_error = summary_error.or(Some(e.to_string())),
-                },
+                }
+            }
+            if failure.is_none() {
+                recorder.reporters.iter_mut().for_each(|r| r.summary(&json));
             }
         }
         let where_ = if in_memory {
@@ -757,7 +736,7 @@ fn resumed_system<'m, M: Molecule<N, NA>, const N: usize, const NA: usize>(
     let mut reduction = frozen_reduction(m, scene)?;
     if r.zero_angular_momentum {
         reduction.rotation = RotationPart::ZeroAngularMomentum {
-            orientation: scene.outputs.lab || scene.outputs.trajectory || reduction.active_count() == 0,
+            orientation: scene.outputs.files.needs().orientation() || reduction.active_count() == 0,
         };
     }
     let system = ReducedSystem::from_body(m, reduction, &body).with_min_pivot(scene.min_metric_pivot);
@@ -843,8 +822,10 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     time_scale: f64,
     time_unit: &'static str,
     com: (Vector3<f64>, Vector3<f64>),
-    /// Where the records go.
-    outputs: Outputs<'m>,
+    /// The outputs, called at every output time.
+    reporters: Vec<Box<dyn Reporter + 'm>>,
+    /// Whether the run writes nothing (a run in memory).
+    in_memory: bool,
     guard: EnergyGuard,
     stops: Stops<'m>,
     count: Count<'m>,
@@ -852,12 +833,6 @@ struct Recorder<'m, M, const N: usize, const NA: usize> {
     /// The last output time recorded, a.u.
     t_reached: Option<f64>,
     error: Option<String>,
-}
-
-/// Where the records go: the files written as the run goes, and the records of a run in memory.
-struct Outputs<'m> {
-    files: Writers,
-    tap: Option<Tap<'m>>,
 }
 
 /// The conservation diagnostics and the guard against a run that has gone unstable.
@@ -909,21 +884,6 @@ struct LastOutput<'m, M, const N: usize, const NA: usize> {
     cartesian: Option<CartesianSystem<'m, M, N, NA>>,
 }
 
-impl Writers {
-    fn flush(&mut self) -> Result<(), Error> {
-        if let Some(csv) = &mut self.trajectory {
-            csv.flush()?;
-        }
-        if let Some(xyz) = &mut self.lab {
-            xyz.flush()?;
-        }
-        if let Some(csv) = &mut self.dipole {
-            csv.flush()?;
-        }
-        Ok(())
-    }
-}
-
 impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA> {
     fn record(&mut self, t: f64, state: ChartState<'_>) -> Result<(), Error> {
         let t_out = t / self.time_scale;
@@ -963,13 +923,9 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             self.guard.conservation.record(energy, body.j.norm(), phase.pe[0], (rotation * body.j).into());
         }
         energy_guard(h0, energy, self.guard.max_energy_error).map_err(|e| at(&e, y, layout))?;
-        if let Some(csv) = &mut self.outputs.files.trajectory {
-            let (euler, pe) = (phase.euler.into(), phase.pe.into());
-            csv.state_row(t_out, phase.q.as_slice(), phase.p.as_slice(), euler, pe, body.j.into(), energy)?;
-        }
-        let tap_lab = self.outputs.tap.as_ref().is_some_and(|t| t.lab);
-        let mut lab_record = None;
-        if self.outputs.files.lab.is_some() || tap_lab {
+        // What the reporters need beyond the phase-space state is computed only if one needs it.
+        let needs = self.reporters.iter().fold(Needs::NOTHING, |n, r| n.union(r.needs()));
+        let lab = if needs.lab {
             let com = CentreOfMass { position: self.com.0 + self.com.1 * t, velocity: self.com.1 };
             let lab: LabState<NA> = match cartesian {
                 None => to_lab_body(self.system.molecule(), &body, &com).map_err(|e| at(&e, y, layout))?,
@@ -982,43 +938,35 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
                     lab
                 }
             };
-            let potential = self.system.molecule().potential(&body.q);
-            if let Some(xyz) = &mut self.outputs.files.lab {
-                let atoms = (0..NA).map(|i| (lab.positions.column(i).into(), lab.velocities.column(i).into()));
-                xyz.frame(t_out, energy, potential, atoms)?;
-            }
-            lab_record = tap_lab.then_some((lab, potential));
-        }
-        let tap_dipole = self.outputs.tap.as_ref().is_some_and(|t| t.dipole);
-        let mut dipole_record = None;
-        if self.outputs.files.dipole.is_some() || tap_dipole {
-            // A scene that writes the dipole is refused for a molecule without one (`Run::go`).
+            Some((lab, self.system.molecule().potential(&body.q)))
+        } else {
+            None
+        };
+        let dipole = needs.dipole.then(|| {
+            // A run whose reporters need the dipole is refused for a molecule without one (`Run::go`).
             let mut mu = Vector3::from_element(f64::NAN);
             if let Some(dipole) = self.system.molecule().dipole() {
                 dipole.moment(&body.q, &mut mu);
             }
-            let mu_lab = rotation * mu;
-            if let Some(csv) = &mut self.outputs.files.dipole {
-                csv.row(t_out, &mu_lab)?;
-            }
-            dipole_record = tap_dipole.then_some(mu_lab.into());
-        }
-        if let Some(tap) = &mut self.outputs.tap {
-            tap.sink.record(&Record {
-                t: t_out,
-                q: phase.q.as_slice(),
-                p: phase.p.as_slice(),
-                euler: phase.euler.into(),
-                pe: phase.pe.into(),
-                j: body.j.into(),
-                energy,
-                lab: lab_record.as_ref().map(|(lab, potential)| LabRecord {
-                    positions: lab.positions.as_slice(),
-                    velocities: lab.velocities.as_slice(),
-                    potential: *potential,
-                }),
-                dipole: dipole_record,
-            });
+            (rotation * mu).into()
+        });
+        let frame = Frame {
+            t: t_out,
+            q: phase.q.as_slice(),
+            p: phase.p.as_slice(),
+            euler: phase.euler.into(),
+            pe: phase.pe.into(),
+            j: body.j.into(),
+            energy,
+            lab: lab.as_ref().map(|(lab, potential)| LabFrame {
+                positions: lab.positions.as_slice(),
+                velocities: lab.velocities.as_slice(),
+                potential: *potential,
+            }),
+            dipole,
+        };
+        for reporter in &mut self.reporters {
+            reporter.report(&frame)?;
         }
         // A state the internal chart cannot hold (exactly linear) leaves no restart point.
         self.last.y_valid = true;
@@ -1056,7 +1004,7 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
         let phase = body.to_phase();
         let q = body.orientation.quaternion();
         let m = self.system.molecule();
-        Ok(Restart {
+        let mut restart = Restart {
             format: crate::restart::FORMAT.to_owned(),
             scene_path: scene.path.clone(),
             scene_text: scene.text.clone(),
@@ -1080,12 +1028,17 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Recorder<'_, M, N, NA>
             com_position_bohr: self.com.0.into(),
             com_velocity_bohr_per_au: self.com.1.into(),
             conservation: self.guard.conservation.clone(),
-            euler_unwrapped: self.outputs.files.trajectory.as_ref().and_then(TrajectoryCsv::last_unwrapped),
-        })
+            euler_unwrapped: None,
+        };
+        for reporter in &self.reporters {
+            reporter.continuation(&mut restart);
+        }
+        Ok(restart)
     }
 
+    /// Flushes every reporter (all of them, also after one fails); the first error.
     fn flush(&mut self) -> Result<(), Error> {
-        self.outputs.files.flush()
+        self.reporters.iter_mut().map(|r| r.flush()).fold(Ok(()), Result::and)
     }
 }
 

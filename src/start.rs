@@ -381,8 +381,7 @@ pub fn production_system_unchecked<'m, M: Molecule<N, NA>, const N: usize, const
 ) -> Result<(ReducedSystem<'m, M, N, NA>, Vec<f64>), StartError> {
     let mut reduction = frozen_reduction(m, scene)?;
     if start.j == Vector3::zeros() {
-        let orientation =
-            scene.outputs.lab || scene.outputs.trajectory || scene.outputs.dipole || reduction.active_count() == 0;
+        let orientation = scene.outputs.files.needs().orientation() || reduction.active_count() == 0;
         reduction.rotation = RotationPart::ZeroAngularMomentum { orientation };
     }
     let system = ReducedSystem::from_body(m, reduction, start).with_min_pivot(scene.min_metric_pivot);
