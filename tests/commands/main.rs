@@ -15,6 +15,7 @@ mod ensemble_xyz;
 mod library_api;
 mod memory_run;
 mod parameters;
+mod reporters;
 mod restart;
 mod run_safety;
 mod scene_units;
