@@ -5,7 +5,8 @@
 //!
 //! [`OUTPUTS`] is the registry: the `run.outputs` names of the files written as the run goes,
 //! with their files and constructors. The scene accepts these names (and "summary", "restart",
-//! which the run writes at its end). Adding an output is a file here and a line in [`OUTPUTS`].
+//! which the run writes at its end). Adding an output is a file here, its `mod` line and its entry
+//! in [`OUTPUTS`].
 
 mod dipole_csv;
 mod lab_xyz;
