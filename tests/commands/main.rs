@@ -18,6 +18,7 @@ mod parameters;
 mod restart;
 mod run_safety;
 mod scene_units;
+mod scene_variants;
 mod scenes;
 mod stress_cli;
 mod trajectory_columns;
