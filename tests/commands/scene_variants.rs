@@ -12,7 +12,7 @@ fn scene(table: &str) -> String {
 }
 
 fn error(table: &str) -> FileError {
-    parse_scene("scenes/bad.toml", &scene(table)).err().expect("an error")
+    parse_scene("scenes/bad.toml", &scene(table)).expect_err("an error")
 }
 
 fn method(table: &str) -> Method {
