@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use serde_json::{Value, json};
 
 use crate::error::Error;
-use crate::runtime::integrate::{Method, Stats};
+use crate::runtime::integrate::Stats;
 use crate::runtime::nalgebra::Vector3;
 use crate::scene::Scene;
 
@@ -348,7 +348,7 @@ impl RunSummary<'_> {
             "resumed_from": self.resumed_from,
             "warnings": self.warnings,
             "charts": self.charts,
-            "method": method_json(&scene.method),
+            "method": scene.method,
             "formulation": "body-frame angular momentum J and unit quaternion, fast right-hand side",
             "state_layout": self.state_layout,
             "frozen": scene.frozen.iter().map(|s| s.get_ref().as_str()).collect::<Vec<_>>(),
@@ -377,17 +377,6 @@ impl RunSummary<'_> {
                 "velocity_bohr_per_au": self.com_velocity.as_slice(),
             },
         })
-    }
-}
-
-/// The integrator and its settings, as `summary.json` names them.
-fn method_json(method: &Method) -> Value {
-    match method {
-        Method::Dop853(o) => json!({"name": "dop853", "rtol": o.rtol, "atol": o.atol}),
-        Method::GaussLegendre(o) => {
-            json!({"name": "gauss-legendre", "stages": o.stages, "step_au": o.step, "compensated": o.compensated})
-        }
-        Method::Rk4(o) => json!({"name": "rk4", "step_au": o.step}),
     }
 }
 

@@ -19,6 +19,7 @@ mod reporters;
 mod restart;
 mod run_safety;
 mod scene_units;
+mod scene_variants;
 mod scenes;
 mod stress_cli;
 mod trajectory_columns;

@@ -228,6 +228,33 @@ impl Method {
     }
 }
 
+/// The method as a run's summary names it: `{"name": <the scene's method>, <its settings>}`,
+/// times in a.u. (`step_au`).
+impl serde::Serialize for Method {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = serializer.serialize_map(None)?;
+        match self {
+            Self::Dop853(o) => {
+                map.serialize_entry("name", "dop853")?;
+                map.serialize_entry("rtol", &o.rtol)?;
+                map.serialize_entry("atol", &o.atol)?;
+            }
+            Self::GaussLegendre(o) => {
+                map.serialize_entry("name", "gauss-legendre")?;
+                map.serialize_entry("stages", &o.stages)?;
+                map.serialize_entry("step_au", &o.step)?;
+                map.serialize_entry("compensated", &o.compensated)?;
+            }
+            Self::Rk4(o) => {
+                map.serialize_entry("name", "rk4")?;
+                map.serialize_entry("step_au", &o.step)?;
+            }
+        }
+        map.end()
+    }
+}
+
 /// Integrates `system` from `(t0, y0)` to `t_end` with `method`, calling `observer` at `t0` and
 /// at the output times `t0 + k·output_interval` up to and including `t_end` (exact rule below).
 ///

@@ -42,10 +42,14 @@ use toml::Spanned;
 
 use crate::runtime::diagnostic::{Compact, FileError, Source};
 use crate::runtime::hamiltonian::{MIN_SIN_THETA, PIVOT_TOLERANCE};
-use crate::runtime::integrate::{
-    DEFAULT_MAX_STEPS, Dop853Options, GaussLegendreOptions, Method, Rk4Options, fixed_step_count,
-};
+use crate::runtime::integrate::{Dop853Options, Method};
 use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit};
+
+mod integrator;
+pub mod variant;
+
+use integrator::integrator;
+use variant::RawVariantTable;
 
 /// A unit of time accepted in scenes.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -238,7 +242,7 @@ struct RawScene {
     collision: Option<toml::Value>,
     pairs: Option<toml::Value>,
     #[serde(default)]
-    integrator: Option<Spanned<RawIntegrator>>,
+    integrator: Option<RawVariantTable>,
     run: Spanned<RawRun>,
     potential: Option<RawScenePotential>,
 }
@@ -274,19 +278,6 @@ struct RawInitial {
     j: Option<Spanned<Vec<f64>>>,
     positions: Option<RawTable<Vec<f64>>>,
     velocities: Option<RawTable<Vec<f64>>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawIntegrator {
-    method: Spanned<String>,
-    rtol: Option<Spanned<f64>>,
-    atol: Option<Spanned<f64>>,
-    step: Option<Spanned<f64>>,
-    stages: Option<Spanned<u32>>,
-    compensated: Option<Spanned<bool>>,
-    max_steps: Option<Spanned<u64>>,
-    min_step: Option<Spanned<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -781,175 +772,6 @@ fn initial(src: &Source<'_>, raw: &Spanned<RawInitial>, l: f64, a: f64, t: f64) 
         None => Vec::new(),
     };
     Ok(Initial::Internal { q, momenta, euler, rotation })
-}
-
-/// The `[integrator]` table, every setting checked here, where the file can point at it: the
-/// defaults are the runtime's own (`Dop853Options::default()` and the others: rtol = atol =
-/// 1e-10, `max_steps` = [`DEFAULT_MAX_STEPS`]), and what this accepts the solver accepts.
-/// `t` is a.u. of time per scene time unit; `t_end` and `output_interval` are in a.u.
-fn integrator(
-    src: &Source<'_>,
-    raw: &Spanned<RawIntegrator>,
-    t: f64,
-    t_end: f64,
-    output_interval: f64,
-) -> Result<Method, FileError> {
-    let r = raw.get_ref();
-    let name = r.method.get_ref().as_str();
-    let not_for = |key: &str, span: Range<usize>, method: &str| {
-        src.error(
-            span,
-            format!("`{key}` does not apply to the {method} method"),
-            "remove it, or choose a method it applies to",
-        )
-    };
-    // A time in the scene's unit, positive and finite there and in atomic units.
-    let time = |x: &Spanned<f64>, what: &str| -> Result<f64, FileError> {
-        let au = positive(src, x, what)? * t;
-        if !au.is_finite() || au == 0.0 {
-            return Err(src.error(
-                x.span(),
-                format!("`{what}` is {} in atomic units of time", Compact(au)),
-                "give a time that is finite and non-zero in atomic units (1 a.u. = 0.0242 fs)",
-            ));
-        }
-        Ok(au)
-    };
-    let max_steps = match &r.max_steps {
-        Some(x) if *x.get_ref() == 0 => {
-            return Err(src.error(
-                x.span(),
-                "`integrator.max_steps` is 0",
-                format!("give at least 1, or leave it out for the default {DEFAULT_MAX_STEPS}"),
-            ));
-        }
-        Some(x) => *x.get_ref(),
-        None => DEFAULT_MAX_STEPS,
-    };
-    let method = match name {
-        "dop853" => {
-            if let Some(s) = &r.step {
-                return Err(not_for("step", s.span(), "adaptive dop853"));
-            }
-            if let Some(s) = &r.stages {
-                return Err(not_for("stages", s.span(), "dop853"));
-            }
-            if let Some(c) = &r.compensated {
-                return Err(not_for("compensated", c.span(), "dop853"));
-            }
-            let mut o = Dop853Options { max_steps, ..Default::default() };
-            if let Some(x) = &r.rtol {
-                let v = *x.get_ref();
-                if !(v > MIN_RTOL && v <= 1.0) {
-                    return Err(src.error(
-                        x.span(),
-                        format!("`integrator.rtol` must lie in (10·ε, 1] = ({MIN_RTOL:.2e}, 1], got {}", Compact(v)),
-                        "below 10·ε the error estimate is round-off (1e-13 is about the tightest useful); \
-                         above 1 it controls nothing",
-                    ));
-                }
-                o.rtol = v;
-            }
-            if let Some(x) = &r.atol {
-                let v = positive(src, x, "integrator.atol")?;
-                if v < f64::MIN_POSITIVE {
-                    return Err(src.error(
-                        x.span(),
-                        format!(
-                            "`integrator.atol` = {} is subnormal (below {})",
-                            Compact(v),
-                            Compact(f64::MIN_POSITIVE)
-                        ),
-                        "give an absolute tolerance of at least 1e-300 (1e-14 is about the tightest useful)",
-                    ));
-                }
-                o.atol = v;
-            }
-            if let Some(x) = &r.min_step {
-                o.min_step = time(x, "integrator.min_step")?;
-                if o.min_step >= t_end {
-                    return Err(src.error(
-                        x.span(),
-                        format!(
-                            "`integrator.min_step` ({} a.u.) is not shorter than the run ({} a.u.)",
-                            Compact(o.min_step),
-                            Compact(t_end)
-                        ),
-                        "min_step is the smallest step before the run stops as stiff: give a small fraction of run.end",
-                    ));
-                }
-            }
-            Method::Dop853(o)
-        }
-        "gauss-legendre" | "rk4" => {
-            for (key, given) in [("rtol", &r.rtol), ("atol", &r.atol), ("min_step", &r.min_step)] {
-                if let Some(x) = given {
-                    return Err(not_for(key, x.span(), &format!("fixed-step {name}")));
-                }
-            }
-            let Some(step) = &r.step else {
-                return Err(src.error(
-                    r.method.span(),
-                    format!("the {name} method needs a step"),
-                    "add step = ... (in the scene's time unit) to [integrator]",
-                ));
-            };
-            let h = time(step, "integrator.step")?;
-            // The steps the run will take, exactly as the solver will cut the output intervals.
-            let needed = fixed_step_count(0.0, t_end, output_interval, h);
-            if needed > max_steps {
-                return Err(src.error(
-                    r.max_steps.as_ref().map_or(step.span(), |m| m.span()),
-                    format!(
-                        "the run needs {needed} steps of at most {} a.u. (run.end / integrator.step, output \
-                         intervals cut into whole steps), more than integrator.max_steps = {max_steps}",
-                        Compact(h)
-                    ),
-                    "lengthen integrator.step, shorten run.end, or raise integrator.max_steps if you mean it",
-                ));
-            }
-            if name == "rk4" {
-                for (key, given) in [
-                    ("stages", r.stages.as_ref().map(|s| s.span())),
-                    ("compensated", r.compensated.as_ref().map(|c| c.span())),
-                ] {
-                    if let Some(span) = given {
-                        return Err(not_for(key, span, "rk4"));
-                    }
-                }
-                Method::Rk4(Rk4Options { step: h, max_steps })
-            } else {
-                let mut o = GaussLegendreOptions { step: h, max_steps, ..Default::default() };
-                if let Some(s) = &r.stages {
-                    if !matches!(*s.get_ref(), 2 | 3) {
-                        return Err(src.error(
-                            s.span(),
-                            format!("Gauss–Legendre with {} stages is not available", s.get_ref()),
-                            "use stages = 2 (order 4) or stages = 3 (order 6)",
-                        ));
-                    }
-                    o.stages = *s.get_ref() as usize;
-                }
-                if let Some(c) = &r.compensated {
-                    o.compensated = *c.get_ref();
-                }
-                Method::GaussLegendre(o)
-            }
-        }
-        other => {
-            return Err(src.error(
-                r.method.span(),
-                format!("unknown integrator `{other}`"),
-                "use \"dop853\" (adaptive, tolerances), \"gauss-legendre\" (symplectic, fixed step) or \"rk4\" (fixed step)",
-            ));
-        }
-    };
-    // Everything the solver checks has been checked above with its place; this is the backstop
-    // that keeps the two in step (a failure here is a bug of this function).
-    method.validate().map_err(|e| {
-        src.error(raw.span(), format!("invalid integrator settings: {e}"), "see docs/src/reference/scene.md")
-    })?;
-    Ok(method)
 }
 
 /// The closest of `candidates` to `word` by edit distance (Levenshtein, `strsim`, ignoring
