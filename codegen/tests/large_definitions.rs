@@ -90,7 +90,7 @@ fn generated_potential(source: &str, q: &[f64; 3]) -> f64 {
 /// triple (i, j, k) by increasing total degree: generated on a 2 MiB stack, and the generated
 /// potential equals the polynomial evaluated directly at random points.
 #[test]
-#[ignore = "heavy tier (CI: `cargo test -- --ignored`): ~60 s in the test profile on a loaded 2-core machine"]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): ~60 s in the test profile on a loaded 2-core machine"]
 fn ten_thousand_term_polynomial_generates_and_evaluates_correctly() {
     const TERMS: usize = 10_000;
     let mut exponents: Vec<(i32, i32, i32)> =
@@ -130,7 +130,7 @@ fn ten_thousand_term_polynomial_generates_and_evaluates_correctly() {
 
 /// A flat sum of 10⁴ Morse terms, one of the shapes that overflowed the stack.
 #[test]
-#[ignore = "heavy tier (CI: `cargo test -- --ignored`): ~25 s in the test profile on a loaded 2-core machine"]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): ~25 s in the test profile on a loaded 2-core machine"]
 fn ten_thousand_morse_terms_generate() {
     let terms: Vec<String> = (0..10_000)
         .map(|i| format!("{}e-5 * pow(1 - exp(-1.1 * (r1 - {})), 2)", i % 97 + 1, 1.0 + i as f64 * 1e-4))

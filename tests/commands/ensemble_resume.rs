@@ -45,6 +45,7 @@ fn ok(o: &Output) {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 35 s unoptimised on a loaded 2-core machine"]
 fn a_run_killed_part_way_resumes_to_the_same_bytes() {
     let d = dir("kill");
     let scene = thermal_scene(&d, N, END);
@@ -93,6 +94,7 @@ fn a_run_killed_part_way_resumes_to_the_same_bytes() {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 12 s unoptimised on a loaded 2-core machine"]
 fn a_panicking_trajectory_stops_the_run_with_its_block_and_the_checkpoint_intact() {
     let d = dir("panic");
     let scene = thermal_scene(&d, 640, 300.0);
@@ -229,6 +231,7 @@ fn signal(pid: u32, signal: &str) {
 /// Each process in turn is frozen (SIGSTOP) while it holds the folder, so the checks do not
 /// depend on how fast it runs.
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 68 s unoptimised on a loaded 2-core machine"]
 fn one_process_at_a_time_in_an_ensembles_folder_and_a_killed_run_resumes() {
     let d = dir("lock");
     let scene = thermal_scene(&d, 4 * N, END);

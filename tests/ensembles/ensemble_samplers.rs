@@ -38,6 +38,7 @@ fn mean_se(x: &[f64]) -> (f64, f64) {
 const THERMAL: &str = "[ensemble]\nmethod = \"thermal\"\ntemperature = 300\nregion = { energy_cap = 0.1 }\n";
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 6 s unoptimised on a loaded 2-core machine"]
 fn thermal_water_through_the_runner_has_equipartition_at_t0() {
     // Water has 3N − 3 = 6 quadratic momentum degrees of freedom (3 vibrational, 3 rotational):
     // ⟨T⟩ = 3 kT whatever the metric, if (J, p) is Gaussian with covariance kT·M(q).
@@ -54,6 +55,7 @@ fn thermal_water_through_the_runner_has_equipartition_at_t0() {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 6 s unoptimised on a loaded 2-core machine"]
 fn thermal_water_is_stationary_under_propagation() {
     // Liouville: a canonical ensemble propagated exactly keeps its averages. Compare t = 0 with
     // t = end through the per-trajectory differences (kept trajectories), whose standard error
@@ -116,6 +118,7 @@ fn microcanonical_water_through_the_runner_starts_every_trajectory_on_the_shell(
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 14 s unoptimised on a loaded 2-core machine"]
 fn thermal_ensembles_on_one_and_two_threads_are_byte_identical() {
     // 150 trajectories: two full blocks and a partial one.
     let s = scene(&format!(
@@ -145,6 +148,7 @@ fn thermal_ensembles_on_one_and_two_threads_are_byte_identical() {
 /// round-off, and α stays in its declared range [0, π] at every output time, also for
 /// trajectories that come back from the Cartesian chart (2 histogram bins split at π).
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 30 s unoptimised on a loaded 2-core machine"]
 fn thermal_co2_starts_every_trajectory_and_keeps_alpha_in_range() {
     let n = 4000;
     let pi = std::f64::consts::PI;

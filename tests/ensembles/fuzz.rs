@@ -186,6 +186,7 @@ proptest! {
 
     /// Up to four mutations of a shipped definition.
     #[test]
+    #[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 99 s unoptimised on a loaded 2-core machine"]
     fn mutated_definitions_never_panic(file in 0usize..64, mutations in prop::collection::vec(mutation(), 1..5)) {
         let corpus = shipped();
         let (path, original) = &corpus[file % corpus.len()];
@@ -392,6 +393,7 @@ proptest! {
     /// accepted one prints source that parses, and its positions and potential are finite at
     /// the reference geometry when it has one.
     #[test]
+    #[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 7 s unoptimised on a loaded 2-core machine"]
     fn hostile_definitions_never_panic_and_accepted_ones_parse(seed in any::<u64>()) {
         let (path, text) = hostile_definition(seed);
         match generate_molecule(&path, &text) {

@@ -102,6 +102,7 @@ fn run(name: &str, text: &str) -> (Vec<f64>, Vec<f64>, Vec<f64>, serde_json::Val
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 22 s unoptimised on a loaded 2-core machine"]
 fn sampled_moments_and_configurational_integral_match_the_quadratures() {
     let q = quadrature();
     let sampler = Thermal::new(&N2arPair, T, &region(), 5).unwrap();
@@ -120,6 +121,7 @@ fn sampled_moments_and_configurational_integral_match_the_quadratures() {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 21 s unoptimised on a loaded 2-core machine"]
 fn the_pair_estimator_gives_c0_equal_to_m0_and_an_even_correlation() {
     let q = quadrature();
     let (tau, c, se, summary) = run("pair", &scene_text(256, 4000.0, "pair", ""));
@@ -147,6 +149,7 @@ fn the_pair_estimator_gives_c0_equal_to_m0_and_an_even_correlation() {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 30 s unoptimised on a loaded 2-core machine"]
 fn the_stationary_estimator_misses_m0_for_pairs() {
     // The failure, reproduced: the time-mean-subtracted, tapered estimator over all
     // time origins does not give <|mu|^2> of the sampled pairs at tau = 0 (|mu|^2 has a relative
@@ -160,6 +163,7 @@ fn the_stationary_estimator_misses_m0_for_pairs() {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 18 s unoptimised on a loaded 2-core machine"]
 fn a_trajectory_that_leaves_the_region_contributes_zero_after_its_stop() {
     // Stopping the pairs once d passes 12 bohr (where mu has fallen to e^-5 of its value at the
     // well, and the products mu(0).mu(tau) to e^-10) leaves the
@@ -181,6 +185,7 @@ fn a_trajectory_that_leaves_the_region_contributes_zero_after_its_stop() {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 7 s unoptimised on a loaded 2-core machine"]
 fn kept_trajectories_write_the_dipole_and_the_spectrum_stops_at_max_wavenumber() {
     let text = scene_text(64, 2000.0, "pair", "").replace("seed = 2811\n", "seed = 2811\nkeep_trajectories = 32\n");
     let scene = parse_scene("pair.toml", &text).unwrap();

@@ -136,6 +136,7 @@ fn pairs() -> PairStates {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 6 s unoptimised on a loaded 2-core machine"]
 fn the_quadratures_are_self_consistent() {
     // The metastable quadrature's Gaussian in v_r: with no barrier test (hi = infinity) the
     // probability of H_rel >= 0 is 1 - f_b.
@@ -147,6 +148,7 @@ fn the_quadratures_are_self_consistent() {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 56 s unoptimised on a loaded 2-core machine"]
 fn sampled_fractions_and_bound_energy_match_the_quadratures() {
     let q = quadrature();
     let region = Region { energy_cap: None, limits: [Some((R[0], R[1])), Some((D[0], D[1])), Some((0.0, PI))] };
@@ -190,6 +192,7 @@ fn run(name: &str, text: &str) -> (PathBuf, serde_json::Value) {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 22 s unoptimised on a loaded 2-core machine"]
 fn per_class_correlations_add_up_and_start_at_each_class_m0() {
     let q = quadrature();
     let (dir, s) = run(
@@ -229,6 +232,7 @@ fn per_class_correlations_add_up_and_start_at_each_class_m0() {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 85 s unoptimised on a loaded 2-core machine"]
 fn sampling_restricted_to_bound_pairs_matches_the_quadratures() {
     let q = quadrature();
     let text = scene_text(

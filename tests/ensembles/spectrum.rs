@@ -94,6 +94,7 @@ output_interval = 20.0
 "#;
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 15 s unoptimised on a loaded 2-core machine"]
 fn low_temperature_bands_sit_at_the_harmonic_wavenumbers() {
     let dir = temp_dir("bands");
     let (s, header, rows) = run_spectrum(BANDS_SCENE, &dir);
@@ -190,6 +191,7 @@ const BAND_HALF_WIDTH: f64 = 51.0;
 const BATCHES: u64 = 4;
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 46 s unoptimised on a loaded 2-core machine"]
 fn integrated_band_intensities_follow_the_double_harmonic_formula() {
     let derivatives = water_dipole_derivatives(true);
     let mut per_batch: Vec<Vec<f64>> = Vec::new();
@@ -295,6 +297,7 @@ frozen = ["r1", "r2", "r3", "a12", "a13", "a23"]
 "#;
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 151 s unoptimised on a loaded 2-core machine"]
 fn a_rigid_symmetric_top_follows_the_classical_rotational_envelope() {
     // Independent of the dynamics: the principal moments and the dipole from the definition's
     // masses, positions at the minimum and charges.
@@ -541,7 +544,7 @@ const PR_TRAJECTORIES: u64 = 48;
 /// maxima of its P and R branches are `2.3583·√(B·T)` cm⁻¹ apart, B from the masses and bond
 /// lengths alone.
 #[test]
-#[ignore = "heavy tier (CI: `cargo test -- --ignored`): 8 x 48 thermal HCN trajectories, ~90 s in the test profile"]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 8 x 48 thermal HCN trajectories, ~90 s in the test profile"]
 fn the_p_r_maxima_of_a_linear_molecule_are_classically_separated() {
     use rovib::ensemble::run_with_sampler;
     use rovib::runtime::sample::{Region, Thermal};

@@ -93,6 +93,7 @@ fn check(label: &str, r: &CrossCheckReport<3>) {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 8 s unoptimised on a loaded 2-core machine"]
 fn hamiltonian_matches_cartesian_without_rotation() {
     let (q, p) = excited_water();
     // p_e = 0: J = 0 and L = 0; the vibrational angular momentum is compensated by a small
@@ -130,6 +131,7 @@ fn check_rotating(label: &str, r: &CrossCheckReport<3>) {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 8 s unoptimised on a loaded 2-core machine"]
 fn hamiltonian_matches_cartesian_with_rotation() {
     let (state, com) = rotating_water();
     let r = cross_check(&H2o, h2o_q_of_x, &state, &com, &CrossCheck::dop853(T_END, OUTPUT_INTERVAL, RTOL, ATOL));
@@ -139,6 +141,7 @@ fn hamiltonian_matches_cartesian_with_rotation() {
 /// The same with an unrelated method on the Hamiltonian side: implicit, symplectic, fixed-step
 /// Gauss–Legendre (3 stages, order 6) against the adaptive explicit DOP853 of the Cartesian side.
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 57 s unoptimised on a loaded 2-core machine"]
 fn hamiltonian_by_gauss_legendre_matches_cartesian_with_rotation() {
     let (state, com) = rotating_water();
     let settings = CrossCheck {
@@ -156,6 +159,7 @@ fn hamiltonian_by_gauss_legendre_matches_cartesian_with_rotation() {
 /// The check can fail: a relative error of 1e-6 in one hydrogen mass on the Cartesian side
 /// moves the positions by far more than the tolerance.
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 7 s unoptimised on a loaded 2-core machine"]
 fn cross_check_detects_a_one_ppm_mass_error() {
     let (q, p) = excited_water();
     let state = PhaseState { q, p, euler: Vector3::new(0.4, 1.1, -0.7), pe: Vector3::zeros() };

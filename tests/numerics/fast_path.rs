@@ -343,6 +343,7 @@ impl MoleculeVisitor for ZeroJTrajectory {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 11 s unoptimised on a loaded 2-core machine"]
 fn zero_angular_momentum_trajectory_follows_the_gmatrix_path() {
     for_each_molecule(ZeroJTrajectory);
 }
@@ -529,6 +530,7 @@ impl MoleculeVisitor for FrozenIsHamiltonian {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 41 s unoptimised on a loaded 2-core machine"]
 fn frozen_coordinate_system_is_hamiltonian_in_its_own_reduced_metric() {
     common::for_each_well_conditioned_molecule(FrozenIsHamiltonian);
 }
@@ -675,6 +677,7 @@ impl MoleculeVisitor for NoAllocation {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 8 s unoptimised on a loaded 2-core machine"]
 fn no_path_allocates() {
     for_each_molecule(NoAllocation);
     // The counter does see allocations: building an error allocates (its q).
@@ -742,6 +745,7 @@ impl MoleculeVisitor for Trajectory {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 11 s unoptimised on a loaded 2-core machine"]
 fn fast_trajectory_follows_the_gmatrix_trajectory() {
     for_each_molecule(Trajectory);
 }

@@ -84,6 +84,7 @@ fn near_pass() -> (PhaseState<3>, f64) {
 }
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 32 s unoptimised on a loaded 2-core machine"]
 fn a_trajectory_through_gimbal_lock_agrees_with_the_cartesian_propagation() {
     let (initial, t_half) = near_pass();
     assert!(initial.euler[1].sin() > 0.1, "the run starts far from gimbal lock: θ = {}", initial.euler[1]);
@@ -444,7 +445,7 @@ fn co2_closer_to_linear_than_the_threshold_stops_naming_the_time_q_and_the_inert
 }
 
 #[test]
-#[ignore = "heavy tier (CI: `cargo test -- --ignored`): millions of right-hand sides near linear, ~4 min in the test profile on a loaded 2-core machine"]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): millions of right-hand sides near linear, ~4 min in the test profile on a loaded 2-core machine"]
 fn co2_closest_approach_sweep_long() {
     let guarded = [10.0, 3.0, 1.0, 0.3, 0.1, 3e-2, 1e-2, 3e-3, 1e-3, 5e-4, 3e-4, 2e-4, 1.7e-4, 1.5e-4, 1e-4, 1e-5];
     // (rtol, bound on |Δx| of a completed run): measured at most 1.7e-11 bohr at rtol 1e-13 and
@@ -617,6 +618,7 @@ fn compensation_pair(stages: usize, h: f64, steps: u64) -> (EnergyRun, EnergyRun
 const REALISTIC_STEP: f64 = 4.125;
 
 #[test]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 40 s unoptimised on a loaded 2-core machine"]
 fn gauss_legendre_energy_error_stays_bounded_over_1e5_steps() {
     eprintln!("{ENERGY_HEADER}");
     // At a realistic step the bounded truncation error (~1e-12) hides round-off.
@@ -637,7 +639,7 @@ fn gauss_legendre_energy_error_stays_bounded_over_1e5_steps() {
 }
 
 #[test]
-#[ignore = "heavy tier (CI: `cargo test -- --ignored`): 6 x 10^6 Gauss-Legendre steps, ~3.5 min in the test profile on a loaded 2-core machine"]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 6 x 10^6 Gauss-Legendre steps, ~3.5 min in the test profile on a loaded 2-core machine"]
 fn gauss_legendre_energy_over_1e6_steps_long() {
     eprintln!("\nWater (scenes/h2o.toml initial state), production path, 10^6 steps\n{ENERGY_HEADER}");
     // At a realistic step the energy error is each method's bounded oscillation, the same in the
@@ -769,7 +771,7 @@ fn fast_rotation_and_high_vibrational_energy_agree_with_the_cartesian_propagatio
 }
 
 #[test]
-#[ignore = "heavy tier (CI: `cargo test -- --ignored`): 36 cross-checks, ~20 s in the test profile on a loaded 2-core machine"]
+#[ignore = "heavy tier (CI: `cargo test --profile heavy -- --ignored`): 36 cross-checks, ~20 s in the test profile on a loaded 2-core machine"]
 fn hard_regimes_for_every_integrator_long() {
     // (method, measured max |Δx| in bohr over 120 and 1200 outputs, fast rotation then high
     // vibration); asserted below 5× the measured value.
