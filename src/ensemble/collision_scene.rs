@@ -98,13 +98,7 @@ pub const MAX_BINS: i64 = 100_000;
 /// the tables and keys a collision ensemble does not use.
 pub fn parse_collision(scene: &Scene, method: Range<usize>) -> Result<CollisionScene, FileError> {
     let src = scene.source();
-    let raw: RawFile = toml::from_str(&scene.text).map_err(|e| {
-        let message = e.message().trim_end().trim_end_matches('.').to_owned();
-        match e.span() {
-            Some(span) => src.error(span, message, HELP),
-            None => src.whole_file(message, HELP),
-        }
-    })?;
+    let raw: RawFile = toml::from_str(&scene.text).map_err(|e| crate::scene::toml_error(&src, &e, HELP))?;
     if let Some(s) = &raw.statistics {
         return Err(src.error(
             s.span(),

@@ -135,13 +135,7 @@ const HELP: &str = "[pairs] takes monomers (two lists of atom labels), distance 
 
 /// Parses `[pairs]` of the scene text (None: no table).
 pub fn parse_pairs(src: &Source<'_>) -> Result<Option<PairScene>, FileError> {
-    let raw: RawFile = toml::from_str(src.text).map_err(|e| {
-        let message = e.message().trim_end().trim_end_matches('.').to_owned();
-        match e.span() {
-            Some(span) => src.error(span, message, HELP),
-            None => src.whole_file(message, HELP),
-        }
-    })?;
+    let raw: RawFile = toml::from_str(src.text).map_err(|e| crate::scene::toml_error(src, &e, HELP))?;
     let Some(table) = raw.pairs else { return Ok(None) };
     let t = table.into_inner();
     let positive = |v: &Option<Spanned<f64>>, key: &str, help: &str| -> Result<(), FileError> {

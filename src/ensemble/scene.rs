@@ -218,12 +218,8 @@ pub use crate::scene::did_you_mean;
 pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
     let src = scene.source();
     let raw: RawFile = toml::from_str(&scene.text).map_err(|e| {
-        let message = e.message().trim_end().trim_end_matches('.').to_owned();
         let help = "docs/src/reference/ensemble.md (the guide's ensemble reference) lists every key of [ensemble] and [statistics]";
-        match e.span() {
-            Some(span) => src.error(span, message, help),
-            None => src.whole_file(message, help),
-        }
+        crate::scene::toml_error(&src, &e, help)
     })?;
     let Some(ensemble) = raw.ensemble else {
         return Err(src.whole_file(

@@ -92,13 +92,9 @@ struct RawSpectrum {
 /// Parses `[spectrum]` of the scene text.
 pub fn parse_spectrum(src: &Source<'_>) -> Result<SpectrumScene, FileError> {
     let raw: RawFile = toml::from_str(src.text).map_err(|e| {
-        let message = e.message().trim_end().trim_end_matches('.').to_owned();
         let help = "[spectrum] takes estimator (\"stationary\" or \"pair\"), max_wavenumber (cm-1) and pair_volume \
                     (bohr^3); see the README's \"Ensembles\"";
-        match e.span() {
-            Some(span) => src.error(span, message, help),
-            None => src.whole_file(message, help),
-        }
+        crate::scene::toml_error(src, &e, help)
     })?;
     let Some(table) = raw.spectrum else { return Ok(SpectrumScene::default()) };
     let span = table.span();

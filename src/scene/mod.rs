@@ -312,20 +312,31 @@ pub const DEFAULT_MIN_METRIC_PIVOT: f64 = PIVOT_TOLERANCE;
 /// 1 % is unstable or far too loosely integrated (the shipped scenes stay below 1e-8).
 pub const DEFAULT_MAX_ENERGY_ERROR: f64 = 1e-2;
 
+/// serde's message for a TOML error, as every scene message is written: without a final full stop.
+pub(crate) fn toml_message(e: &toml::de::Error) -> String {
+    e.message().trim_end().trim_end_matches('.').to_owned()
+}
+
+/// A TOML error of a scene file at its place (the whole file when it has none), with `help`.
+pub(crate) fn toml_error(src: &Source<'_>, e: &toml::de::Error, help: &str) -> FileError {
+    let message = toml_message(e);
+    match e.span() {
+        Some(span) => src.error(span, message, help),
+        None => src.whole_file(message, help),
+    }
+}
+
 /// Parses and validates a scene file. `path` names it in messages.
 pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     let src = Source { path, text };
     let raw: RawScene = toml::from_str(text).map_err(|e| {
-        let message = e.message().trim_end().trim_end_matches('.').to_owned();
+        let message = toml_message(&e);
         let help = if message.starts_with("unknown field") || message.starts_with("missing field") {
             "docs/src/reference/scene.md (the guide's scene reference) lists every key"
         } else {
             "see the TOML syntax at https://toml.io and the shipped scenes/ for examples"
         };
-        match e.span() {
-            Some(span) => src.error(span, message, help),
-            None => src.whole_file(message, help),
-        }
+        toml_error(&src, &e, help)
     })?;
 
     // Without [units], lengths and angles of coordinates are in each coordinate's declared unit

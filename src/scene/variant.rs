@@ -8,16 +8,16 @@
 //! reads the tag, and each variant names the keys it takes ([`Tagged::only`]) and reads each
 //! value into its type ([`Tagged::get`]); every error points at the key or value it is about.
 
-use std::collections::BTreeMap;
 use std::ops::Range;
 
 use serde::de::{DeserializeOwned, Error as _};
 use toml::Spanned;
 
+use super::toml_message;
 use crate::runtime::diagnostic::{FileError, Source};
 
 /// A table as written: every key and value with its place.
-pub type RawVariantTable = Spanned<BTreeMap<Spanned<String>, Spanned<toml::Value>>>;
+pub type RawVariantTable = super::RawTable<toml::Value>;
 
 /// The help of a message about a value of the wrong type (as for any other TOML error).
 const TYPE_HELP: &str = "see the TOML syntax at https://toml.io and the shipped scenes/ for examples";
@@ -44,7 +44,7 @@ impl<'a> Tagged<'a> {
         keys: &'static [&'static str],
         help: &str,
     ) -> Result<Self, FileError> {
-        let error = |span: Range<usize>, e: toml::de::Error, help: &str| src.error(span, message(&e), help);
+        let error = |span: Range<usize>, e: toml::de::Error, help: &str| src.error(span, toml_message(&e), help);
         // Keys in the order written, so that the first unknown one is the one reported.
         let mut written: Vec<&Spanned<String>> = table.get_ref().keys().collect();
         written.sort_by_key(|k| k.span().start);
@@ -67,11 +67,6 @@ impl<'a> Tagged<'a> {
     /// Where the tag's value is written.
     pub fn name_span(&self) -> Range<usize> {
         self.tag.span()
-    }
-
-    /// The tag's value and place.
-    pub fn tag(&self) -> &Spanned<String> {
-        &self.tag
     }
 
     /// Refuses the first key (in the order of `all`, the table's keys) that is neither the tag
@@ -109,7 +104,7 @@ impl<'a> Tagged<'a> {
         let Some((_, value)) = self.table.get_ref().iter().find(|(k, _)| k.get_ref() == key) else {
             return Ok(None);
         };
-        typed(value).map(Some).map_err(|e| self.src.error(value.span(), message(&e), TYPE_HELP))
+        typed(value).map(Some).map_err(|e| self.src.error(value.span(), toml_message(&e), TYPE_HELP))
     }
 
     /// An unknown tag, `unknown {what} `name``, at its place, with a did-you-mean among `names`
@@ -131,9 +126,4 @@ impl<'a> Tagged<'a> {
 /// A value read into its type, keeping its place.
 fn typed<T: DeserializeOwned>(value: &Spanned<toml::Value>) -> Result<Spanned<T>, toml::de::Error> {
     T::deserialize(value.get_ref().clone()).map(|v| Spanned::new(value.span(), v))
-}
-
-/// serde's message as the scene parser writes every TOML error's: without a final full stop.
-fn message(e: &toml::de::Error) -> String {
-    e.message().trim_end().trim_end_matches('.').to_owned()
 }
