@@ -8,6 +8,7 @@
 mod common;
 
 mod co2ar_example;
+mod chart_choice;
 mod collision_interrupt;
 mod collisions;
 mod ensemble;
