@@ -29,8 +29,8 @@ use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::runner::{Accumulators, CartesianWatch, Failure, Outcome, Plan, Stop, Tally, Watch, fold, run_block_scalar};
-use crate::runtime::cartesian_system::CartesianSystem;
 use crate::runtime::Molecule;
+use crate::runtime::cartesian_system::CartesianSystem;
 use crate::runtime::hamiltonian::BodyState;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
@@ -154,7 +154,12 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, 'm, M, 
 
     /// A lane's start: the internal flat state, or in the Cartesian chart (`run.chart`) the
     /// positions and velocities.
-    fn lane_start(&self, system: &ReducedSystem<'m, M, N, NA>, state: &BodyState<N>, y0: &mut [f64]) -> Result<(), String> {
+    fn lane_start(
+        &self,
+        system: &ReducedSystem<'m, M, N, NA>,
+        state: &BodyState<N>,
+        y0: &mut [f64],
+    ) -> Result<(), String> {
         if !self.plan.in_cartesian_chart() {
             return system.reduce_body(state, y0).map_err(|e| e.to_string());
         }

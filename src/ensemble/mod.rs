@@ -642,7 +642,9 @@ fn run_header(scene: &Scene, ensemble: &EnsembleScene, options: &EnsembleOptions
         bytes.push(0);
         bytes.extend_from_slice(&b);
     }
-    Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK).with_lanes(options.lanes).with_chart(scene.chart.0.name())
+    Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK)
+        .with_lanes(options.lanes)
+        .with_chart(scene.chart.0.name())
 }
 
 /// The most worker threads per core an ensemble starts: the trajectories are compute-bound, so

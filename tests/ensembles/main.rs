@@ -7,8 +7,8 @@
 #[path = "../common/mod.rs"]
 mod common;
 
-mod co2ar_example;
 mod chart_choice;
+mod co2ar_example;
 mod collision_interrupt;
 mod collisions;
 mod ensemble;
