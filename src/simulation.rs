@@ -314,6 +314,14 @@ impl Run<'_> {
                 ),
             )));
         }
+        if let (crate::scene::chart::RunChart::Cartesian, Some(span)) = &scene.chart {
+            return Err(Error::File(scene.source().error(
+                span.clone(),
+                "`run.chart = \"cartesian\"` applies to ensembles ([ensemble]) only",
+                "remove it: `rovib run` integrates in internal coordinates and continues in the Cartesian chart \
+                 near linear geometries (run.cartesian_fallback)",
+            )));
+        }
         let mut warnings = Vec::new();
         if scene.central_differences {
             warnings.push(crate::surface_gradient::note(N));

@@ -49,6 +49,15 @@ pub struct Header {
     /// at a time agree to round-off only, so a resume must use the setting of the run it
     /// continues for its outputs to be those of an uninterrupted run.
     pub lanes: bool,
+    /// The chart the trajectories are integrated in (`run.chart`: "internal" or "cartesian";
+    /// "internal" for checkpoints written before the key existed). The charts agree within the
+    /// tolerances only, so a resume must use the chart of the run it continues.
+    #[serde(default = "internal_chart")]
+    pub chart: String,
+}
+
+fn internal_chart() -> String {
+    "internal".into()
 }
 
 impl Header {
@@ -62,7 +71,13 @@ impl Header {
             trajectories,
             block,
             lanes: true,
+            chart: internal_chart(),
         }
+    }
+
+    /// The same header with the chart `chart` (`run.chart`).
+    pub fn with_chart(self, chart: &str) -> Self {
+        Self { chart: chart.into(), ..self }
     }
 
     /// The same header with the lane setting `lanes`.
@@ -142,6 +157,9 @@ impl Identity {
         if a.lanes != b.lanes {
             let s = |l: bool| if l { "lanes" } else { "--no-lanes" };
             d.push(format!("{} ({this}: {})", s(b.lanes), s(a.lanes)));
+        }
+        if a.chart != b.chart {
+            d.push(format!("run.chart = \"{}\" ({this}: \"{}\")", b.chart, a.chart));
         }
         if self.layout != other.layout {
             d.push(format!("statistics layout {:?} ({this}: {:?})", other.layout, self.layout));

@@ -28,8 +28,9 @@
 use std::ops::{ControlFlow, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::runner::{Accumulators, Failure, Outcome, Plan, Stop, Tally, Watch, fold, run_block_scalar};
+use super::runner::{Accumulators, CartesianWatch, Failure, Outcome, Plan, Stop, Tally, Watch, fold, run_block_scalar};
 use crate::runtime::Molecule;
+use crate::runtime::cartesian_system::CartesianSystem;
 use crate::runtime::hamiltonian::BodyState;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
 use crate::runtime::hamiltonian::lanes::ProductionLanes;
@@ -64,7 +65,11 @@ pub const LANES: usize = <Lanes as Real>::LANES;
 /// matrix is completed at run time, see [`crate::runtime::hamiltonian::lanes::available`]).
 pub fn applies<M: Molecule<N, NA>, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>) -> bool {
     plan.lanes
-        && crate::runtime::hamiltonian::lanes::available(plan.molecule)
+        && if plan.in_cartesian_chart() {
+            crate::runtime::cartesian_lanes::available(plan.molecule)
+        } else {
+            crate::runtime::hamiltonian::lanes::available(plan.molecule)
+        }
         && matches!(plan.method, Method::Dop853(_))
         && plan.reduction.active.iter().all(|&a| a)
         && plan.reduction.rotation == crate::runtime::hamiltonian::fast::RotationPart::Free
@@ -96,6 +101,8 @@ struct Slot<'m, M, const N: usize, const NA: usize> {
     failure: Option<(&'static str, f64, String)>,
     interrupted: bool,
     stopped: Option<Stop>,
+    /// q at the last output (the branch of the closed-form q of a Cartesian-chart state).
+    last_q: crate::runtime::nalgebra::SVector<f64, N>,
 }
 
 struct Feeder<'a, 'm, M, const N: usize, const NA: usize> {
@@ -117,6 +124,8 @@ struct Feeder<'a, 'm, M, const N: usize, const NA: usize> {
     first: u64,
     /// [`super::runner::PANIC_HOOK`], as the scalar path honours it.
     panic_at: Option<u64>,
+    /// The Cartesian chart, when the trajectories run in it (`run.chart`).
+    cartesian: Option<CartesianSystem<'m, M, N, NA>>,
 }
 
 impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, 'm, M, N, NA> {
@@ -128,8 +137,9 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, 'm, M, 
         self.backward[(index - self.first) as usize] = Some(r);
     }
 
-    fn slot(&self, index: u64, backward: bool, system: ReducedSystem<'m, M, N, NA>) -> Slot<'m, M, N, NA> {
+    fn slot(&self, index: u64, backward: bool, system: ReducedSystem<'m, M, N, NA>, q: &[f64]) -> Slot<'m, M, N, NA> {
         Slot {
+            last_q: crate::runtime::nalgebra::SVector::from_column_slice(q),
             index,
             backward,
             system,
@@ -140,6 +150,23 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, 'm, M, 
             interrupted: false,
             stopped: None,
         }
+    }
+
+    /// A lane's start: the internal flat state, or in the Cartesian chart (`run.chart`) the
+    /// positions and velocities.
+    fn lane_start(
+        &self,
+        system: &ReducedSystem<'m, M, N, NA>,
+        state: &BodyState<N>,
+        y0: &mut [f64],
+    ) -> Result<(), String> {
+        if !self.plan.in_cartesian_chart() {
+            return system.reduce_body(state, y0).map_err(|e| e.to_string());
+        }
+        let y = crate::runtime::charts::to_cartesian(self.plan.molecule, state)
+            .map_err(|e| format!("the state in the Cartesian chart: {e}"))?;
+        y0.copy_from_slice(&y);
+        Ok(())
     }
 
     /// Starts the backward run of `index` from the reversed `drawn` in `lane`, if it can start:
@@ -153,11 +180,11 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> Feeder<'_, 'm, M, 
         let state = super::pair::reversed(drawn);
         let system = ReducedSystem::from_body(self.plan.molecule, self.plan.reduction, &state)
             .with_min_pivot(self.plan.min_pivot);
-        if system.reduce_body(&state, y0).is_err() {
+        if self.lane_start(&system, &state, y0).is_err() {
             self.set_backward(index, Fate::Redo);
             return false;
         }
-        self.slots[lane] = Some(self.slot(index, true, system));
+        self.slots[lane] = Some(self.slot(index, true, system, state.q.as_slice()));
         true
     }
 }
@@ -204,15 +231,15 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             }
             let system = ReducedSystem::from_body(self.plan.molecule, self.plan.reduction, &state)
                 .with_min_pivot(self.plan.min_pivot);
-            if let Err(e) = system.reduce_body(&state, y0) {
-                self.set(index, Fate::Failed(failure("invalid initial state", Some(0.0), e.to_string())));
+            if let Err(e) = self.lane_start(&system, &state, y0) {
+                self.set(index, Fate::Failed(failure("invalid initial state", Some(0.0), e)));
                 continue;
             }
             if self.pair {
                 self.drawn[(index - self.first) as usize] = Some(state);
                 self.pending = Some((index, state));
             }
-            self.slots[lane] = Some(self.slot(index, false, system));
+            self.slots[lane] = Some(self.slot(index, false, system, state.q.as_slice()));
             return true;
         }
     }
@@ -232,13 +259,18 @@ impl<'m, M: Molecule<N, NA>, const N: usize, const NA: usize> LaneFeeder for Fee
             interrupted: false,
             csv: None,
             dipole: None,
-            cartesian: None,
-            // Lanes hold internal-chart states only: no Cartesian state, so no branch to follow.
-            last_q: crate::runtime::nalgebra::SVector::zeros(),
+            // Lent to the observer for this output, and taken back below.
+            cartesian: self.cartesian.take(),
+            last_q: slot.last_q,
             stopped: None,
         };
-        let flow = crate::runtime::integrate::Observer::observe(&mut watch, t, y);
+        let flow = match watch.cartesian {
+            Some(_) => crate::runtime::integrate::Observer::observe(&mut CartesianWatch(&mut watch), t, y),
+            None => crate::runtime::integrate::Observer::observe(&mut watch, t, y),
+        };
         (slot.k, slot.initial_energy, slot.interrupted) = (watch.k, watch.initial_energy, watch.interrupted);
+        slot.last_q = watch.last_q;
+        self.cartesian = watch.cartesian.take();
         slot.stopped = watch.stopped;
         slot.failure = watch.failure.take();
         flow
@@ -272,7 +304,8 @@ where
     M: Molecule<N, NA> + Sync,
 {
     let Method::Dop853(options) = plan.method else { return run_block_scalar(plan, sampler, indices, stop, progress) };
-    let mut solver = match Dop853Lanes::<Lanes>::new(plan.reduction.dim(), options) {
+    let dim = if plan.in_cartesian_chart() { 6 * NA } else { plan.reduction.dim() };
+    let mut solver = match Dop853Lanes::<Lanes>::new(dim, options) {
         Ok(s) => s,
         Err(_) => return run_block_scalar(plan, sampler, indices, stop, progress),
     };
@@ -293,14 +326,23 @@ where
         pending: None,
         first: indices.start,
         panic_at: super::runner::panic_hook(),
+        cartesian: if plan.in_cartesian_chart() { CartesianSystem::new(plan.molecule).ok() } else { None },
     };
     // A plan that switches charts: a lane stops where the scalar path would switch (its internal
     // chart's pivot threshold), and the scalar path runs that trajectory again with the switch,
     // so that trajectory is the scalar path's.
     let switching = plan.switches_charts();
     let min_pivot = if switching { plan.min_pivot.max(crate::runtime::charts::SWITCH_PIVOT) } else { plan.min_pivot };
-    let mut system = ProductionLanes::new(plan.molecule, min_pivot);
-    if solver.integrate(&mut system, 0.0, plan.t_end, plan.interval, &mut feeder).is_err() {
+    let run = if plan.in_cartesian_chart() {
+        match crate::runtime::cartesian_lanes::CartesianLanes::new(plan.molecule) {
+            Ok(mut system) => solver.integrate(&mut system, 0.0, plan.t_end, plan.interval, &mut feeder),
+            Err(_) => return run_block_scalar(plan, sampler, indices, stop, progress),
+        }
+    } else {
+        let mut system = ProductionLanes::new(plan.molecule, min_pivot);
+        solver.integrate(&mut system, 0.0, plan.t_end, plan.interval, &mut feeder)
+    };
+    if run.is_err() {
         return run_block_scalar(plan, sampler, indices, stop, progress);
     }
 

@@ -60,6 +60,7 @@ use crate::error::Error;
 use crate::molecules;
 use crate::runtime::sample::{self, Sampler};
 use crate::runtime::{Molecule, MoleculeVisitor};
+use crate::scene::chart::RunChart;
 use crate::scene::{Scene, parse_scene};
 
 pub use self::runner::Failure;
@@ -316,6 +317,12 @@ impl Visit<'_, '_> {
                             trajectories over several scenes with different seeds";
                 return Err(self.scene.source().error(self.ensemble.method_span(), why, help).into());
             }
+            if let (RunChart::Cartesian, Some(span)) = &self.scene.chart {
+                let why = "`run.chart = \"cartesian\"` is not available for a collision ensemble";
+                let help = "remove it: a collision runs in internal coordinates (with the Cartesian chart near linear \
+                            geometries)";
+                return Err(self.scene.source().error(span.clone(), why, help).into());
+            }
             return collision_output::run_and_write(&m, self.scene, self.ensemble, c, self.options).map(|r| Some(r.0));
         }
         let times = output_times(self.scene.t_end, self.scene.output_interval);
@@ -396,6 +403,37 @@ where
     run_block_scalar(plan, sampler, indices, stop, progress)
 }
 
+/// The chart the ensemble's trajectories are integrated in (`run.chart`): `cartesian` only for
+/// a molecule with a Cartesian potential (coordinates declared by kind) and nothing frozen,
+/// else an error at the key.
+fn chart_of<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    scene: &Scene,
+    reduction: &crate::runtime::hamiltonian::fast::Reduction<N>,
+) -> Result<RunChart, Error> {
+    let (chart, span) = &scene.chart;
+    let Some(span) = span else { return Ok(*chart) };
+    if *chart != RunChart::Cartesian {
+        return Ok(*chart);
+    }
+    let why = if !reduction.active.iter().all(|&a| a) {
+        "the scene freezes coordinates (run.frozen), which have no Cartesian counterpart"
+    } else if crate::runtime::cartesian_system::CartesianSystem::new(m).is_err() {
+        "the molecule has no Cartesian potential U(x) (its definition gives positions rather than coordinates by \
+         kind, or the potential comes from a shared library or a grid file)"
+    } else {
+        return Ok(RunChart::Cartesian);
+    };
+    Err(scene
+        .source()
+        .error(
+            span.clone(),
+            format!("`run.chart = \"cartesian\"` is not available for {}: {why}", m.name()),
+            "remove it (the default, \"internal\", integrates in internal coordinates)",
+        )
+        .into())
+}
+
 /// The output times of a run from 0 to `t_end` every `interval` (a.u.): the grid
 /// `runtime::integrate::solve` observes (0, k·interval while before `t_end`, then `t_end`; a
 /// ratio within 64 ε of an integer counts as that integer). The runner checks every trajectory
@@ -426,6 +464,7 @@ where
     M: Molecule<N, NA> + Sync,
 {
     let reduction = crate::start::frozen_reduction(m, scene)?;
+    let chart = chart_of(m, scene, &reduction)?;
     let ranks = link.ranks();
     if ranks > 1 && ensemble.keep_trajectories.is_some() {
         return Err(Error::Message(
@@ -457,6 +496,7 @@ where
         max_energy_error: scene.max_energy_error,
         min_pivot: scene.min_metric_pivot,
         cartesian_fallback: scene.cartesian_fallback,
+        chart,
         keep: ensemble.keep_trajectories.map(|k| (k, options.out_dir.join("trajectories"))),
         time_scale: scene.time_unit.in_au(),
         lanes: options.lanes,
@@ -602,7 +642,9 @@ fn run_header(scene: &Scene, ensemble: &EnsembleScene, options: &EnsembleOptions
         bytes.push(0);
         bytes.extend_from_slice(&b);
     }
-    Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK).with_lanes(options.lanes)
+    Header::new(&bytes, ensemble.seed, ensemble.trajectories, BLOCK)
+        .with_lanes(options.lanes)
+        .with_chart(scene.chart.0.name())
 }
 
 /// The most worker threads per core an ensemble starts: the trajectories are compute-bound, so

@@ -349,6 +349,7 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
                 "not_a_number": (0..plan.histograms[i].3.len()).map(|t| acc.histograms[first + t].not_a_number()).collect::<Vec<_>>(),
             })
         }).collect::<Vec<_>>(),
+        "chart": plan.chart.name(),
         "charts": charts_json(plan, &o.charts, ts),
         "stops": super::lifetimes::summary(m, plan, o, ts),
         "spectrum": super::pair::summary(plan, report.phase_space.as_ref(), spectrum.as_ref()),
@@ -373,7 +374,9 @@ fn charts_json<M: Molecule<N, NA>, const N: usize, const NA: usize>(
 ) -> serde_json::Value {
     use crate::runtime::charts::{RETURN_PIVOT, SWITCH_PIVOT};
     if !plan.switches_charts() {
-        let why = if !plan.cartesian_fallback {
+        let why = if plan.in_cartesian_chart() {
+            "run.chart = \"cartesian\": every trajectory is integrated in the Cartesian chart"
+        } else if !plan.cartesian_fallback {
             "run.cartesian_fallback = false"
         } else if !matches!(plan.method, crate::runtime::integrate::Method::Dop853(_)) {
             "only dop853 switches charts (the fixed-step methods stop at a singular geometry)"

@@ -69,6 +69,11 @@ pub struct Plan<'m, M, const N: usize, const NA: usize> {
     /// chart continue in the Cartesian chart (`runtime::charts`) where that is possible
     /// ([`Plan::switches_charts`]), instead of failing as "ill-conditioned metric".
     pub cartesian_fallback: bool,
+    /// `run.chart`: the chart the trajectories are integrated in. In the Cartesian chart
+    /// (checked to exist, nothing frozen) every trajectory starts from its sampled state
+    /// converted to positions and velocities, and is observed through the internal state
+    /// converted at each output time; it never switches charts.
+    pub chart: crate::scene::chart::RunChart,
     /// Keep the trajectory of every k-th index in `dir/trajectories/INDEX/trajectory.csv`.
     pub keep: Option<(u64, PathBuf)>,
     /// Scale from a.u. of time to the scene's time unit, for kept trajectories.
@@ -95,9 +100,15 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Plan<'_, M, N, NA> {
     /// fragments and atoms (the rigid chart).
     pub fn switches_charts(&self) -> bool {
         self.cartesian_fallback
+            && !self.in_cartesian_chart()
             && matches!(self.method, Method::Dop853(_))
             && self.reduction.active.iter().all(|&a| a)
             && (CartesianSystem::new(self.molecule).is_ok() || self.uses_rigid_chart())
+    }
+
+    /// Whether every trajectory is integrated in the Cartesian chart (`run.chart = "cartesian"`).
+    pub fn in_cartesian_chart(&self) -> bool {
+        self.chart == crate::scene::chart::RunChart::Cartesian
     }
 
     /// Whether the fallback chart is the rigid one (no Cartesian potential, a rigid layout).
@@ -725,7 +736,9 @@ where
     let mut outcome = Outcome::new(Accumulators::new(plan));
     let dim = plan.reduction.dim();
     let switching = plan.switches_charts();
-    let mut integrator = match Integrator::new(&plan.method, dim, NA, switching) {
+    let in_cartesian = plan.in_cartesian_chart();
+    let integrated_dim = if in_cartesian { 6 * NA } else { dim };
+    let mut integrator = match Integrator::new(&plan.method, integrated_dim, NA, switching) {
         Ok(i) => i,
         Err(e) => {
             for index in indices {
@@ -794,6 +807,7 @@ where
             // (the chart integrator checks it: an `InvalidInput` there is an invalid initial state).
             if let Err(e) = system.reduce_body(&state, &mut y0)
                 && !switching
+                && !in_cartesian
             {
                 outcome.fail(failure("invalid initial state", Some(0.0), e.to_string()), progress);
                 break;
@@ -841,7 +855,7 @@ where
                 interrupted: false,
                 csv,
                 dipole,
-                cartesian: if switching { CartesianSystem::new(plan.molecule).ok() } else { None },
+                cartesian: if switching || in_cartesian { CartesianSystem::new(plan.molecule).ok() } else { None },
                 last_q: state.q,
                 stopped: None,
             };
@@ -864,6 +878,7 @@ where
                         SolveError::InvalidInput(why) => ("invalid initial state", why, Some(0.0)),
                         e => solve_reason(&e, chart_reason),
                     }),
+                other if in_cartesian => in_cartesian_chart(other, plan, &state, &mut watch),
                 other => other
                     .integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch)
                     .map_err(|e| solve_reason(&e, hamiltonian_reason)),
@@ -949,6 +964,34 @@ where
         progress.done();
     }
     outcome
+}
+
+/// One trajectory from `state` in the Cartesian chart (`run.chart = "cartesian"`), observed by
+/// `watch` through the internal state at each output time.
+fn in_cartesian_chart<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    integrator: &mut Integrator,
+    plan: &Plan<'_, M, N, NA>,
+    state: &BodyState<N>,
+    watch: &mut Watch<'_, '_, M, N, NA>,
+) -> Result<Stats, (&'static str, String, Option<f64>)> {
+    let invalid = |why: String| ("invalid initial state", why, Some(0.0));
+    let mut system = CartesianSystem::new(plan.molecule).map_err(|e| invalid(e.to_string()))?;
+    let y0 = crate::runtime::charts::to_cartesian(plan.molecule, state)
+        .map_err(|e| invalid(format!("the state in the Cartesian chart: {e}")))?;
+    integrator
+        .integrate(&mut system, &y0, plan.t_end, plan.interval, &mut CartesianWatch(watch))
+        .map_err(|e| solve_reason(&e, |e| chart_reason(&ChartError::Cartesian(e.clone()))))
+}
+
+/// Hands the states of a Cartesian-chart run to a [`Watch`].
+pub(super) struct CartesianWatch<'w, 'a, 'm, M, const N: usize, const NA: usize>(
+    pub(super) &'w mut Watch<'a, 'm, M, N, NA>,
+);
+
+impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Observer for CartesianWatch<'_, '_, '_, M, N, NA> {
+    fn observe(&mut self, t: f64, y: &[f64]) -> ControlFlow<()> {
+        ChartObserver::observe(self.0, t, ChartState::Cartesian(y))
+    }
 }
 
 /// Writes `charts.json` (switches, time in the Cartesian chart in the scene's unit, the chart at

@@ -45,6 +45,7 @@ use crate::runtime::hamiltonian::{MIN_SIN_THETA, PIVOT_TOLERANCE};
 use crate::runtime::integrate::{Dop853Options, Method};
 use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit};
 
+pub mod chart;
 mod integrator;
 pub mod variant;
 
@@ -200,6 +201,9 @@ pub struct Scene {
     /// `run.cartesian_fallback` (default true): whether `rovib run` continues in the Cartesian
     /// chart near a linear geometry (`runtime::charts`) rather than stop at `min_metric_pivot`.
     pub cartesian_fallback: bool,
+    /// `run.chart` (default internal): the chart ensemble trajectories are integrated in, and
+    /// the key's place when given (`chart`).
+    pub chart: (chart::RunChart, Option<Range<usize>>),
     /// `[potential.parameters]`: values that replace the definition's compiled-in parameters
     /// for this run (names checked against the molecule when the run starts).
     pub parameters: Vec<Named<f64>>,
@@ -294,6 +298,7 @@ struct RawRun {
     #[serde(default)]
     euler_unwrapped: bool,
     cartesian_fallback: Option<bool>,
+    chart: Option<Spanned<String>>,
     stop_outside: Option<RawTable<Vec<f64>>>,
 }
 
@@ -545,6 +550,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         },
         euler_unwrapped: run.euler_unwrapped,
         cartesian_fallback: run.cartesian_fallback.unwrap_or(true),
+        chart: chart::parse(&src, run.chart.as_ref())?,
         parameters: match raw.potential.as_ref().and_then(|p| p.parameters.as_ref()) {
             Some(table) => named_numbers(&src, table, "potential.parameters")?,
             None => Vec::new(),

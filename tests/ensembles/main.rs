@@ -7,6 +7,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod chart_choice;
 mod co2ar_example;
 mod collision_interrupt;
 mod collisions;
