@@ -25,6 +25,7 @@ pub mod dir_lock;
 pub mod energy_guard;
 pub mod ensemble;
 pub mod error;
+pub mod external_potential;
 pub mod freq;
 pub mod memory;
 pub mod molecules;
