@@ -36,7 +36,7 @@ use core::ops::{Add, Div, Mul, Neg, Sub};
 
 use nalgebra::SMatrix;
 
-use crate::molecule::KineticMatrices;
+use crate::kinetic_matrices::KineticMatrices;
 
 /// A real number, or a vector of `LANES` independent real numbers with lane-wise operations.
 pub trait Real:
@@ -493,6 +493,8 @@ impl<T: Real, const N: usize> KineticLanes<T, N> {
 pub fn finite_mask<T: Real>(v: &[T]) -> u32 {
     v.iter().fold(T::splat(0.0), |acc, &x| acc + x * T::splat(0.0)).not_nan_mask()
 }
+
+pub mod transcendental;
 
 #[cfg(test)]
 mod tests {
