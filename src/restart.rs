@@ -24,8 +24,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::Error;
 use crate::energy_guard::Conservation;
+use crate::error::Error;
 use crate::runtime::integrate::Dop853Resume;
 
 /// The restart file's name in a run's output directory (one of [`crate::report::run_files`]).

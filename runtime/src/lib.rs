@@ -38,8 +38,8 @@ pub mod units;
 pub use frames::{
     CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, from_lab_body, to_lab, to_lab_body,
 };
+pub use hamiltonian::{FastSystem, HamiltonianError, HamiltonianSystem, PhaseState};
 /// The lane types' `sin_cos` and `exp` ([`lanes::transcendental`]).
 pub use lanes::transcendental;
-pub use hamiltonian::{FastSystem, HamiltonianError, HamiltonianSystem, PhaseState};
 pub use molecule::{Atom, Coordinate, HasKinematics, Kinematics, KineticMatrices, Molecule, MoleculeVisitor, NoDipole};
 pub use nalgebra;

@@ -35,9 +35,9 @@
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
-use crate::lanes::{KineticLanes, Real};
 pub use crate::dipole::Dipole;
 pub use crate::kinetic_matrices::KineticMatrices;
+use crate::lanes::{KineticLanes, Real};
 use crate::units::CoordinateUnit;
 
 /// One atom of a molecule.
