@@ -1,5 +1,5 @@
 //! What a problem in a definition file is ([`DefinitionError`]: a located file error) and how
-//! an error inside an expression string gets its place in the file ([`ExpressionPlace`]): what
+//! an error inside an expression string gets its place in the file (`ExpressionPlace`): what
 //! the readers of a definition's parts share.
 
 use std::ops::Range;
