@@ -258,20 +258,22 @@ fn root_reexports(lib: &str, modules: &BTreeSet<String>) -> BTreeMap<String, Str
     let mut map = BTreeMap::new();
     let mut i = 0;
     while i + 2 < toks.len() {
-        if toks[i].0 == Token::Ident("pub".into()) && toks[i + 1].0 == Token::Ident("use".into()) {
-            if let Token::Ident(module) = &toks[i + 2].0 {
-                let mut j = i + 3;
-                while j < toks.len() && toks[j].0 != Token::Punct(';') {
-                    if let Token::Ident(name) = &toks[j].0 {
-                        if modules.contains(module) && name != "self" {
-                            map.insert(name.clone(), module.clone());
-                        }
-                    }
-                    j += 1;
+        if toks[i].0 == Token::Ident("pub".into())
+            && toks[i + 1].0 == Token::Ident("use".into())
+            && let Token::Ident(module) = &toks[i + 2].0
+        {
+            let mut j = i + 3;
+            while j < toks.len() && toks[j].0 != Token::Punct(';') {
+                if let Token::Ident(name) = &toks[j].0
+                    && modules.contains(module)
+                    && name != "self"
+                {
+                    map.insert(name.clone(), module.clone());
                 }
-                i = j;
-                continue;
+                j += 1;
             }
+            i = j;
+            continue;
         }
         i += 1;
     }
