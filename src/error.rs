@@ -79,15 +79,6 @@ impl From<&str> for Error {
     }
 }
 
-impl From<crate::start::StartError> for Error {
-    fn from(e: crate::start::StartError) -> Self {
-        match e {
-            crate::start::StartError::File(e) => Error::File(e),
-            crate::start::StartError::Message(m) => Error::Message(m),
-        }
-    }
-}
-
 impl Error {
     /// A file that cannot be used as asked; `why` follows its path (": …", " has …").
     pub fn unusable(path: impl Into<PathBuf>, why: impl Into<String>) -> Self {

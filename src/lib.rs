@@ -22,12 +22,15 @@
 pub mod bench;
 pub mod cpu;
 pub mod dir_lock;
+pub mod energy_guard;
 pub mod ensemble;
 pub mod error;
+pub mod external_potential;
 pub mod freq;
 pub mod memory;
 pub mod molecules;
 pub mod output;
+pub mod output_file;
 pub mod parameters;
 #[cfg(feature = "svg")]
 pub mod plot;

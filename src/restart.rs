@@ -24,12 +24,12 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::energy_guard::Conservation;
 use crate::error::Error;
-use crate::output::Conservation;
 use crate::runtime::integrate::Dop853Resume;
 
-/// The file name in a run's output directory (one of [`crate::report::run_files`]).
-pub use crate::output::RESTART_FILE;
+/// The restart file's name in a run's output directory (one of [`crate::report::run_files`]).
+pub const RESTART_FILE: &str = "restart.json";
 
 /// The largest `restart.json` read: the scene's text (at most
 /// [`MAX_INPUT_BYTES`](crate::runtime::diagnostic::MAX_INPUT_BYTES), 16 MiB, and at most 6 bytes
@@ -162,6 +162,6 @@ impl Restart {
     pub fn write(&self, dir: &Path) -> Result<std::path::PathBuf, Error> {
         let value = serde_json::to_value(self)
             .map_err(|e| Error::unusable(dir.join(RESTART_FILE), format!(" cannot be written: {e}")))?;
-        crate::output::write_atomically(dir, RESTART_FILE, &value)
+        crate::output_file::write_atomically(dir, RESTART_FILE, &value)
     }
 }

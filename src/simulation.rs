@@ -10,7 +10,7 @@ use std::time::Instant;
 use crate::Progress;
 use crate::dir_lock::DirLock;
 use crate::error::Error;
-use crate::memory::{External, ExternalPotential};
+use crate::external_potential::{External, ExternalPotential};
 use crate::molecules;
 use crate::output::{Conservation, RunSummary, energy_guard, remove_stale_outputs, write_summary};
 use crate::parameters::{WithParameters, scene_parameters};
@@ -258,7 +258,7 @@ impl MoleculeVisitor for Run<'_> {
     /// compiled-in constants.
     fn visit<M: Molecule<N, NA> + Copy, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
         if let Some(p) = self.potential {
-            crate::memory::check_external(&m, p)?;
+            crate::external_potential::check_external(&m, p)?;
             return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: External(p) });
         }
         if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {

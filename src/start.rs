@@ -26,6 +26,15 @@ pub enum StartError {
     Message(String),
 }
 
+impl From<StartError> for crate::Error {
+    fn from(e: StartError) -> Self {
+        match e {
+            StartError::File(e) => crate::Error::File(e),
+            StartError::Message(m) => crate::Error::Message(m),
+        }
+    }
+}
+
 impl fmt::Display for StartError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::definition::DefinitionError;
+use crate::definition_error::DefinitionError;
 use crate::diagnostic::Source;
 
 /// One entry of `[arrays]` as read.

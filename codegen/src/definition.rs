@@ -53,15 +53,14 @@ use std::ops::Range;
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::diagnostic::{FileError, Source};
+use crate::diagnostic::Source;
 use crate::elements;
 use crate::expr::{ExprId, Func, Graph, Node};
-use crate::parse::{self, BINARY_FUNCTIONS, ExprError, Library, Scope};
+use crate::parse::{self, BINARY_FUNCTIONS, Library, Scope};
 use crate::units::{CoordinateUnit, DALTON_IN_ELECTRON_MASSES, DipoleUnit, EnergyUnit, LengthUnit};
 
-/// A problem in a definition file, with its place and a suggested fix (file, line, column,
-/// message, help), displayed like a rustc error.
-pub type DefinitionError = FileError;
+pub use crate::definition_error::DefinitionError;
+pub(crate) use crate::definition_error::ExpressionPlace;
 
 /// An atom after validation.
 #[derive(Clone, Debug, PartialEq)]
@@ -248,19 +247,6 @@ pub fn default_range(unit: CoordinateUnit) -> (f64, f64) {
     match unit {
         CoordinateUnit::Length(_) => (0.0, f64::INFINITY),
         CoordinateUnit::Angle(_) => (f64::NEG_INFINITY, f64::INFINITY),
-    }
-}
-
-/// Places inside expression strings.
-pub(crate) trait ExpressionPlace {
-    /// Turns an error inside the string value at `span` into an error at its place in the file.
-    fn expression_error(&self, span: Range<usize>, value: &str, e: ExprError) -> DefinitionError;
-}
-
-impl ExpressionPlace for Source<'_> {
-    fn expression_error(&self, span: Range<usize>, value: &str, e: ExprError) -> DefinitionError {
-        let offset = self.offset_in_string(span, value, e.line, e.column);
-        self.error_at_offset(offset, e.message, e.help)
     }
 }
 

@@ -24,6 +24,7 @@ pub mod adjoint;
 pub mod arrays;
 pub mod cartesian;
 pub mod definition;
+pub mod definition_error;
 pub mod diff;
 pub mod dipole;
 pub mod elements;
@@ -42,7 +43,8 @@ pub mod special;
 pub mod template;
 pub mod zmatrix;
 
-pub use definition::{Definition, DefinitionError, parse_definition};
+pub use definition::{Definition, parse_definition};
+pub use definition_error::DefinitionError;
 pub use emit::FunctionStats;
 pub use kinetic::{GradientMethod, Options};
 pub use names::type_name;

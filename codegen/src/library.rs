@@ -21,7 +21,7 @@ use std::ops::Range;
 
 use toml::Spanned;
 
-use crate::definition::{DefinitionError, ExpressionPlace};
+use crate::definition_error::{DefinitionError, ExpressionPlace};
 use crate::diagnostic::Source;
 use crate::expr::{ExprId, Graph};
 use crate::parse::{self, ExprError, Function, Library, Named, Scope};

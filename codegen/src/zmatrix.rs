@@ -37,7 +37,7 @@
 
 use std::ops::Range;
 
-use crate::definition::DefinitionError;
+use crate::definition_error::DefinitionError;
 use crate::diagnostic::Source;
 use crate::expr::{ExprId, Func, Graph};
 use crate::parse;

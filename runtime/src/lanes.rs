@@ -36,7 +36,7 @@ use core::ops::{Add, Div, Mul, Neg, Sub};
 
 use nalgebra::SMatrix;
 
-use crate::molecule::KineticMatrices;
+use crate::kinetic_matrices::KineticMatrices;
 
 /// A real number, or a vector of `LANES` independent real numbers with lane-wise operations.
 pub trait Real:
@@ -494,6 +494,8 @@ pub fn finite_mask<T: Real>(v: &[T]) -> u32 {
     v.iter().fold(T::splat(0.0), |acc, &x| acc + x * T::splat(0.0)).not_nan_mask()
 }
 
+pub mod transcendental;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -519,9 +521,9 @@ mod tests {
             same(-v, &|a, _| -a);
             same(v.sqrt(), &|a, _| a.sqrt());
             // sin_cos and exp: the polynomials of crate::transcendental (tested there against libm).
-            same(v.sin_cos().0, &|a, _| crate::transcendental::sin_cos(a).0);
-            same(v.sin_cos().1, &|a, _| crate::transcendental::sin_cos(a).1);
-            same(v.exp(), &|a, _| crate::transcendental::exp(a));
+            same(v.sin_cos().0, &|a, _| transcendental::sin_cos(a).0);
+            same(v.sin_cos().1, &|a, _| transcendental::sin_cos(a).1);
+            same(v.exp(), &|a, _| transcendental::exp(a));
             same(v.atan2(u), &|a, b| a.atan2(b));
             same(v.powf(u), &|a, b| a.powf(b));
             same(v.abs(), &|a, _| a.abs());

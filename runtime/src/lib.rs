@@ -15,12 +15,14 @@ pub mod cartesian_modes;
 pub mod cartesian_system;
 pub mod charts;
 pub mod diagnostic;
+pub mod dipole;
 pub mod ensemble;
 pub mod finite_differences;
 pub mod frames;
 pub mod grid;
 pub mod hamiltonian;
 pub mod integrate;
+pub mod kinetic_matrices;
 pub mod lanes;
 pub mod modes;
 pub mod molecule;
@@ -31,12 +33,13 @@ pub mod sample;
 pub mod special;
 pub mod spectrum;
 pub mod surface;
-pub mod transcendental;
 pub mod units;
 
 pub use frames::{
     CentreOfMass, FitOptions, FitReport, FrameError, LabState, from_lab, from_lab_body, to_lab, to_lab_body,
 };
 pub use hamiltonian::{FastSystem, HamiltonianError, HamiltonianSystem, PhaseState};
+/// The lane types' `sin_cos` and `exp` ([`lanes::transcendental`]).
+pub use lanes::transcendental;
 pub use molecule::{Atom, Coordinate, HasKinematics, Kinematics, KineticMatrices, Molecule, MoleculeVisitor, NoDipole};
 pub use nalgebra;

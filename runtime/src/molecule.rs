@@ -33,10 +33,11 @@
 //! * Every method overwrites its outputs completely; callers need not clear them.
 //! * Value and derivative entry points are separate so a caller pays only for what it uses.
 
-use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{SMatrix, SVector, Vector3};
 
+pub use crate::dipole::Dipole;
+pub use crate::kinetic_matrices::KineticMatrices;
 use crate::lanes::{KineticLanes, Real};
-use crate::surface::Dipole;
 use crate::units::CoordinateUnit;
 
 /// One atom of a molecule.
@@ -75,24 +76,6 @@ impl Coordinate {
     }
 }
 
-/// The kinetic matrices `a` (n × n), `A` (3 × n) and `I` (3 × 3) of the seed's eq. (3), or one
-/// q-derivative of all three.
-#[derive(Copy, Clone, Debug, PartialEq)]
-pub struct KineticMatrices<const N: usize> {
-    /// The vibrational kinetic matrix `a` (symmetric).
-    pub a: SMatrix<f64, N, N>,
-    /// The Coriolis matrix `A`.
-    pub coriolis: SMatrix<f64, 3, N>,
-    /// The inertia tensor `I` (symmetric).
-    pub inertia: Matrix3<f64>,
-}
-
-impl<const N: usize> Default for KineticMatrices<N> {
-    fn default() -> Self {
-        Self { a: SMatrix::zeros(), coriolis: SMatrix::zeros(), inertia: Matrix3::zeros() }
-    }
-}
-
 /// The kinematic part of a molecule with `N` internal coordinates and `NA` atoms: atoms,
 /// internal coordinates, body-frame positions and everything derived from them.
 ///
@@ -127,7 +110,7 @@ pub trait Kinematics<const N: usize, const NA: usize> {
     /// to rounding, `(N + 3)(N + 4)/2` gradient calls); the generator emits a symbolic version
     /// only on request (`ROVIB_KINETIC_JACOBIAN=generated`), since it grows like `N³`.
     fn kinetic_jacobian(&self, q: &SVector<f64, N>, dk: &mut [KineticMatrices<N>; N]) {
-        crate::polarization::kinetic_jacobian(self, q, dk);
+        crate::polarization::kinetic_jacobian(|omega, qdot, out| self.kinetic_energy_gradient(q, omega, qdot, out), dk);
     }
 
     /// The gradient in q of the kinetic energy `T = ½ Σ m_i |ω × R_i + Σ_j ∂R_i/∂q_j q̇_j|²`

@@ -1,9 +1,9 @@
 //! The q-derivatives of the kinetic matrices from the kinetic-energy gradient, by polarization:
-//! the default [`Kinematics::kinetic_jacobian`] that the G-matrix reference path uses when the
+//! the default [`Kinematics::kinetic_jacobian`](crate::molecule::Kinematics::kinetic_jacobian) that the G-matrix reference path uses when the
 //! generator did not emit the symbolic one (it does not by default; see `rovib-codegen`'s
 //! `Options`).
 //!
-//! With `v = (ω, q̇)` and `M = [[I, A], [Aᵀ, a]]`, [`Kinematics::kinetic_energy_gradient`] returns
+//! With `v = (ω, q̇)` and `M = [[I, A], [Aᵀ, a]]`, the kinetic-energy gradient returns
 //! `g_l(v) = ½ vᵀ (∂M/∂q_l) v` for every `l` at once. A symmetric matrix is determined by its
 //! quadratic form (polarization identity): with unit vectors `e_a`,
 //!
@@ -22,16 +22,17 @@
 
 use nalgebra::{SVector, Vector3};
 
-use crate::molecule::{Kinematics, KineticMatrices};
+use crate::kinetic_matrices::KineticMatrices;
 
-/// `dk[l]` = `∂a/∂q_l`, `∂A/∂q_l`, `∂I/∂q_l` from `molecule`'s kinetic-energy gradient.
-pub fn kinetic_jacobian<M, const N: usize, const NA: usize>(
-    molecule: &M,
-    q: &SVector<f64, N>,
+/// `dk[l]` = `∂a/∂q_l`, `∂A/∂q_l`, `∂I/∂q_l` from a molecule's kinetic-energy gradient at one
+/// geometry: `kinetic_energy_gradient(omega, qdot, out)` is
+/// [`Kinematics::kinetic_energy_gradient`] at that q.
+///
+/// [`Kinematics::kinetic_energy_gradient`]: crate::molecule::Kinematics::kinetic_energy_gradient
+pub fn kinetic_jacobian<const N: usize>(
+    kinetic_energy_gradient: impl Fn(&Vector3<f64>, &SVector<f64, N>, &mut SVector<f64, N>) -> f64,
     dk: &mut [KineticMatrices<N>; N],
-) where
-    M: Kinematics<N, NA> + ?Sized,
-{
+) {
     // g(v) into `out`, for v = e_a (+ e_b).
     let gradient = |a: usize, b: Option<usize>, out: &mut SVector<f64, N>| {
         let mut omega = Vector3::zeros();
@@ -43,7 +44,7 @@ pub fn kinetic_jacobian<M, const N: usize, const NA: usize>(
                 qdot[x - 3] = 1.0;
             }
         }
-        molecule.kinetic_energy_gradient(q, &omega, &qdot, out);
+        kinetic_energy_gradient(&omega, &qdot, out);
     };
     // Stores (∂_l M)_ab = (∂_l M)_ba = value[l] for every l.
     let store = |dk: &mut [KineticMatrices<N>; N], a: usize, b: usize, value: &SVector<f64, N>| {

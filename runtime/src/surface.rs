@@ -22,6 +22,8 @@ use nalgebra::{SMatrix, SVector, Vector3};
 use crate::lanes::Real;
 use crate::molecule::{Coordinate, HasKinematics, Molecule};
 
+pub use crate::dipole::Dipole;
+
 /// A potential energy surface over `N` internal coordinates (atomic units: q in bohr or
 /// radians, U in hartree), in the coordinate order of the molecule it is composed with.
 pub trait Potential<const N: usize> {
@@ -55,24 +57,6 @@ pub trait Potential<const N: usize> {
     /// replaces the molecule's in [`WithPotential`].
     fn dipole_part(&self) -> Option<&dyn Dipole<N>> {
         None
-    }
-}
-
-/// A body-frame dipole surface over `N` internal coordinates (e·bohr).
-pub trait Dipole<const N: usize> {
-    /// μ(q) into `mu` (overwritten).
-    fn moment(&self, q: &SVector<f64, N>, mu: &mut Vector3<f64>);
-
-    /// `∂μ/∂q` into `dmu` (overwritten): column `k` is `∂μ/∂q_k`.
-    fn moment_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>);
-}
-
-impl<D: Dipole<N> + ?Sized, const N: usize> Dipole<N> for &D {
-    fn moment(&self, q: &SVector<f64, N>, mu: &mut Vector3<f64>) {
-        (**self).moment(q, mu)
-    }
-    fn moment_jacobian(&self, q: &SVector<f64, N>, dmu: &mut SMatrix<f64, 3, N>) {
-        (**self).moment_jacobian(q, dmu)
     }
 }
 

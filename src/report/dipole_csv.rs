@@ -4,7 +4,7 @@ use std::path::Path;
 
 use super::{Frame, Needs, Open, Output, Reporter};
 use crate::error::Error;
-use crate::output::OutputFile;
+use crate::output_file::OutputFile;
 use crate::runtime::nalgebra::Vector3;
 
 /// `dipole.csv`: the lab-frame dipole moment μ_lab = S μ(q), one row per output time.

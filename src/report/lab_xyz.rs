@@ -4,7 +4,7 @@ use std::path::Path;
 
 use super::{Frame, Needs, Open, Output, Reporter};
 use crate::error::Error;
-use crate::output::OutputFile;
+use crate::output_file::OutputFile;
 use crate::runtime::units::{AU_TIME_IN_FS, BOHR_IN_ANGSTROM, HARTREE_IN_EV};
 
 /// One ASE time unit in femtoseconds, the unit of the `momenta` column ASE reads: `1e15 / (1e10 ·

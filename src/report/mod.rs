@@ -147,7 +147,7 @@ pub struct Output {
 pub const OUTPUTS: &[Output] = &[trajectory_csv::OUTPUT, lab_xyz::OUTPUT, dipole_csv::OUTPUT];
 
 /// The outputs a run writes at its end (not reporters): `summary.json` and `restart.json`.
-pub const END_OUTPUTS: [(&str, &str); 2] = [("summary", "summary.json"), ("restart", crate::output::RESTART_FILE)];
+pub const END_OUTPUTS: [(&str, &str); 2] = [("summary", "summary.json"), ("restart", crate::restart::RESTART_FILE)];
 
 /// Every name `run.outputs` accepts.
 pub fn output_names() -> impl Iterator<Item = &'static str> + Clone {

@@ -6,7 +6,7 @@ use serde_json::{Value, json};
 
 use super::{Frame, Needs, Open, Output, Reporter};
 use crate::error::Error;
-use crate::output::{OutputFile, write_atomically};
+use crate::output_file::{OutputFile, write_atomically};
 use crate::restart::Restart;
 use crate::runtime::Coordinate;
 

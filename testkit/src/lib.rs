@@ -62,3 +62,5 @@ mod tests {
         assert!((d - 0.3f64.cos()).abs() < 1e-12, "{d}");
     }
 }
+
+pub mod module_graph;
