@@ -31,8 +31,8 @@ pub const MAX_BINS: usize = 1_000_000;
 pub const MAX_OUTPUT_TIMES: usize = 1_000_000;
 
 /// The sampling methods, as spelt in scenes (one [`method::VARIANTS`] entry each).
-pub const METHODS: [&str; 5] = {
-    let mut names = [""; 5];
+pub const METHODS: [&str; method::VARIANTS.len()] = {
+    let mut names = [""; method::VARIANTS.len()];
     let mut i = 0;
     while i < names.len() {
         names[i] = method::VARIANTS[i].name;

@@ -37,7 +37,7 @@ pub(super) struct Variant {
 }
 
 /// The methods, in the order in which messages list them.
-pub(super) const VARIANTS: [Variant; 5] = [
+pub(super) const VARIANTS: &[Variant] = &[
     Variant { name: "thermal", keys: &["temperature", "energy_unit", "region"], read: thermal },
     Variant {
         name: "microcanonical",
