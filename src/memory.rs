@@ -11,9 +11,6 @@
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
-use serde::Deserialize;
-use toml::Spanned;
-
 use crate::Progress;
 use crate::error::Error;
 use crate::report::{Frame, Needs, Reporter};
@@ -64,17 +61,6 @@ impl Reporter for Tap<'_> {
     }
 }
 
-/// The scene keys a run in memory reads again for their places.
-#[derive(Deserialize)]
-struct RawScene {
-    run: Option<RawRun>,
-}
-
-#[derive(Deserialize)]
-struct RawRun {
-    outputs: Option<Vec<Spanned<String>>>,
-}
-
 /// Runs the scene `text` (named `path` in messages, and relative paths in it resolve from
 /// `path`'s folder) to its end in memory: every output record goes to `sink`, and with
 /// `potential` the molecule runs on it instead of its own (its gradient checked first). `stop`
@@ -89,7 +75,7 @@ pub fn run_in_memory(
 ) -> Result<RunReport, Error> {
     let mut scene = parse_scene(path, text)?;
     let src = scene.source();
-    let outputs = toml::from_str::<RawScene>(text).ok().and_then(|r| r.run?.outputs).unwrap_or_default();
+    let outputs = scene.tables.outputs.clone();
     if let Some(restart) = outputs.iter().find(|o| o.get_ref() == "restart") {
         return Err(src
             .error(

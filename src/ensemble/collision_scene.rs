@@ -7,7 +7,6 @@
 
 use std::ops::Range;
 
-use serde::Deserialize;
 use toml::Spanned;
 
 use crate::runtime::Molecule;
@@ -45,52 +44,6 @@ pub struct CollisionScene {
     pub span: Range<usize>,
 }
 
-#[derive(Deserialize)]
-struct RawFile {
-    collision: Option<Spanned<RawCollision>>,
-    statistics: Option<Spanned<toml::Value>>,
-    spectrum: Option<Spanned<toml::Value>>,
-    pairs: Option<Spanned<toml::Value>>,
-    run: Option<RawRun>,
-}
-
-#[derive(Deserialize)]
-struct RawRun {
-    stop_outside: Option<Spanned<toml::Value>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawCollision {
-    fragment: Option<Spanned<Vec<Spanned<RawFragment>>>>,
-    b_max: Option<Spanned<f64>>,
-    strata: Option<Spanned<Vec<Spanned<RawStratum>>>>,
-    energy: Option<Spanned<f64>>,
-    energy_unit: Option<Spanned<String>>,
-    temperature: Option<Spanned<f64>>,
-    r0: Spanned<f64>,
-    r_stop: Spanned<f64>,
-    lifetime_radius: Option<Spanned<f64>>,
-    bins: Option<Spanned<i64>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawFragment {
-    atoms: Spanned<Vec<Spanned<String>>>,
-    rotation_temperature: Option<Spanned<f64>>,
-    j: Option<Spanned<i64>>,
-    vibration_temperature: Option<Spanned<f64>>,
-    v: Option<Spanned<i64>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawStratum {
-    b: Spanned<Vec<f64>>,
-    weight: Spanned<f64>,
-}
-
 /// The most histogram bins of final states.
 pub const MAX_BINS: i64 = 100_000;
 
@@ -98,7 +51,7 @@ pub const MAX_BINS: i64 = 100_000;
 /// the tables and keys a collision ensemble does not use.
 pub fn parse_collision(scene: &Scene, method: Range<usize>) -> Result<CollisionScene, FileError> {
     let src = scene.source();
-    let raw: RawFile = toml::from_str(&scene.text).map_err(|e| crate::scene::toml_error(&src, &e, HELP))?;
+    let raw = scene.tables.collision.clone().map_err(|e| crate::scene::toml_error(&src, &e, HELP))?;
     if let Some(s) = &raw.statistics {
         return Err(src.error(
             s.span(),

@@ -51,7 +51,7 @@ use super::quantity::Quantity;
 use super::runner::Plan;
 use crate::output::OutputFile;
 use crate::runtime::Molecule;
-use crate::runtime::diagnostic::{FileError, Source};
+use crate::runtime::diagnostic::FileError;
 use crate::runtime::ensemble::Moments;
 use crate::runtime::hamiltonian::BodyState;
 use crate::runtime::hamiltonian::MetricFactor;
@@ -60,6 +60,7 @@ use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use crate::runtime::sample::{BOLTZMANN, SampleError, Sampler, Spec};
 use crate::runtime::spectrum::Spectrum;
 use crate::runtime::surface::Dipole;
+use crate::scene::Scene;
 
 /// Points of the scan of `U_eff` from a state's distance to `R_far`.
 pub const SCAN_POINTS: usize = 256;
@@ -104,21 +105,6 @@ pub struct Relative {
 // ---------------------------------------------------------------------------------------------
 // The scene table.
 
-#[derive(Deserialize)]
-struct RawFile {
-    pairs: Option<Spanned<RawPairs>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawPairs {
-    monomers: Spanned<Vec<Vec<Spanned<String>>>>,
-    distance: Spanned<String>,
-    far: Option<Spanned<f64>>,
-    max_energy: Option<Spanned<f64>>,
-    monomer_integral: Option<Spanned<f64>>,
-}
-
 /// The `[pairs]` table as written (names unbound), with places.
 #[derive(Clone, Debug)]
 pub struct PairScene {
@@ -133,9 +119,10 @@ const HELP: &str = "[pairs] takes monomers (two lists of atom labels), distance 
                     far (scene length unit), max_energy (hartree) and monomer_integral (bohr^(3 atoms - 6)); see \
                     docs/src/reference/ensemble.md";
 
-/// Parses `[pairs]` of the scene text (None: no table).
-pub fn parse_pairs(src: &Source<'_>) -> Result<Option<PairScene>, FileError> {
-    let raw: RawFile = toml::from_str(src.text).map_err(|e| crate::scene::toml_error(src, &e, HELP))?;
+/// Parses `[pairs]` of the scene (None: no table).
+pub fn parse_pairs(scene: &Scene) -> Result<Option<PairScene>, FileError> {
+    let src = &scene.source();
+    let raw = scene.tables.pairs.clone().map_err(|e| crate::scene::toml_error(src, &e, HELP))?;
     let Some(table) = raw.pairs else { return Ok(None) };
     let t = table.into_inner();
     let positive = |v: &Option<Spanned<f64>>, key: &str, help: &str| -> Result<(), FileError> {
@@ -202,7 +189,7 @@ impl PairScene {
     pub fn bind<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         &self,
         m: &M,
-        scene: &crate::scene::Scene,
+        scene: &Scene,
         spec: &Spec<N>,
     ) -> Result<PairStates, FileError> {
         let src = scene.source();

@@ -5,19 +5,20 @@
 //! `crate::scene` parses the rest of the scene and only lets these two tables through.
 
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use serde::Deserialize;
 use toml::Spanned;
 
 use super::quantity::Quantity;
 use super::states_file::read_states;
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::{FileError, Source};
-use crate::runtime::nalgebra::Vector3;
 use crate::runtime::sample::{ModeEnergies, Region, RotationSampling, Spec};
 use crate::runtime::units::EnergyUnit;
 use crate::scene::Scene;
+
+mod method;
+use crate::scene::raw::EnsembleRunKeys;
 
 /// The seed of an ensemble whose scene gives none.
 pub const DEFAULT_SEED: u64 = 0;
@@ -29,8 +30,16 @@ pub const MAX_BINS: usize = 1_000_000;
 /// every output time: 10⁶ times × a few quantities is tens of MB per thread).
 pub const MAX_OUTPUT_TIMES: usize = 1_000_000;
 
-/// The sampling methods, as spelt in scenes.
-pub const METHODS: [&str; 5] = ["thermal", "microcanonical", "normal-modes", "file", "collision"];
+/// The sampling methods, as spelt in scenes (one [`method::VARIANTS`] entry each).
+pub const METHODS: [&str; method::VARIANTS.len()] = {
+    let mut names = [""; method::VARIANTS.len()];
+    let mut i = 0;
+    while i < names.len() {
+        names[i] = method::VARIANTS[i].name;
+        i += 1;
+    }
+    names
+};
 
 /// A parsed `[ensemble]` (with `[statistics]`), in atomic units, names not yet bound.
 #[derive(Clone, Debug)]
@@ -148,76 +157,12 @@ pub struct Bound<const N: usize> {
     pub correlations: Vec<usize>,
 }
 
-#[derive(Deserialize)]
-struct RawFile {
-    ensemble: Option<Spanned<RawEnsemble>>,
-    statistics: Option<Spanned<RawStatistics>>,
-    initial: Option<Spanned<toml::Value>>,
-    run: Option<RawRunKeys>,
-}
-
-/// The keys of `[run]` that a single run honours and an ensemble refuses (the others are parsed
-/// by `crate::scene`).
-#[derive(Deserialize)]
-struct RawRunKeys {
-    outputs: Option<Spanned<toml::Value>>,
-    euler_unwrapped: Option<Spanned<toml::Value>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawEnsemble {
-    trajectories: Spanned<i64>,
-    seed: Option<Spanned<i64>>,
-    method: Spanned<String>,
-    temperature: Option<Spanned<f64>>,
-    energy: Option<Spanned<f64>>,
-    energy_unit: Option<Spanned<String>>,
-    angular_momentum: Option<Spanned<f64>>,
-    region: Option<Spanned<RawRegion>>,
-    quanta: Option<Spanned<Vec<i64>>>,
-    mode_energies: Option<Spanned<Vec<f64>>>,
-    j: Option<Spanned<Vec<f64>>>,
-    file: Option<Spanned<String>>,
-    threads: Option<Spanned<i64>>,
-    keep_trajectories: Option<Spanned<i64>>,
-    max_memory_gb: Option<Spanned<f64>>,
-    max_disk_gb: Option<Spanned<f64>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawRegion {
-    energy_cap: Option<Spanned<f64>>,
-    #[serde(default)]
-    limits: std::collections::BTreeMap<Spanned<String>, Spanned<Vec<f64>>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawStatistics {
-    means: Option<Vec<Spanned<String>>>,
-    #[serde(default)]
-    histograms: Vec<Spanned<RawHistogram>>,
-    #[serde(default)]
-    correlations: Vec<Spanned<String>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawHistogram {
-    quantity: Spanned<String>,
-    bins: Spanned<i64>,
-    range: Spanned<Vec<f64>>,
-    times: Option<Spanned<Vec<f64>>>,
-}
-
 pub use crate::scene::did_you_mean;
 
 /// Parses the `[ensemble]` and `[statistics]` tables of `scene` (which must have `[ensemble]`).
 pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
     let src = scene.source();
-    let raw: RawFile = toml::from_str(&scene.text).map_err(|e| {
+    let raw = scene.tables.ensemble.clone().map_err(|e| {
         let help = "docs/src/reference/ensemble.md (the guide's ensemble reference) lists every key of [ensemble] and [statistics]";
         crate::scene::toml_error(&src, &e, help)
     })?;
@@ -299,208 +244,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
             "raise run.output_interval (the statistics' time grid) or shorten run.end",
         ));
     }
-    let method_name = e.method.get_ref().as_str();
-    if !METHODS.contains(&method_name) {
-        let help = match did_you_mean(method_name, METHODS) {
-            Some(m) => format!("did you mean \"{m}\"? the methods are {}", quoted(&METHODS)),
-            None => format!("the methods are {}", quoted(&METHODS)),
-        };
-        return Err(src.error(e.method.span(), format!("unknown ensemble method `{method_name}`"), help));
-    }
-    // Which keys each method takes; any other parameter given is an error that says so.
-    let allowed: &[&str] = match method_name {
-        "thermal" => &["temperature", "energy_unit", "region"],
-        "microcanonical" => &["energy", "energy_unit", "angular_momentum", "region"],
-        "normal-modes" => &["energy", "energy_unit", "quanta", "mode_energies", "temperature", "j"],
-        "collision" => &[],
-        _ => &["file"],
-    };
-    let given: [(&str, Option<Range<usize>>); 9] = [
-        ("temperature", e.temperature.as_ref().map(|x| x.span())),
-        ("energy", e.energy.as_ref().map(|x| x.span())),
-        ("energy_unit", e.energy_unit.as_ref().map(|x| x.span())),
-        ("angular_momentum", e.angular_momentum.as_ref().map(|x| x.span())),
-        ("region", e.region.as_ref().map(|x| x.span())),
-        ("quanta", e.quanta.as_ref().map(|x| x.span())),
-        ("mode_energies", e.mode_energies.as_ref().map(|x| x.span())),
-        ("j", e.j.as_ref().map(|x| x.span())),
-        ("file", e.file.as_ref().map(|x| x.span())),
-    ];
-    for (key, at) in &given {
-        if let Some(at) = at
-            && !allowed.contains(key)
-        {
-            return Err(src.error(
-                at.clone(),
-                format!("`{key}` does not apply to the {method_name} method"),
-                format!(
-                    "the {method_name} method takes {}; remove `{key}` or choose another method",
-                    allowed.join(", ")
-                ),
-            ));
-        }
-    }
-    let needs = |what: &str, unit: &str| {
-        src.error(
-            e.method.span(),
-            format!("the {method_name} method needs `{what}`"),
-            format!("add {what} = ... ({unit}) to [ensemble]"),
-        )
-    };
-    let temperature = |t: &Spanned<f64>| -> Result<f64, FileError> {
-        let v = *t.get_ref();
-        if v.is_finite() && v > 0.0 {
-            Ok(v)
-        } else {
-            Err(src.error(
-                t.span(),
-                format!("`ensemble.temperature` must be a positive finite number of kelvin, got {v}"),
-                "write a temperature above 0 K, e.g. temperature = 300",
-            ))
-        }
-    };
-    let region = |r: &Option<Spanned<RawRegion>>| -> Result<RegionSpec, FileError> {
-        let Some(r) = r else { return Ok(RegionSpec::default()) };
-        let r = r.get_ref();
-        let energy_cap = match &r.energy_cap {
-            Some(c) if !(c.get_ref().is_finite() && *c.get_ref() > 0.0) => {
-                return Err(src.error(
-                    c.span(),
-                    format!("`region.energy_cap` must be a positive finite energy, got {}", c.get_ref()),
-                    "give the largest U(q) − U(reference) to sample, in ensemble.energy_unit",
-                ));
-            }
-            Some(c) => Some((c.get_ref() * eh, c.span())),
-            None => None,
-        };
-        let mut limits = Vec::new();
-        for (name, v) in &r.limits {
-            let x = v.get_ref();
-            if x.len() != 2 || !x.iter().all(|x| x.is_finite()) || x[0] >= x[1] {
-                return Err(src.error(
-                    v.span(),
-                    format!(
-                        "the limits of `{}` must be two finite numbers [low, high] with low < high",
-                        name.get_ref()
-                    ),
-                    format!("write {} = [low, high] in the scene's length or angle unit", name.get_ref()),
-                ));
-            }
-            limits.push((name.clone(), [x[0], x[1]]));
-        }
-        Ok(RegionSpec { energy_cap, limits })
-    };
-    let finite_energy = |x: &Spanned<f64>, what: &str| -> Result<f64, FileError> {
-        if x.get_ref().is_finite() {
-            Ok(x.get_ref() * eh)
-        } else {
-            Err(src.error(x.span(), format!("`ensemble.{what}` is not a finite number"), "write a finite energy"))
-        }
-    };
-
-    let method = match method_name {
-        "thermal" => {
-            let t = e.temperature.as_ref().ok_or_else(|| needs("temperature", "kelvin"))?;
-            MethodSpec::Thermal { temperature: temperature(t)?, region: region(&e.region)? }
-        }
-        "microcanonical" => {
-            let energy =
-                e.energy.as_ref().ok_or_else(|| needs("energy", "in ensemble.energy_unit, default hartree"))?;
-            let angular_momentum = match &e.angular_momentum {
-                Some(j) if !(j.get_ref().is_finite() && *j.get_ref() >= 0.0) => {
-                    return Err(src.error(
-                        j.span(),
-                        format!("`ensemble.angular_momentum` must be a non-negative |J| in hbar, got {}", j.get_ref()),
-                        "write |J| in units of hbar, or remove it to sample J too",
-                    ));
-                }
-                Some(j) => Some(*j.get_ref()),
-                None => None,
-            };
-            MethodSpec::Microcanonical {
-                energy: (finite_energy(energy, "energy")?, energy.span()),
-                angular_momentum,
-                region: region(&e.region)?,
-            }
-        }
-        "normal-modes" => {
-            let energies = match (&e.quanta, &e.mode_energies, &e.energy) {
-                (Some(q), None, None) => {
-                    if let Some(bad) = q.get_ref().iter().find(|v| **v < 0 || **v > i64::from(u32::MAX)) {
-                        return Err(src.error(
-                            q.span(),
-                            format!("quantum number {bad} is not a non-negative integer"),
-                            "write one vibrational quantum number v ≥ 0 per mode",
-                        ));
-                    }
-                    ModeEnergies::Quantum(q.get_ref().iter().map(|&v| v as u32).collect())
-                }
-                (None, Some(m), None) => {
-                    if m.get_ref().iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-                        return Err(src.error(
-                            m.span(),
-                            "mode energies must be non-negative finite numbers",
-                            "write one energy per mode in ensemble.energy_unit",
-                        ));
-                    }
-                    ModeEnergies::Fixed(m.get_ref().iter().map(|v| v * eh).collect())
-                }
-                (None, None, Some(total)) => ModeEnergies::Random { total: finite_energy(total, "energy")? },
-                (None, None, None) => {
-                    return Err(src.error(
-                        e.method.span(),
-                        "the normal-modes method needs the mode energies",
-                        "add quanta = [v1, v2, ...] (quasiclassical), mode_energies = [...] or energy = ... (random over the modes)",
-                    ));
-                }
-                _ => {
-                    return Err(src.error(
-                        e.method.span(),
-                        "more than one of quanta, mode_energies and energy is given",
-                        "give exactly one of quanta, mode_energies and energy",
-                    ));
-                }
-            };
-            let rotation = match (&e.temperature, &e.j) {
-                (Some(t), None) => RotationSampling::Thermal { temperature: temperature(t)? },
-                (None, Some(j)) => {
-                    let v = j.get_ref();
-                    if v.len() != 3 || !v.iter().all(|x| x.is_finite()) {
-                        return Err(src.error(
-                            j.span(),
-                            "`ensemble.j` must be three finite numbers",
-                            "write j = [Jx, Jy, Jz] in hbar",
-                        ));
-                    }
-                    RotationSampling::Fixed(Vector3::new(v[0], v[1], v[2]))
-                }
-                (None, None) => RotationSampling::Fixed(Vector3::zeros()),
-                (Some(_), Some(j)) => {
-                    return Err(src.error(
-                        j.span(),
-                        "both a rotational temperature and a fixed j are given",
-                        "give temperature (thermal rotation) or j (fixed body-frame J), not both",
-                    ));
-                }
-            };
-            MethodSpec::NormalModes { energies, rotation }
-        }
-        "collision" => {
-            if let Some(k) = &e.keep_trajectories {
-                return Err(src.error(
-                    k.span(),
-                    "`keep_trajectories` does not apply to a collision ensemble (it writes final_states.csv)",
-                    "remove keep_trajectories; run one collision with `rovib run` and [initial] positions to see its path",
-                ));
-            }
-            MethodSpec::Collision(Box::new(super::collision_scene::parse_collision(scene, e.method.span())?))
-        }
-        _ => {
-            let file = e.file.as_ref().ok_or_else(|| needs("file", "a path relative to the scene"))?;
-            let base = Path::new(&scene.path).parent().unwrap_or(Path::new(""));
-            MethodSpec::File { path: base.join(file.get_ref()), span: file.span() }
-        }
-    };
+    let method = method::read(&method::Context { scene, src: &src, e: &e, eh })?;
 
     let statistics = match raw.statistics {
         None => StatisticsSpec { means: None, histograms: Vec::new(), correlations: Vec::new() },
@@ -584,8 +328,8 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         statistics,
         max_memory_gb,
         max_disk_gb,
-        spectrum: super::spectrum_scene::parse_spectrum(&src)?,
-        pairs: super::pair_states::parse_pairs(&src)?,
+        spectrum: super::spectrum_scene::parse_spectrum(scene)?,
+        pairs: super::pair_states::parse_pairs(scene)?,
         method_span: e.method.span(),
         trajectories_span: e.trajectories.span(),
     })
@@ -596,7 +340,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
 fn refuse_single_run_keys(
     src: &Source<'_>,
     initial: &Option<Spanned<toml::Value>>,
-    run: Option<&RawRunKeys>,
+    run: Option<&EnsembleRunKeys>,
 ) -> Result<(), FileError> {
     if let Some(i) = initial {
         return Err(src.error(

@@ -6,11 +6,9 @@
 
 use std::ops::Range;
 
-use serde::Deserialize;
-use toml::Spanned;
-
 use super::quantity::Quantity;
 use crate::runtime::diagnostic::{FileError, Source};
+use crate::scene::Scene;
 
 /// The highest wavenumber written by default, cm⁻¹ (also limited by the output interval's
 /// Nyquist limit).
@@ -76,22 +74,10 @@ pub struct SpectrumScene {
     pub span: Option<Range<usize>>,
 }
 
-#[derive(Deserialize)]
-struct RawFile {
-    spectrum: Option<Spanned<RawSpectrum>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawSpectrum {
-    estimator: Option<Spanned<String>>,
-    max_wavenumber: Option<Spanned<f64>>,
-    pair_volume: Option<Spanned<f64>>,
-}
-
-/// Parses `[spectrum]` of the scene text.
-pub fn parse_spectrum(src: &Source<'_>) -> Result<SpectrumScene, FileError> {
-    let raw: RawFile = toml::from_str(src.text).map_err(|e| {
+/// Parses `[spectrum]` of the scene.
+pub fn parse_spectrum(scene: &Scene) -> Result<SpectrumScene, FileError> {
+    let src = &scene.source();
+    let raw = scene.tables.spectrum.clone().map_err(|e| {
         let help = "[spectrum] takes estimator (\"stationary\" or \"pair\"), max_wavenumber (cm-1) and pair_volume \
                     (bohr^3); see the README's \"Ensembles\"";
         crate::scene::toml_error(src, &e, help)

@@ -34,10 +34,8 @@
 //! rest (coordinate and atom names) is checked when the scene is bound to its molecule, with
 //! errors that still point into the file.
 
-use std::collections::BTreeMap;
 use std::ops::Range;
 
-use serde::Deserialize;
 use toml::Spanned;
 
 use crate::runtime::diagnostic::{Compact, FileError, Source};
@@ -47,10 +45,11 @@ use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit
 
 pub mod chart;
 mod integrator;
+pub(crate) mod raw;
 pub mod variant;
 
 use integrator::integrator;
-use variant::RawVariantTable;
+use raw::{RawInitial, RawTable};
 
 /// A unit of time accepted in scenes.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -221,6 +220,8 @@ pub struct Scene {
     /// named coordinate is outside `[low, high]` (the scene's units, as q; checked against the
     /// molecule when the run starts).
     pub stop_outside: Vec<Named<[f64; 2]>>,
+    /// The tables the readers after the single run's take, from the one parse of `text`.
+    pub(crate) tables: raw::Tables,
 }
 
 impl Scene {
@@ -228,78 +229,6 @@ impl Scene {
     pub fn source(&self) -> Source<'_> {
         Source { path: &self.path, text: &self.text }
     }
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawScene {
-    molecule: Spanned<String>,
-    #[serde(default)]
-    description: Option<String>,
-    #[serde(default)]
-    units: RawUnits,
-    initial: Option<Spanned<RawInitial>>,
-    // Parsed with their places by `crate::ensemble::scene`.
-    ensemble: Option<toml::Value>,
-    statistics: Option<toml::Value>,
-    spectrum: Option<toml::Value>,
-    collision: Option<toml::Value>,
-    pairs: Option<toml::Value>,
-    #[serde(default)]
-    integrator: Option<RawVariantTable>,
-    run: Spanned<RawRun>,
-    potential: Option<RawScenePotential>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawScenePotential {
-    parameters: Option<RawTable<f64>>,
-    library: Option<Spanned<String>>,
-    grid: Option<Spanned<String>>,
-    outside: Option<Spanned<String>>,
-    gradient: Option<Spanned<String>>,
-}
-
-#[derive(Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-struct RawUnits {
-    length: Option<Spanned<String>>,
-    angle: Option<Spanned<String>>,
-    time: Option<Spanned<String>>,
-}
-
-type RawTable<T> = Spanned<BTreeMap<Spanned<String>, Spanned<T>>>;
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawInitial {
-    q: Option<RawTable<f64>>,
-    p: Option<RawTable<f64>>,
-    qdot: Option<RawTable<f64>>,
-    euler: Option<Spanned<Vec<f64>>>,
-    pe: Option<Spanned<Vec<f64>>>,
-    j: Option<Spanned<Vec<f64>>>,
-    positions: Option<RawTable<Vec<f64>>>,
-    velocities: Option<RawTable<Vec<f64>>>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawRun {
-    end: Spanned<f64>,
-    output_interval: Option<Spanned<f64>>,
-    outputs: Option<Spanned<Vec<Spanned<String>>>>,
-    #[serde(default)]
-    frozen: Vec<Spanned<String>>,
-    min_metric_pivot: Option<Spanned<f64>>,
-    max_energy_error: Option<Spanned<f64>>,
-    max_outputs: Option<Spanned<u64>>,
-    #[serde(default)]
-    euler_unwrapped: bool,
-    cartesian_fallback: Option<bool>,
-    chart: Option<Spanned<String>>,
-    stop_outside: Option<RawTable<Vec<f64>>>,
 }
 
 /// The largest number of output times a scene may ask for unless `run.max_outputs` raises it:
@@ -334,7 +263,7 @@ pub(crate) fn toml_error(src: &Source<'_>, e: &toml::de::Error, help: &str) -> F
 /// Parses and validates a scene file. `path` names it in messages.
 pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     let src = Source { path, text };
-    let raw: RawScene = toml::from_str(text).map_err(|e| {
+    let (raw, tables) = raw::parse(text).map_err(|e| {
         let message = toml_message(&e);
         let help = if message.starts_with("unknown field") || message.starts_with("missing field") {
             "docs/src/reference/scene.md (the guide's scene reference) lists every key"
@@ -504,6 +433,7 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
     Ok(Scene {
         path: path.to_owned(),
         text: text.to_owned(),
+        tables,
         molecule: raw.molecule,
         description: raw.description.unwrap_or_default(),
         initial,

@@ -17,7 +17,7 @@ use super::toml_message;
 use crate::runtime::diagnostic::{FileError, Source};
 
 /// A table as written: every key and value with its place.
-pub type RawVariantTable = super::RawTable<toml::Value>;
+pub type RawVariantTable = super::raw::RawTable<toml::Value>;
 
 /// The help of a message about a value of the wrong type (as for any other TOML error).
 const TYPE_HELP: &str = "see the TOML syntax at https://toml.io and the shipped scenes/ for examples";

@@ -364,3 +364,50 @@ fn threads_are_capped_by_the_work_and_the_cores() {
     assert!(summary.contains("100000 threads were asked for, 1 run"), "{summary}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `[ensemble]` written with its nested tables as sub-tables, every error at the line and
+/// column of what it is about, however deep: the method's keys are read with their places
+/// inside `region` and `region.limits` too.
+#[test]
+fn errors_inside_the_nested_tables_of_a_method_are_at_their_place() {
+    let nested = |limits: &str| {
+        format!(
+            "[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\n\n\
+             [ensemble.region]\nenergy_cap = 0.1\n\n[ensemble.region.limits]\nr1 = [1.0, 2.0]\n{limits}\n"
+        )
+    };
+    let at = |e: &FileError, line: usize, column: usize| {
+        assert_eq!((e.line, e.column), (line, column), "{e}");
+    };
+    // A limit in the wrong order: at its value (line 12 of the file, after `alpha = `).
+    let e = error(&nested("alpha = [2.0, 1.0]"));
+    check(
+        &e,
+        12,
+        "the limits of `alpha` must be two finite numbers [low, high] with low < high",
+        "alpha = [low, high]",
+    );
+    at(&e, 12, 9);
+    // A value of the wrong type inside a limit: at the element.
+    let e = error(&nested("alpha = [1.0, \"x\"]"));
+    check(&e, 12, "invalid type: string \"x\", expected f64", "ensemble reference");
+    at(&e, 12, 15);
+    // A key `region` does not take: at the key.
+    let e = error(
+        "[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\n\
+         [ensemble.region]\nenergy_cap = 0.1\n  limit = { r1 = [1.0, 2.0] }",
+    );
+    check(&e, 8, "unknown field `limit`, expected `energy_cap` or `limits`", "ensemble reference");
+    at(&e, 8, 3);
+    // A cap that is not positive, inside an inline table: at the value.
+    let e =
+        error("[ensemble]\ntrajectories = 10\nmethod = \"thermal\"\ntemperature = 300\nregion = { energy_cap = -1 }");
+    check(&e, 6, "`region.energy_cap` must be a positive finite energy, got -1", "ensemble.energy_unit");
+    at(&e, 6, 25);
+    // A nested table of another method: at the key.
+    let e = error(
+        "[ensemble]\ntrajectories = 10\nmethod = \"normal-modes\"\nquanta = [0, 0, 0]\n\n[ensemble.region]\nenergy_cap = 0.1",
+    );
+    check(&e, 7, "`region` does not apply to the normal-modes method", "the normal-modes method takes energy");
+    at(&e, 7, 1);
+}
