@@ -8,48 +8,17 @@
 //! rotations and translations, and its gradient checked against central differences of its
 //! energy before the first trajectory ([`crate::runtime::surface::check_gradient`]).
 
-use std::ops::Range;
-use std::path::{Path, PathBuf};
-
 use rovib_ffi::{OnPositions, SharedLibrary};
 
-use crate::runtime::diagnostic::{FileError, Source};
+use crate::runtime::diagnostic::FileError;
 use crate::runtime::grid::GridPotential;
 use crate::runtime::molecule::Molecule;
 use crate::runtime::nalgebra::{SMatrix, SVector};
 use crate::runtime::position_surface::check_rotation_invariance;
 use crate::runtime::surface::{Dipole, GradientCheck, GradientError, Potential, check_gradient};
 use crate::scene::Scene;
-use toml::Spanned;
 
 pub mod grid;
-
-/// The checked `library` key of a scene's `[potential]` (its place, and the path resolved
-/// against the scene file's directory); `parameters` is the place of `[potential.parameters]`,
-/// which a library potential does not take.
-pub fn scene_library(
-    src: &Source<'_>,
-    library: Option<&Spanned<String>>,
-    parameters: Option<Range<usize>>,
-) -> Result<Option<(Spanned<String>, PathBuf)>, FileError> {
-    let Some(library) = library else { return Ok(None) };
-    if library.get_ref().trim().is_empty() {
-        return Err(src.error(
-            library.span(),
-            "`potential.library` is empty",
-            "give the path of a shared library with the functions of rovib_surface.h, e.g. \"libsurf.so\"",
-        ));
-    }
-    if let Some(span) = parameters {
-        return Err(src.error(
-            span,
-            "`[potential.parameters]` sets the definition's parameters, but `potential.library` replaces that potential",
-            "remove [potential.parameters], or remove `library` to run on the definition's potential",
-        ));
-    }
-    let dir = Path::new(src.path).parent().unwrap_or(Path::new(""));
-    Ok(Some((library.clone(), dir.join(library.get_ref()))))
-}
 
 /// The potential a scene puts in place of the molecule's: a shared library's (over internal
 /// coordinates or over the atoms' positions) or a grid's.

@@ -30,7 +30,7 @@ pub const MAX_BINS: usize = 1_000_000;
 /// every output time: 10⁶ times × a few quantities is tens of MB per thread).
 pub const MAX_OUTPUT_TIMES: usize = 1_000_000;
 
-/// The sampling methods, as spelt in scenes (one [`method::VARIANTS`] entry each).
+/// The sampling methods, as spelt in scenes (one entry each in `method::VARIANTS`).
 pub const METHODS: [&str; method::VARIANTS.len()] = {
     let mut names = [""; method::VARIANTS.len()];
     let mut i = 0;

@@ -45,6 +45,7 @@ use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit
 
 pub mod chart;
 mod integrator;
+pub mod potential;
 pub(crate) mod raw;
 pub mod variant;
 
@@ -212,7 +213,7 @@ pub struct Scene {
     pub library: Option<(Spanned<String>, std::path::PathBuf)>,
     /// `[potential] grid` and `outside`: a tabulated surface that replaces the molecule's
     /// potential (see `crate::surfaces::grid`).
-    pub grid: Option<crate::surfaces::grid::SceneGrid>,
+    pub grid: Option<potential::SceneGrid>,
     /// `[potential] gradient = "central-differences"`: the library's ∂U/∂q by central
     /// differences of its energy (`crate::surface_gradient`).
     pub central_differences: bool,
@@ -485,12 +486,12 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             Some(table) => named_numbers(&src, table, "potential.parameters")?,
             None => Vec::new(),
         },
-        library: crate::surfaces::scene_library(
+        library: potential::scene_library(
             &src,
             raw.potential.as_ref().and_then(|p| p.library.as_ref()),
             raw.potential.as_ref().and_then(|p| p.parameters.as_ref()).map(|t| t.span()),
         )?,
-        grid: crate::surfaces::grid::scene_grid(
+        grid: potential::scene_grid(
             &src,
             raw.potential.as_ref().and_then(|p| p.grid.as_ref()),
             raw.potential.as_ref().and_then(|p| p.outside.as_ref()),

@@ -3,11 +3,6 @@
 //! for points beyond the grid. It replaces the molecule's potential (and, with dipole columns,
 //! its dipole) for the run through `WithPotential`, as a `[potential] library` does.
 
-use std::ops::Range;
-use std::path::{Path, PathBuf};
-
-use toml::Spanned;
-
 use crate::runtime::diagnostic::{FileError, MAX_INPUT_BYTES, Source, read_text_capped};
 use crate::runtime::grid::{BindError, GridFile, GridPotential, Outside, parse};
 use crate::runtime::integrate::SolveError;
@@ -15,83 +10,7 @@ use crate::runtime::molecule::Molecule;
 use crate::runtime::nalgebra::SVector;
 use crate::runtime::surface::{GradientCheck, check_gradient};
 use crate::scene::Scene;
-
-/// The checked `grid` and `outside` keys of a scene's `[potential]`.
-#[derive(Clone, Debug)]
-pub struct SceneGrid {
-    /// `grid` as written (its place for errors).
-    pub written: Spanned<String>,
-    /// The grid file, resolved against the scene file's directory.
-    pub path: PathBuf,
-    /// The policy outside the grid.
-    pub outside: Outside,
-    /// `outside`'s place.
-    pub outside_span: Range<usize>,
-}
-
-const OUTSIDE_HELP: &str = "write outside = \"error\" (a trajectory that leaves the grid stops, with a message) or \
-                            outside = \"extrapolate\" (the edge cell's cubic continued beyond the grid)";
-
-/// Checks `[potential] grid` and `outside`; `library` and `parameters` are the places of the
-/// keys that cannot go with a grid.
-pub fn scene_grid(
-    src: &Source<'_>,
-    grid: Option<&Spanned<String>>,
-    outside: Option<&Spanned<String>>,
-    library: Option<Range<usize>>,
-    parameters: Option<Range<usize>>,
-) -> Result<Option<SceneGrid>, FileError> {
-    let Some(grid) = grid else {
-        if let Some(outside) = outside {
-            return Err(src.error(
-                outside.span(),
-                "`potential.outside` is the policy of a grid potential, but the scene has no `potential.grid`",
-                "remove `outside`, or add grid = \"pes.csv\" (docs/src/howto/outside-surfaces.md)",
-            ));
-        }
-        return Ok(None);
-    };
-    if grid.get_ref().trim().is_empty() {
-        return Err(src.error(
-            grid.span(),
-            "`potential.grid` is empty",
-            "give the path of a grid file, e.g. \"pes.csv\"",
-        ));
-    }
-    if let Some(span) = library {
-        return Err(src.error(
-            span,
-            "`potential.library` and `potential.grid` both replace the potential",
-            "keep one of them",
-        ));
-    }
-    if let Some(span) = parameters {
-        return Err(src.error(
-            span,
-            "`[potential.parameters]` sets the definition's parameters, but `potential.grid` replaces that potential",
-            "remove [potential.parameters], or remove `grid` to run on the definition's potential",
-        ));
-    }
-    let Some(outside_key) = outside else {
-        return Err(src.error(
-            grid.span(),
-            "`potential.grid` needs `outside`: what the surface is beyond the grid",
-            OUTSIDE_HELP,
-        ));
-    };
-    let policy = match outside_key.get_ref().as_str() {
-        "error" => Outside::Error,
-        "extrapolate" => Outside::Extrapolate,
-        other => return Err(src.error(outside_key.span(), format!("unknown `outside = \"{other}\"`"), OUTSIDE_HELP)),
-    };
-    let dir = Path::new(src.path).parent().unwrap_or(Path::new(""));
-    Ok(Some(SceneGrid {
-        written: grid.clone(),
-        path: dir.join(grid.get_ref()),
-        outside: policy,
-        outside_span: outside_key.span(),
-    }))
-}
+pub use crate::scene::potential::SceneGrid;
 
 /// Reads the scene's grid file: its text and the parsed grid.
 fn load(scene: &Scene, grid: &SceneGrid) -> Result<(String, GridFile), FileError> {
