@@ -28,8 +28,10 @@
 //! features allow: for the default target (baseline x86-64, SSE2) an `F64x4` is two 128-bit
 //! registers; a build with AVX2 or AVX-512 (`RUSTFLAGS="-C target-cpu=native"`) uses 256- or
 //! 512-bit ones. There is no run-time detection (calling code compiled for a feature the build
-//! lacks needs `unsafe`, which the workspace forbids); the binary checks at start that the CPU
-//! has the features it was built for (`rovib::cpu`).
+//! lacks needs `unsafe`, which the workspace forbids outside the `ffi` crate; a dispatch tried
+//! through that crate made the command slower at every level, docs/src/history/benchmarks.md,
+//! "Run-time dispatch of the SIMD lanes"); the binary checks at start that the CPU has the
+//! features it was built for (`rovib::cpu`).
 
 use core::fmt::Debug;
 use core::ops::{Add, Div, Mul, Neg, Sub};
