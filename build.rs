@@ -15,7 +15,7 @@
 //! without their size-dependent forms (reverse-mode ∂T/∂q, run-time centre of mass), for
 //! measuring what those gain.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 fn main() {
     let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
@@ -25,6 +25,10 @@ fn main() {
     println!("cargo::rerun-if-env-changed=ROVIB_MOLECULES_ONLY");
     println!("cargo::rerun-if-env-changed=ROVIB_KINETIC_JACOBIAN");
     println!("cargo::rerun-if-env-changed=ROVIB_LARGE_MOLECULE_FORMS");
+    if let Err(message) = report_registry(&manifest.join("src/report"), &out_dir.join("reporters.rs")) {
+        eprintln!("rovib: {message}");
+        std::process::exit(1);
+    }
     let mut options = match std::env::var("ROVIB_KINETIC_JACOBIAN").as_deref() {
         Ok("generated") => rovib_codegen::Options { kinetic_jacobian: true, ..Default::default() },
         Ok("") | Ok("runtime") | Err(_) => rovib_codegen::Options::default(),
@@ -82,7 +86,7 @@ fn main() {
     for (dir, _) in &dirs {
         println!("cargo::rerun-if-changed={}", dir.display());
     }
-    let dirs: Vec<(&std::path::Path, &str)> = dirs.iter().map(|(d, name)| (d.as_path(), name.as_str())).collect();
+    let dirs: Vec<(&Path, &str)> = dirs.iter().map(|(d, name)| (d.as_path(), name.as_str())).collect();
     match rovib_codegen::generate_dirs(&dirs, &out_dir, &options) {
         Ok(report) => {
             for input in &report.inputs {
@@ -128,4 +132,26 @@ fn main() {
             std::process::exit(1);
         }
     }
+}
+
+/// Writes `reporters.rs`, included by `src/report/mod.rs`: one module per file of `src/report/`
+/// (other than `mod.rs`), in the order of the files' names, and `OUTPUTS`, their `OUTPUT`
+/// constants in that order (`rovib_codegen::folder_registry`). Adding an output is adding its
+/// file; the folder is watched, so a new or changed file reruns this script (0.3 s with the
+/// molecules, whose generated files are rewritten only if their text changed).
+fn report_registry(dir: &Path, out: &Path) -> Result<(), String> {
+    println!("cargo::rerun-if-changed={}", dir.display());
+    let registry = rovib_codegen::folder_registry::Registry {
+        folder: "src/report/",
+        constant: "OUTPUT",
+        ty: "Output",
+        list: "OUTPUTS",
+        example: "src/report/dipole_csv.rs",
+    };
+    let source = rovib_codegen::folder_registry::folder_registry(dir, &registry)?;
+    if std::fs::read_to_string(out).ok().as_deref() != Some(source.as_str()) {
+        std::fs::write(out, source)
+            .map_err(|e| format!("cannot write {}: {e}; check that OUT_DIR is writable", out.display()))?;
+    }
+    Ok(())
 }

@@ -32,6 +32,7 @@ pub mod emit;
 pub mod emit_lanes;
 pub mod expr;
 pub mod external;
+pub mod folder_registry;
 pub mod kinetic;
 pub mod library;
 pub mod names;

@@ -36,7 +36,7 @@ use crate::hamiltonian::{HamiltonianError, ReducedSystem, RotationPart};
 use crate::integrate::{Dop853, Dop853Options, Dop853Resume, InvalidInput, OdeSystem, SolveError, Stats};
 use crate::molecule::Molecule;
 use crate::rigid_system::{RigidError, RigidSystem};
-use nalgebra::Vector3;
+use nalgebra::{SVector, Vector3};
 
 /// The relative pivot of the kinetic metric below which the run leaves the internal chart.
 pub const SWITCH_PIVOT: f64 = 1e-4;
@@ -166,7 +166,7 @@ pub fn to_cartesian<M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize
 pub fn to_internal<M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize>(
     system: &ReducedSystem<'_, M, N, NA>,
     y: &[f64],
-    near: &nalgebra::SVector<f64, N>,
+    near: &SVector<f64, N>,
 ) -> Result<(BodyState<N>, Vec<f64>), String> {
     let lab = CartesianSystem::<M, N, NA>::lab(y);
     let (mut body, _) = body_of_lab_exact(system.molecule(), &lab, near).map_err(|e| e.to_string())?;
@@ -367,7 +367,7 @@ where
     let fallback = if rigid.is_some() { Chart::Rigid } else { Chart::Cartesian };
     let mut buffer = vec![0.0; internal.dim()];
     let mut served: Option<u64> = None;
-    let mut last_q = nalgebra::SVector::<f64, N>::zeros();
+    let mut last_q = SVector::<f64, N>::zeros();
     let mut entered = t0;
     let (mut chart, mut next) = match start {
         ChartStart::Resume(r) => {
@@ -508,47 +508,11 @@ where
             Chart::Cartesian => {
                 let Next::Point(p) = &next else { unreachable!("a Cartesian segment starts from a point") };
                 let Some(cartesian) = &mut cartesian else { unreachable!("the Cartesian chart is the fallback") };
-                match dop_c.resume(cartesian, t0, p, t_end, interval, &mut out) {
-                    Ok((stats, _)) => {
-                        add(&mut report.stats, &stats);
-                        report.cartesian_time += t_end - entered;
-                        return Ok(());
-                    }
-                    Err(SolveError::Rhs { source: CartesianError::Regular { .. }, .. }) => {
-                        let (t, y, h, stats) = dop_c.last_accepted();
-                        add(&mut report.stats, &stats);
-                        let outputs_done = served.unwrap_or(0);
-                        let x = CartesianSystem::<M, N, NA>::positions(y);
-                        if cartesian.internal_chart_regular(&x, SWITCH_PIVOT) {
-                            let (body, yi) = to_internal(&internal, y, &last_q).map_err(|reason| SolveError::Rhs {
-                                t,
-                                y: y.to_vec(),
-                                source: ChartError::Switch { from: Chart::Cartesian, t, reason },
-                            })?;
-                            last_q = body.q;
-                            next =
-                                Next::Point(Dop853Resume { t, y: yi, h, fac_old: 1e-4, reject: false, outputs_done });
-                            chart = Chart::Internal;
-                            report.switches += 1;
-                            report.cartesian_time += t - entered;
-                        } else {
-                            // Regular at a stage but not yet at the last accepted state: one more
-                            // step here before testing again.
-                            cartesian.check_after(t + h);
-                            next = Next::Point(Dop853Resume {
-                                t,
-                                y: y.to_vec(),
-                                h,
-                                fac_old: 1e-4,
-                                reject: false,
-                                outputs_done,
-                            });
-                        }
-                    }
-                    Err(e) => {
-                        add(&mut report.stats, &dop_c.last_accepted().3);
-                        return Err(map_error(e, ChartError::Cartesian));
-                    }
+                let result = dop_c.resume(cartesian, t0, p, t_end, interval, &mut out);
+                let at = Segment { internal: &internal, served, entered, t_end };
+                match conclude(result, dop_c, cartesian, at, &mut last_q, report)? {
+                    None => return Ok(()),
+                    Some((c, n)) => (chart, next) = (c, n),
                 }
             }
             Chart::Rigid => {
@@ -576,53 +540,146 @@ where
                     let y = dop_r.last_accepted().1.to_vec();
                     return Err(SolveError::Rhs { t, y, source: ChartError::Switch { from: Chart::Rigid, t, reason } });
                 }
-                match result {
-                    Ok((stats, _)) => {
-                        add(&mut report.stats, &stats);
-                        report.rigid_time += t_end - entered;
-                        return Ok(());
-                    }
-                    Err(SolveError::Rhs { source: RigidError::Regular { .. }, .. }) => {
-                        let (t, y, h, stats) = dop_r.last_accepted();
-                        add(&mut report.stats, &stats);
-                        let outputs_done = served.unwrap_or(0);
-                        let fail = |reason: String| SolveError::Rhs {
-                            t,
-                            y: y.to_vec(),
-                            source: ChartError::Switch { from: Chart::Rigid, t, reason },
-                        };
-                        rigid.set_near(&last_q);
-                        let body = rigid.body_of_flat(y).map_err(|e| fail(e.to_string()))?;
-                        let mut k = crate::molecule::KineticMatrices::<N>::default();
-                        m.kinetic(&body.q, &mut k);
-                        if crate::hamiltonian::MetricFactor::is_regular(&k, SWITCH_PIVOT) {
-                            let mut yi = vec![0.0; internal.dim()];
-                            reduce(&internal, body, &mut yi).map_err(fail)?;
-                            last_q = body.q;
-                            next =
-                                Next::Point(Dop853Resume { t, y: yi, h, fac_old: 1e-4, reject: false, outputs_done });
-                            chart = Chart::Internal;
-                            report.switches += 1;
-                            report.rigid_time += t - entered;
-                        } else {
-                            last_q = body.q;
-                            rigid.check_after(t + h);
-                            next = Next::Point(Dop853Resume {
-                                t,
-                                y: y.to_vec(),
-                                h,
-                                fac_old: 1e-4,
-                                reject: false,
-                                outputs_done,
-                            });
-                        }
-                    }
-                    Err(e) => {
-                        add(&mut report.stats, &dop_r.last_accepted().3);
-                        return Err(map_error(e, ChartError::Rigid));
-                    }
+                let at = Segment { internal: &internal, served, entered, t_end };
+                match conclude(result, dop_r, rigid, at, &mut last_q, report)? {
+                    None => return Ok(()),
+                    Some((c, n)) => (chart, next) = (c, n),
                 }
             }
+        }
+    }
+}
+
+/// A chart a run falls back to near singular geometries of the internal chart (the Cartesian or
+/// the rigid chart), as [`conclude`] needs it.
+trait Fallback<const N: usize>: OdeSystem {
+    /// Which chart it is.
+    const CHART: Chart;
+    /// Whether a segment stopped because the internal chart may be regular again.
+    fn returning(e: &Self::Error) -> bool;
+    /// This chart's error as a [`ChartError`].
+    fn chart_error(e: Self::Error) -> ChartError;
+    /// The body state at the flat state `y` if the internal chart is regular there (every
+    /// relative pivot above [`SWITCH_PIVOT`]), else `None`; `near` is the internal
+    /// configuration the conversion starts from, updated to the one found when there is one.
+    fn regular_body(&mut self, y: &[f64], near: &mut SVector<f64, N>) -> Result<Option<BodyState<N>>, String>;
+    /// Makes the return test apply only to evaluations at times after `t`.
+    fn check_after(&mut self, t: f64);
+}
+
+impl<M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize> Fallback<N> for CartesianSystem<'_, M, N, NA> {
+    const CHART: Chart = Chart::Cartesian;
+
+    fn returning(e: &CartesianError) -> bool {
+        matches!(e, CartesianError::Regular { .. })
+    }
+
+    fn chart_error(e: CartesianError) -> ChartError {
+        ChartError::Cartesian(e)
+    }
+
+    fn regular_body(&mut self, y: &[f64], near: &mut SVector<f64, N>) -> Result<Option<BodyState<N>>, String> {
+        if !self.internal_chart_regular(&Self::positions(y), SWITCH_PIVOT) {
+            return Ok(None);
+        }
+        let (body, _) = body_of_lab_exact(self.molecule(), &Self::lab(y), near).map_err(|e| e.to_string())?;
+        *near = body.q;
+        Ok(Some(body))
+    }
+
+    fn check_after(&mut self, t: f64) {
+        CartesianSystem::check_after(self, t);
+    }
+}
+
+impl<M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize> Fallback<N> for RigidSystem<'_, M, N, NA> {
+    const CHART: Chart = Chart::Rigid;
+
+    fn returning(e: &RigidError) -> bool {
+        matches!(e, RigidError::Regular { .. })
+    }
+
+    fn chart_error(e: RigidError) -> ChartError {
+        ChartError::Rigid(e)
+    }
+
+    fn regular_body(&mut self, y: &[f64], near: &mut SVector<f64, N>) -> Result<Option<BodyState<N>>, String> {
+        self.set_near(near);
+        let body = self.body_of_flat(y).map_err(|e| e.to_string())?;
+        *near = body.q;
+        let mut k = crate::molecule::KineticMatrices::<N>::default();
+        self.molecule().kinetic(&body.q, &mut k);
+        Ok(crate::hamiltonian::MetricFactor::is_regular(&k, SWITCH_PIVOT).then_some(body))
+    }
+
+    fn check_after(&mut self, t: f64) {
+        RigidSystem::check_after(self, t);
+    }
+}
+
+/// Where a fallback segment of [`run`] stands: the internal system to return to, the outputs
+/// served before the segment, when the run entered the fallback chart, and the run's end.
+struct Segment<'a, 'm, M: ?Sized, const N: usize, const NA: usize> {
+    internal: &'a ReducedSystem<'m, M, N, NA>,
+    served: Option<u64>,
+    entered: f64,
+    t_end: f64,
+}
+
+/// The end of a fallback segment: `None` when the run is finished, else the next segment's
+/// chart and start (the internal chart if it is regular at the segment's last accepted state,
+/// else one more step in the fallback chart before testing again). Adds the segment's work and
+/// time to `report`.
+fn conclude<S, M, const N: usize, const NA: usize>(
+    result: Result<(Stats, Option<Dop853Resume>), SolveError<S::Error>>,
+    dop: &Dop853,
+    system: &mut S,
+    at: Segment<'_, '_, M, N, NA>,
+    last_q: &mut SVector<f64, N>,
+    report: &mut ChartReport,
+) -> Result<Option<(Chart, Next)>, SolveError<ChartError>>
+where
+    S: Fallback<N>,
+    M: Molecule<N, NA> + ?Sized,
+{
+    let time = match S::CHART {
+        Chart::Rigid => &mut report.rigid_time,
+        Chart::Cartesian | Chart::Internal => &mut report.cartesian_time,
+    };
+    match result {
+        Ok((stats, _)) => {
+            add(&mut report.stats, &stats);
+            *time += at.t_end - at.entered;
+            Ok(None)
+        }
+        Err(SolveError::Rhs { source, .. }) if S::returning(&source) => {
+            let (t, y, h, stats) = dop.last_accepted();
+            add(&mut report.stats, &stats);
+            let outputs_done = at.served.unwrap_or(0);
+            let fail = |reason: String| SolveError::Rhs {
+                t,
+                y: y.to_vec(),
+                source: ChartError::Switch { from: S::CHART, t, reason },
+            };
+            match system.regular_body(y, last_q).map_err(fail)? {
+                Some(body) => {
+                    let mut yi = vec![0.0; at.internal.dim()];
+                    reduce(at.internal, body, &mut yi).map_err(fail)?;
+                    *time += t - at.entered;
+                    report.switches += 1;
+                    let point = Dop853Resume { t, y: yi, h, fac_old: 1e-4, reject: false, outputs_done };
+                    Ok(Some((Chart::Internal, Next::Point(point))))
+                }
+                None => {
+                    system.check_after(t + h);
+                    let point = Dop853Resume { t, y: y.to_vec(), h, fac_old: 1e-4, reject: false, outputs_done };
+                    Ok(Some((S::CHART, Next::Point(point))))
+                }
+            }
+        }
+        Err(e) => {
+            add(&mut report.stats, &dop.last_accepted().3);
+            Err(map_error(e, S::chart_error))
         }
     }
 }

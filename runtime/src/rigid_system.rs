@@ -477,6 +477,11 @@ where
         self.check_after = t;
     }
 
+    /// The molecule.
+    pub fn molecule(&self) -> &'a M {
+        self.molecule
+    }
+
     /// Starts the next position fit from `q`.
     pub fn set_near(&mut self, q: &SVector<f64, N>) {
         self.last_q = *q;

@@ -405,33 +405,54 @@ where
 
 /// The chart the ensemble's trajectories are integrated in (`run.chart`): `cartesian` only for
 /// a molecule with a Cartesian potential (coordinates declared by kind) and nothing frozen,
-/// else an error at the key.
+/// else an error at the key; `auto` by the rule of [`crate::scene::chart`].
 fn chart_of<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &M,
     scene: &Scene,
     reduction: &crate::runtime::hamiltonian::fast::Reduction<N>,
 ) -> Result<RunChart, Error> {
     let (chart, span) = &scene.chart;
-    let Some(span) = span else { return Ok(*chart) };
-    if *chart != RunChart::Cartesian {
-        return Ok(*chart);
-    }
-    let why = if !reduction.active.iter().all(|&a| a) {
-        "the scene freezes coordinates (run.frozen), which have no Cartesian counterpart"
+    let unavailable = if !reduction.active.iter().all(|&a| a) {
+        Some("the scene freezes coordinates (run.frozen), which have no Cartesian counterpart")
     } else if crate::runtime::cartesian_system::CartesianSystem::new(m).is_err() {
-        "the molecule has no Cartesian potential U(x) (its definition gives positions rather than coordinates by \
-         kind, or the potential comes from a shared library or a grid file)"
-    } else {
-        return Ok(RunChart::Cartesian);
-    };
-    Err(scene
-        .source()
-        .error(
-            span.clone(),
-            format!("`run.chart = \"cartesian\"` is not available for {}: {why}", m.name()),
-            "remove it (the default, \"internal\", integrates in internal coordinates)",
+        Some(
+            "the molecule has no Cartesian potential U(x) (its definition gives positions rather than coordinates \
+             by kind, or the potential comes from a shared library or a grid file)",
         )
-        .into())
+    } else {
+        None
+    };
+    match (chart, unavailable) {
+        (RunChart::Internal, _) => Ok(RunChart::Internal),
+        (RunChart::Auto, Some(_)) => Ok(RunChart::Internal),
+        (RunChart::Auto, None) => Ok(if scene.cartesian_fallback && linear_at_reference(m) {
+            RunChart::Cartesian
+        } else {
+            RunChart::Internal
+        }),
+        (RunChart::Cartesian, None) => Ok(RunChart::Cartesian),
+        (RunChart::Cartesian, Some(why)) => {
+            let at = span.clone().unwrap_or(0..0);
+            Err(scene
+                .source()
+                .error(
+                    at,
+                    format!("`run.chart = \"cartesian\"` is not available for {}: {why}", m.name()),
+                    "remove it (the default, \"auto\", chooses the internal chart for this molecule)",
+                )
+                .into())
+        }
+    }
+}
+
+/// Whether the internal chart is singular or ill-conditioned at the molecule's reference geometry
+/// (a linear molecule at its linear equilibrium): some relative pivot of the kinetic metric there
+/// is below the chart switch's return threshold. False for a molecule without a reference.
+fn linear_at_reference<M: Molecule<N, NA>, const N: usize, const NA: usize>(m: &M) -> bool {
+    let Some(q) = m.reference_geometry() else { return false };
+    let mut k = crate::runtime::molecule::KineticMatrices::<N>::default();
+    m.kinetic(&q, &mut k);
+    !crate::runtime::hamiltonian::MetricFactor::is_regular(&k, crate::runtime::charts::RETURN_PIVOT)
 }
 
 /// The output times of a run from 0 to `t_end` every `interval` (a.u.): the grid

@@ -350,6 +350,7 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             })
         }).collect::<Vec<_>>(),
         "chart": plan.chart.name(),
+        "chart_requested": scene.chart.0.name(),
         "charts": charts_json(plan, &o.charts, ts),
         "stops": super::lifetimes::summary(m, plan, o, ts),
         "spectrum": super::pair::summary(plan, report.phase_space.as_ref(), spectrum.as_ref()),
@@ -375,7 +376,7 @@ fn charts_json<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     use crate::runtime::charts::{RETURN_PIVOT, SWITCH_PIVOT};
     if !plan.switches_charts() {
         let why = if plan.in_cartesian_chart() {
-            "run.chart = \"cartesian\": every trajectory is integrated in the Cartesian chart"
+            "every trajectory is integrated in the Cartesian chart (run.chart: see chart and chart_requested)"
         } else if !plan.cartesian_fallback {
             "run.cartesian_fallback = false"
         } else if !matches!(plan.method, crate::runtime::integrate::Method::Dop853(_)) {

@@ -5,14 +5,16 @@
 //!
 //! [`OUTPUTS`] is the registry: the `run.outputs` names of the files written as the run goes,
 //! with their files and constructors. The scene accepts these names (and "summary", "restart",
-//! which the run writes at its end). Adding an output is a file here, its `mod` line and its entry
-//! in [`OUTPUTS`].
-
-mod dipole_csv;
-mod lab_xyz;
-mod trajectory_csv;
+//! which the run writes at its end).
+//!
+//! Adding an output is adding one file here, `src/report/NAME.rs`, that declares
+//! `pub(super) const OUTPUT: Output`: the build script makes every file of this folder a module and
+//! lists their `OUTPUT`s in [`OUTPUTS`] in the order of the files' names (it refuses, with the
+//! file and what to change, a file that declares no `OUTPUT` or whose name is not a module name).
 
 use std::path::Path;
+
+include!(concat!(env!("OUT_DIR"), "/reporters.rs"));
 
 pub use dipole_csv::DipoleCsv;
 pub use lab_xyz::{ASE_TIME_IN_FS, LAB_XYZ_PROPERTIES, LabXyz};
@@ -142,9 +144,6 @@ pub struct Output {
     /// Creates its files, or when continuing a run checks and opens them for appending.
     pub open: fn(&Open<'_>) -> Result<Box<dyn Reporter>, Error>,
 }
-
-/// The outputs written as the run goes, in the order they are written and listed.
-pub const OUTPUTS: &[Output] = &[trajectory_csv::OUTPUT, lab_xyz::OUTPUT, dipole_csv::OUTPUT];
 
 /// The outputs a run writes at its end (not reporters): `summary.json` and `restart.json`.
 pub const END_OUTPUTS: [(&str, &str); 2] = [("summary", "summary.json"), ("restart", crate::restart::RESTART_FILE)];

@@ -1,6 +1,12 @@
 //! `run.chart`: the chart of phase space an ensemble's trajectories are integrated in.
 //!
-//! `internal` (the default) integrates in internal coordinates and orientation, switching to a
+//! `auto` (the default) chooses one of the two below for the molecule, by a fixed rule (the same
+//! on every MPI rank and on resume; `crate::ensemble` applies it): the Cartesian chart for a
+//! molecule whose reference geometry is linear (where the internal chart is singular: a thermal
+//! ensemble stays near it and keeps switching charts), when the Cartesian chart is available and
+//! `run.cartesian_fallback` is on; the internal chart otherwise. The rule comes from measurement
+//! (BENCHMARKS.md, "The chart of an ensemble").
+//! `internal` integrates in internal coordinates and orientation, switching to a
 //! lab-frame chart near linear geometries as `run.cartesian_fallback` says (`runtime::charts`).
 //! `cartesian` integrates every trajectory in the lab-frame Cartesian chart
 //! (`runtime::cartesian_system`, on SIMD lanes with `runtime::cartesian_lanes`); the
@@ -18,8 +24,11 @@ use crate::runtime::diagnostic::{FileError, Source};
 /// The chart a scene's ensemble trajectories are integrated in.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
 pub enum RunChart {
-    /// Internal coordinates and orientation (with the fallback chart near linear geometries).
+    /// Chosen for the molecule by the rule of the module documentation (a scene's value only:
+    /// an ensemble's plan holds the chart chosen).
     #[default]
+    Auto,
+    /// Internal coordinates and orientation (with the fallback chart near linear geometries).
     Internal,
     /// Lab-frame Cartesian positions and velocities for the whole trajectory.
     Cartesian,
@@ -29,6 +38,7 @@ impl RunChart {
     /// The key's value for this chart (as summary.json and the checkpoint write it).
     pub fn name(self) -> &'static str {
         match self {
+            RunChart::Auto => "auto",
             RunChart::Internal => "internal",
             RunChart::Cartesian => "cartesian",
         }
@@ -36,12 +46,13 @@ impl RunChart {
 }
 
 /// The values `run.chart` accepts.
-pub const NAMES: [&str; 2] = ["internal", "cartesian"];
+pub const NAMES: [&str; 3] = ["auto", "internal", "cartesian"];
 
 /// `run.chart` as given (its place, for errors found once the molecule is known), or the default.
 pub fn parse(src: &Source<'_>, given: Option<&Spanned<String>>) -> Result<(RunChart, Option<Range<usize>>), FileError> {
     let Some(s) = given else { return Ok((RunChart::default(), None)) };
     let chart = match s.get_ref().as_str() {
+        "auto" => RunChart::Auto,
         "internal" => RunChart::Internal,
         "cartesian" => RunChart::Cartesian,
         other => {
@@ -53,9 +64,10 @@ pub fn parse(src: &Source<'_>, given: Option<&Spanned<String>>) -> Result<(RunCh
                 s.span(),
                 format!("unknown `run.chart` \"{other}\""),
                 format!(
-                    "{hint}use \"internal\" (the default: internal coordinates, the Cartesian chart only near linear \
-                     geometries) or \"cartesian\" (every ensemble trajectory in lab-frame Cartesians; BENCHMARKS.md \
-                     says which is faster for which molecule)"
+                    "{hint}use \"auto\" (the default: the Cartesian chart for a molecule linear at its reference \
+                     geometry, the internal chart otherwise), \"internal\" (internal coordinates, the Cartesian chart \
+                     only near linear geometries) or \"cartesian\" (every ensemble trajectory in lab-frame \
+                     Cartesians; BENCHMARKS.md says which is faster for which molecule)"
                 ),
             ));
         }

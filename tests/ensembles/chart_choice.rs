@@ -1,6 +1,8 @@
 //! `run.chart`: an ensemble integrated in the lab-frame Cartesian chart gives the statistics
 //! of the internal chart within the integration error, on lanes the one-at-a-time outcome to
-//! round-off, and the key's wrong values and unsupported scenes are located errors.
+//! round-off, `auto` (the default) chooses the Cartesian chart for a molecule linear at its
+//! reference geometry and the internal chart otherwise, and the key's wrong values and
+//! unsupported scenes are located errors.
 
 use crate::common;
 
@@ -10,8 +12,13 @@ use rovib::scene::parse_scene;
 /// A thermal water ensemble (300 K, energy cap 0.1 hartree; 16 trajectories, 400 a.u., DOP853 at rtol = atol = 1e-10) with
 /// `extra` added to `[run]`.
 fn text(extra: &str) -> String {
+    text_for("h2o", extra)
+}
+
+/// [`text`] for `molecule`.
+fn text_for(molecule: &str, extra: &str) -> String {
     format!(
-        "molecule = \"h2o\"\n[ensemble]\ntrajectories = 16\nseed = 7\nmethod = \"thermal\"\ntemperature = 300\nregion = {{ energy_cap = 0.1 }}\n\
+        "molecule = \"{molecule}\"\n[ensemble]\ntrajectories = 16\nseed = 7\nmethod = \"thermal\"\ntemperature = 300\nregion = {{ energy_cap = 0.1 }}\n\
          [statistics]\nmeans = [\"r1\", \"r2\", \"alpha\", \"H\", \"J\", \"Lz\"]\n\
          [integrator]\nmethod = \"dop853\"\nrtol = 1e-10\natol = 1e-10\n\
          [run]\nend = 400\noutput_interval = 40\n{extra}"
@@ -19,7 +26,11 @@ fn text(extra: &str) -> String {
 }
 
 fn run(name: &str, extra: &str, lanes: bool) -> (EnsembleReport, serde_json::Value) {
-    let scene = parse_scene("test.toml", &text(extra)).unwrap();
+    run_for("h2o", name, extra, lanes)
+}
+
+fn run_for(molecule: &str, name: &str, extra: &str, lanes: bool) -> (EnsembleReport, serde_json::Value) {
+    let scene = parse_scene("test.toml", &text_for(molecule, extra)).unwrap();
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("rovib-chart-choice-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     let mut options = common::ensemble::options(dir.clone(), 1);
@@ -71,6 +82,33 @@ fn cartesian_lanes_give_the_one_at_a_time_outcome_to_round_off() {
     for (x, y) in scalar.outcome.statistics.means.iter().zip(&lanes.outcome.statistics.means) {
         assert!((x.mean() - y.mean()).abs() <= 1e-11 * y.mean().abs().max(1.0), "{} vs {}", x.mean(), y.mean());
     }
+}
+
+/// `auto`, the default, is a fixed rule on the molecule: co2, linear at its reference geometry
+/// (where a thermal ensemble keeps switching charts), runs in the Cartesian chart; water in the
+/// internal chart (the test above); co2 with `chart = "internal"`, with the switch turned off or
+/// with a frozen coordinate (no Cartesian counterpart) in the internal chart. The chart chosen
+/// gives the internal chart's means (with its switches) within 1e-7, as for water above: the
+/// internal run of co2 did switch charts, so this also compares the switching path with a
+/// trajectory that never switches.
+#[test]
+fn the_default_chart_is_cartesian_for_a_molecule_linear_at_its_reference_and_internal_otherwise() {
+    let (auto, sa) = run_for("co2", "co2-auto", "", true);
+    let (internal, si) = run_for("co2", "co2-internal", "chart = \"internal\"\n", true);
+    assert_eq!(sa["chart"], "cartesian");
+    assert_eq!(si["chart"], "internal");
+    assert!(si["charts"]["switches"].as_u64().unwrap_or(0) > 0, "{}", si["charts"]);
+    assert_eq!(auto.outcome.completed, 16, "{:?}", auto.outcome.first_failures);
+    assert_eq!(internal.outcome.completed, 16, "{:?}", internal.outcome.first_failures);
+    let mut worst: f64 = 0.0;
+    for (x, y) in internal.outcome.statistics.means.iter().zip(&auto.outcome.statistics.means) {
+        worst = worst.max((x.mean() - y.mean()).abs());
+    }
+    assert!(worst <= 1e-7, "the charts' means differ by up to {worst:e}");
+    let (_, s) = run_for("co2", "co2-no-switch", "cartesian_fallback = false\n", false);
+    assert_eq!(s["chart"], "internal");
+    let (_, s) = run_for("co2", "co2-frozen", "frozen = [\"r1\"]\n", false);
+    assert_eq!(s["chart"], "internal");
 }
 
 #[test]

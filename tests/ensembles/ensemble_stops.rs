@@ -339,7 +339,9 @@ fn a_short_last_interval_is_left_out_of_the_correlations() {
     assert!(spectrum.starts_with(&format!("# resolution (FWHM) {:?} cm-1", expected.resolution())), "{spectrum:.80}");
 }
 
-/// A linear molecule whose trajectories pass through the Cartesian chart: the stop condition is
+/// A linear molecule whose trajectories pass through the Cartesian chart (`chart = "internal"`:
+/// the internal chart with the switch, not the default whole-trajectory Cartesian chart of a
+/// linear molecule): the stop condition is
 /// checked on q from the closed forms there, lanes and one at a time agree on every trajectory
 /// both complete.
 #[test]
@@ -348,7 +350,7 @@ fn trajectories_in_the_cartesian_chart_stop_on_their_closed_form_coordinates() {
     let text = "molecule = \"co2\"\n[units]\nlength = \"bohr\"\n[ensemble]\ntrajectories = 128\nseed = 3\n\
                 method = \"thermal\"\ntemperature = 300\nregion = { energy_cap = 0.1 }\n[statistics]\n\
                 means = [\"r1\", \"alpha\"]\n[run]\nend = 600\noutput_interval = 20\n\
-                stop_outside = { r1 = [2.17, 2.225], alpha = [2.9, 3.3] }\n";
+                stop_outside = { r1 = [2.17, 2.225], alpha = [2.9, 3.3] }\nchart = \"internal\"\n";
     let s = parse_scene("co2.toml", text).unwrap();
     let a = run_ensemble(&s, &options("co2-lanes", true)).unwrap();
     let b = run_ensemble(&s, &options("co2-nolanes", false)).unwrap();

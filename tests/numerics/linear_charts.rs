@@ -289,7 +289,7 @@ fn ensemble_scene(fallback: bool) -> String {
         "molecule = \"hcn\"\n[ensemble]\ntrajectories = {ENSEMBLE_MEMBERS}\nseed = 1\nmethod = \"thermal\"\n\
          temperature = 300.0\nkeep_trajectories = 1\n[statistics]\nmeans = [\"rch\", \"rcn\", \"alpha\", \"H\", \"Lx\", \
          \"Ly\", \"Lz\"]\n[integrator]\nmethod = \"dop853\"\nrtol = {RTOL:e}\natol = {ATOL:e}\n[run]\nend = \
-         {ENSEMBLE_END}\noutput_interval = {INTERVAL}\ncartesian_fallback = {fallback}\n"
+         {ENSEMBLE_END}\noutput_interval = {INTERVAL}\ncartesian_fallback = {fallback}\nchart = \"internal\"\n"
     )
 }
 
