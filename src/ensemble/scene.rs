@@ -1,6 +1,6 @@
 //! The `[ensemble]` and `[statistics]` tables of a scene: parsed with their places, checked,
 //! converted to atomic units, and bound to the molecule (names to indices, the sampling
-//! [`Spec`]). Every error names the file, the line and what to change.
+//! [`BoundMethod`]). Every error names the file, the line and what to change.
 //!
 //! `crate::scene` parses the rest of the scene and only lets these two tables through.
 
@@ -304,8 +304,9 @@ fn histogram_range_is_representable(range: [f64; 2], bins: usize) -> bool {
 }
 
 impl EnsembleScene {
-    /// Binds the ensemble to molecule `m`: coordinate names, units, the sampling [`Spec`]
-    /// (reading the states file), the quantities and the output-time indices of histograms.
+    /// Binds the ensemble to molecule `m`: coordinate names, units, the sampling method
+    /// ([`BoundMethod`], reading a states file), the quantities and the output-time indices of
+    /// histograms.
     pub fn bind<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         &self,
         m: &M,

@@ -46,8 +46,8 @@ use crate::runtime::units::{AU_TIME_IN_FS, AngleUnit, CoordinateUnit, LengthUnit
 pub mod chart;
 mod integrator;
 pub mod potential;
-pub mod raw;
-pub mod spanned;
+pub(crate) mod raw;
+pub(crate) mod spanned;
 pub mod variant;
 
 use integrator::integrator;

@@ -98,7 +98,7 @@ impl<'de> Visitor<'de> for ValueVisitor {
     type Value = Value;
 
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("a TOML value")
+        f.write_str("a number, string, boolean, array or table")
     }
 
     fn visit_bool<E>(self, v: bool) -> Result<Value, E> {
@@ -135,7 +135,10 @@ impl<'de> Visitor<'de> for ValueVisitor {
 
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Value, A::Error> {
         let mut entries = Vec::new();
-        while let Some(key) = map.next_key::<Spanned<String>>()? {
+        // toml gives a date or time as a map whose one key has no place: the only key that is
+        // not a `Spanned<String>`.
+        let datetime = |_: A::Error| <A::Error as de::Error>::invalid_type(de::Unexpected::Other("datetime"), &self);
+        while let Some(key) = map.next_key::<Spanned<String>>().map_err(datetime)? {
             entries.push((key, map.next_value::<Spanned<Value>>()?));
         }
         entries.sort_by_key(|(k, _)| k.span().start);
@@ -374,5 +377,15 @@ mod tests {
         let text = "[t]\na = 1\nlist = [-1]\n";
         let e = deserialize::<Outer>(&table(text)).unwrap_err();
         assert_eq!(&text[e.span.unwrap()], "-1");
+        // A date is no value of a scene: refused by toml's deserializer, at its place.
+        #[derive(Debug, Deserialize)]
+        #[allow(dead_code)]
+        struct Doc {
+            t: Spanned<Value>,
+        }
+        let text = "[t]\na = 1979-05-27\n";
+        let e = Doc::deserialize(toml::de::Deserializer::from(toml::de::DeTable::parse(text).unwrap())).unwrap_err();
+        assert_eq!(e.message(), "invalid type: datetime, expected a number, string, boolean, array or table");
+        assert_eq!(&text[e.span().unwrap()], "1979-05-27");
     }
 }
