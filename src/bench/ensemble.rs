@@ -166,7 +166,7 @@ impl MoleculeVisitor for Visit<'_> {
         let spread = Spread { centre, seed: ensemble.seed };
         let times = crate::ensemble::output_times(self.scene.t_end, self.scene.output_interval);
         let bound = ensemble.bind(&m, &scenes[0].1, &times)?;
-        let own = sample::sampler(&m, &bound.spec, ensemble.seed);
+        let own = bound.spec.sampler(&m, ensemble.seed);
         let (sampler, description): (&dyn Sampler<N>, String) = match &own {
             Ok(s) => (&**s, bound.description.clone()),
             Err(e) => (

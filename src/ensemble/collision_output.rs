@@ -51,7 +51,7 @@ impl MoleculeVisitor for Visit<'_> {
     where
         M: Molecule<N, NA> + Copy + Send + Sync + 'static,
     {
-        let MethodSpec::Collision(c) = &self.ensemble.method else {
+        let MethodSpec::Collision(super::method::collision::Collision(c)) = &self.ensemble.method else {
             return Err(Error::Message("the scene's ensemble method is not \"collision\"".into()));
         };
         if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {

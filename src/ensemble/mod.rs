@@ -29,6 +29,7 @@ pub mod collision_run;
 pub mod collision_scene;
 pub mod lanes;
 pub mod lifetimes;
+pub mod method;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod output;
@@ -58,7 +59,7 @@ use self::schedule::{BlockResult, Collector, Remote, Work, block_range, caught, 
 use crate::Progress;
 use crate::error::Error;
 use crate::molecules;
-use crate::runtime::sample::{self, Sampler};
+use crate::runtime::sample::Sampler;
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::chart::RunChart;
 use crate::scene::{Scene, parse_scene};
@@ -323,11 +324,12 @@ impl Visit<'_, '_> {
                             geometries)";
                 return Err(self.scene.source().error(span.clone(), why, help).into());
             }
-            return collision_output::run_and_write(&m, self.scene, self.ensemble, c, self.options).map(|r| Some(r.0));
+            return collision_output::run_and_write(&m, self.scene, self.ensemble, &c.0, self.options)
+                .map(|r| Some(r.0));
         }
         let times = output_times(self.scene.t_end, self.scene.output_interval);
         let bound = self.ensemble.bind(&m, self.scene, &times)?;
-        let sampler = sample::sampler(&m, &bound.spec, self.ensemble.seed).map_err(|e| {
+        let sampler = bound.spec.sampler(&m, self.ensemble.seed).map_err(|e| {
             self.scene.source().error(
                 self.ensemble.method_span(),
                 format!("cannot sample this ensemble: {e}"),
@@ -523,7 +525,7 @@ where
         lanes: options.lanes,
         stops: crate::start::stop_conditions(m, scene)?,
         spectrum: ensemble.spectrum.settings.clone(),
-        pairs: ensemble.pairs.as_ref().map(|p| p.bind(m, scene, &bound.spec)).transpose()?,
+        pairs: ensemble.pairs.as_ref().map(|p| p.bind(m, scene, bound.spec.spec())).transpose()?,
     };
     // `[pairs] max_energy`: the scene's sampler restricted to H_rel < E_max.
     let restricted = plan.pairs.as_ref().and_then(|p| {
@@ -657,7 +659,7 @@ where
 /// setting.
 fn run_header(scene: &Scene, ensemble: &EnsembleScene, options: &EnsembleOptions) -> Header {
     let mut bytes = scene.text.clone().into_bytes();
-    if let MethodSpec::File { path: states, .. } = &ensemble.method
+    if let Some(states) = ensemble.method.input_file()
         && let Ok(b) = std::fs::read(states)
     {
         bytes.push(0);

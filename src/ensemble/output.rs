@@ -251,10 +251,7 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         csv("lifetimes.csv", super::lifetimes::lifetimes_csv(m, plan, &report.outcome, tu, ts))?;
         csv("stops.csv", super::lifetimes::stops_csv(m, plan, &report.outcome, tu, ts))?;
     }
-    let temperature = match &ensemble.method {
-        super::scene::MethodSpec::Thermal { temperature, .. } => Some(*temperature),
-        _ => None,
-    };
+    let temperature = ensemble.method.temperature();
     files.extend(super::spectrum::write(plan, acc, temperature, dir)?);
     let spectrum = super::spectrum::spectrum(plan, acc);
     if let Some(phase) = &report.phase_space {

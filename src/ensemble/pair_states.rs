@@ -184,13 +184,13 @@ pub struct PairStates {
 }
 
 impl PairScene {
-    /// Binds the table to molecule `m` and the ensemble's sampling `spec`; every name and value
-    /// is checked at its place.
+    /// Binds the table to molecule `m` and the ensemble's sampling `spec` (None for a method that
+    /// is not one of the runtime's [`Spec`]s); every name and value is checked at its place.
     pub fn bind<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         &self,
         m: &M,
         scene: &Scene,
-        spec: &Spec<N>,
+        spec: Option<&Spec<N>>,
     ) -> Result<PairStates, FileError> {
         let src = scene.source();
         let atoms = m.atoms();
@@ -225,8 +225,8 @@ impl PairScene {
             )
         })?;
         let (region, temperature) = match spec {
-            Spec::Thermal { region, temperature } => (Some(region), Some(*temperature)),
-            Spec::Microcanonical { region, .. } => (Some(region), None),
+            Some(Spec::Thermal { region, temperature }) => (Some(region), Some(*temperature)),
+            Some(Spec::Microcanonical { region, .. }) => (Some(region), None),
             _ => (None, None),
         };
         let scale = scene.units.coordinate_to_au(coords[distance].unit, 1.0);

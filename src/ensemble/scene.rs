@@ -1,24 +1,20 @@
 //! The `[ensemble]` and `[statistics]` tables of a scene: parsed with their places, checked,
 //! converted to atomic units, and bound to the molecule (names to indices, the sampling
-//! [`Spec`]). Every error names the file, the line and what to change.
+//! [`BoundMethod`]). Every error names the file, the line and what to change.
 //!
 //! `crate::scene` parses the rest of the scene and only lets these two tables through.
 
 use std::ops::Range;
-use std::path::PathBuf;
 
 use toml::Spanned;
 
+use super::method::{self, Binding, BoundMethod};
+pub use super::method::{METHODS, MethodSpec, RegionSpec};
 use super::quantity::Quantity;
-use super::states_file::read_states;
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::{FileError, Source};
-use crate::runtime::sample::{ModeEnergies, Region, RotationSampling, Spec};
-use crate::runtime::units::EnergyUnit;
 use crate::scene::Scene;
-
-mod method;
-use crate::scene::raw::EnsembleRunKeys;
+use crate::scene::raw::{EnsembleRunKeys, RawEnsemble};
 
 /// The seed of an ensemble whose scene gives none.
 pub const DEFAULT_SEED: u64 = 0;
@@ -29,17 +25,6 @@ pub const MAX_BINS: usize = 1_000_000;
 /// The most output times an ensemble may have (each trajectory buffers its observations at
 /// every output time: 10⁶ times × a few quantities is tens of MB per thread).
 pub const MAX_OUTPUT_TIMES: usize = 1_000_000;
-
-/// The sampling methods, as spelt in scenes (one entry each in `method::VARIANTS`).
-pub const METHODS: [&str; method::VARIANTS.len()] = {
-    let mut names = [""; method::VARIANTS.len()];
-    let mut i = 0;
-    while i < names.len() {
-        names[i] = method::VARIANTS[i].name;
-        i += 1;
-    }
-    names
-};
 
 /// A parsed `[ensemble]` (with `[statistics]`), in atomic units, names not yet bound.
 #[derive(Clone, Debug)]
@@ -70,53 +55,6 @@ pub struct EnsembleScene {
     trajectories_span: Range<usize>,
 }
 
-/// A sampling method with its parameters (energies in hartree, temperatures in kelvin, J in ħ).
-#[derive(Clone, Debug)]
-pub enum MethodSpec {
-    /// Canonical at `temperature` kelvin.
-    Thermal {
-        /// Kelvin.
-        temperature: f64,
-        /// The bounded region.
-        region: RegionSpec,
-    },
-    /// On the energy shell.
-    Microcanonical {
-        /// Total energy, hartree, and where it is written.
-        energy: (f64, Range<usize>),
-        /// Fixed |J|, ħ.
-        angular_momentum: Option<f64>,
-        /// The bounded region.
-        region: RegionSpec,
-    },
-    /// Normal-mode sampling.
-    NormalModes {
-        /// Energies per mode.
-        energies: ModeEnergies,
-        /// Rotation.
-        rotation: RotationSampling,
-    },
-    /// States read from a file (path resolved against the scene's folder).
-    File {
-        /// The file.
-        path: PathBuf,
-        /// Where `file = ...` is written.
-        span: Range<usize>,
-    },
-    /// Collisions of two fragments (`[collision]`, run by `super::collision_run`).
-    Collision(Box<super::collision_scene::CollisionScene>),
-}
-
-/// `region = { energy_cap = ..., limits = { name = [lo, hi] } }`, cap in hartree, limits in the
-/// scene's units until bound.
-#[derive(Clone, Debug, Default)]
-pub struct RegionSpec {
-    /// The cap on `U(q) − U(q_ref)`, hartree, and where it is written.
-    pub energy_cap: Option<(f64, Range<usize>)>,
-    /// Limits by coordinate name, in the scene's length or angle unit.
-    pub limits: Vec<(Spanned<String>, [f64; 2])>,
-}
-
 /// The `[statistics]` table, names not yet bound.
 #[derive(Clone, Debug)]
 pub struct StatisticsSpec {
@@ -143,8 +81,8 @@ pub struct HistogramSpec {
 
 /// The ensemble bound to a molecule: what to sample and what to compute.
 pub struct Bound<const N: usize> {
-    /// The sampling specification.
-    pub spec: Spec<N>,
+    /// The sampling method bound to the molecule (its sampler: [`BoundMethod::sampler`]).
+    pub spec: BoundMethod<N>,
     /// One line saying how the states are drawn, for summary.json.
     pub description: String,
     /// Every quantity observed, means first.
@@ -162,19 +100,19 @@ pub use crate::scene::did_you_mean;
 /// Parses the `[ensemble]` and `[statistics]` tables of `scene` (which must have `[ensemble]`).
 pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
     let src = scene.source();
-    let raw = scene.tables.ensemble.clone().map_err(|e| {
-        let help = "docs/src/reference/ensemble.md (the guide's ensemble reference) lists every key of [ensemble] and [statistics]";
-        crate::scene::toml_error(&src, &e, help)
-    })?;
-    let Some(ensemble) = raw.ensemble else {
+    let raw = scene.tables.ensemble.clone().map_err(|e| crate::scene::toml_error(&src, &e, method::KEYS_HELP))?;
+    let Some(table) = raw.ensemble else {
         return Err(src.whole_file(
             "the scene has no [ensemble] table",
             "add [ensemble] with trajectories, seed and method (see docs/src/reference/ensemble.md), or use `rovib run`",
         ));
     };
+    // The keys every method takes; a key that neither they nor some method take is unknown.
+    let e: RawEnsemble = crate::scene::spanned::deserialize(&table)
+        .map_err(|e| crate::scene::spanned_error(&src, &e, method::KEYS_HELP))?;
+    method::refuse_unknown_keys(&src, &table)?;
 
     refuse_single_run_keys(&src, &raw.initial, raw.run.as_ref())?;
-    let e = ensemble.into_inner();
 
     let trajectories = *e.trajectories.get_ref();
     if trajectories < 1 {
@@ -223,19 +161,6 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
     let max_memory_gb = cap(&e.max_memory_gb, "max_memory_gb", super::resources::DEFAULT_MAX_MEMORY_GB)?;
     let max_disk_gb = cap(&e.max_disk_gb, "max_disk_gb", super::resources::DEFAULT_MAX_DISK_GB)?;
 
-    let energy_unit = match &e.energy_unit {
-        None => EnergyUnit::Hartree,
-        Some(u) => EnergyUnit::parse(u.get_ref()).ok_or_else(|| {
-            let names: Vec<&str> = EnergyUnit::SPELLINGS.iter().map(|s| s.0).collect();
-            src.error(
-                u.span(),
-                format!("unknown energy unit `{}`", u.get_ref()),
-                format!("use one of {}", names.iter().map(|n| format!("\"{n}\"")).collect::<Vec<_>>().join(", ")),
-            )
-        })?,
-    };
-    let eh = energy_unit.in_hartree();
-
     // Every trajectory keeps its observations at all output times until it ends.
     let n_times = scene.t_end / scene.output_interval;
     if n_times.is_nan() || n_times > MAX_OUTPUT_TIMES as f64 {
@@ -244,7 +169,7 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
             "raise run.output_interval (the statistics' time grid) or shorten run.end",
         ));
     }
-    let method = method::read(&method::Context { scene, src: &src, e: &e, eh })?;
+    let method = method::read(scene, &src, &e, &table)?;
 
     let statistics = match raw.statistics {
         None => StatisticsSpec { means: None, histograms: Vec::new(), correlations: Vec::new() },
@@ -378,13 +303,10 @@ fn histogram_range_is_representable(range: [f64; 2], bins: usize) -> bool {
     width.is_finite() && bin.is_normal() && bin > 4.0 * f64::EPSILON * scale
 }
 
-fn quoted(names: &[&str]) -> String {
-    names.iter().map(|n| format!("\"{n}\"")).collect::<Vec<_>>().join(", ")
-}
-
 impl EnsembleScene {
-    /// Binds the ensemble to molecule `m`: coordinate names, units, the sampling [`Spec`]
-    /// (reading the states file), the quantities and the output-time indices of histograms.
+    /// Binds the ensemble to molecule `m`: coordinate names, units, the sampling method
+    /// ([`BoundMethod`], reading a states file), the quantities and the output-time indices of
+    /// histograms.
     pub fn bind<M: Molecule<N, NA>, const N: usize, const NA: usize>(
         &self,
         m: &M,
@@ -392,112 +314,8 @@ impl EnsembleScene {
         times: &[f64],
     ) -> Result<Bound<N>, FileError> {
         let src = scene.source();
-        let coords = m.coordinates();
-        let reference_energy = || -> Result<f64, FileError> {
-            let q = m.reference_geometry().ok_or_else(|| {
-                src.error(
-                    self.method_span.clone(),
-                    format!("{} has no reference geometry to measure energies from", m.name()),
-                    format!("add `reference` values to the coordinates in {}", m.source()),
-                )
-            })?;
-            Ok(m.potential(&q))
-        };
-        let region = |r: &RegionSpec| -> Result<Region<N>, FileError> {
-            let mut limits = [None; N];
-            for (name, [lo, hi]) in &r.limits {
-                let k = coords.iter().position(|c| c.name == name.get_ref()).ok_or_else(|| {
-                    unknown_name(&src, name, &format!("{} has no coordinate", m.name()), coords.iter().map(|c| c.name))
-                })?;
-                let s = scene.units.coordinate_to_au(coords[k].unit, 1.0);
-                let (rlo, rhi) = coords[k].range;
-                let slack = |x: f64| 1e-12 * x.abs().max(1.0);
-                if lo * s < rlo - slack(rlo) || hi * s > rhi + slack(rhi) {
-                    return Err(src.error(
-                        name.span(),
-                        format!(
-                            "the limits [{lo}, {hi}] of `{}` reach outside its valid range [{}, {}] (scene units)",
-                            name.get_ref(),
-                            rlo / s,
-                            rhi / s
-                        ),
-                        "give limits within the coordinate's range (a bond angle within [0, π], a length above 0)",
-                    ));
-                }
-                limits[k] = Some((lo * s, hi * s));
-            }
-            Ok(Region { energy_cap: r.energy_cap.as_ref().map(|c| c.0), limits })
-        };
-        let (spec, description) = match &self.method {
-            MethodSpec::Thermal { temperature, region: r } => (
-                Spec::Thermal { temperature: *temperature, region: region(r)? },
-                format!("thermal (canonical) at {temperature} K"),
-            ),
-            MethodSpec::Microcanonical { energy, angular_momentum, region: r } => {
-                let u0 = reference_energy()?;
-                if energy.0 < u0 {
-                    return Err(src.error(
-                        energy.1.clone(),
-                        format!(
-                            "the energy {} hartree is below the potential at the reference geometry, {u0} hartree",
-                            energy.0
-                        ),
-                        "give a total energy above the minimum of the potential (same zero as the potential)",
-                    ));
-                }
-                if let Some((cap, at)) = &r.energy_cap
-                    && *cap < energy.0 - u0
-                {
-                    return Err(src.error(
-                        at.clone(),
-                        format!(
-                            "the energy cap {cap} hartree is below the energy above the reference, E − U(reference) = {} hartree",
-                            energy.0 - u0
-                        ),
-                        "raise region.energy_cap above E − U(reference), or lower the energy",
-                    ));
-                }
-                let d = match angular_momentum {
-                    Some(j) => format!("microcanonical at E = {} hartree, |J| = {j} hbar", energy.0),
-                    None => format!("microcanonical at E = {} hartree", energy.0),
-                };
-                (Spec::Microcanonical { energy: energy.0, angular_momentum: *angular_momentum, region: region(r)? }, d)
-            }
-            MethodSpec::NormalModes { energies, rotation } => (
-                Spec::NormalModes { energies: energies.clone(), rotation: rotation.clone() },
-                format!("normal modes, energies {energies:?}, rotation {rotation:?}"),
-            ),
-            MethodSpec::File { path, span } => {
-                let states = read_states(m, path, scene).map_err(|e| match e {
-                    Ok(located) => located,
-                    Err(message) => src.error(
-                        span.clone(),
-                        message,
-                        "give a readable CSV or extended XYZ file of states (see docs/src/reference/ensemble.md)",
-                    ),
-                })?;
-                if (states.len() as u64) < self.trajectories {
-                    return Err(src.error(
-                        self.trajectories_span.clone(),
-                        format!(
-                            "{} has {} states but trajectories = {}",
-                            path.display(),
-                            states.len(),
-                            self.trajectories
-                        ),
-                        format!("lower trajectories to at most {}, or add states to the file", states.len()),
-                    ));
-                }
-                (Spec::States(states), format!("{} states from {}", self.trajectories, path.display()))
-            }
-            MethodSpec::Collision(_) => {
-                return Err(src.error(
-                    self.method_span.clone(),
-                    "a collision ensemble runs through `rovib ensemble` (its own runner), not with another sampler",
-                    "run the scene with `rovib ensemble`",
-                ));
-            }
-        };
+        let cx = Binding::new(scene, self.method_span.clone(), (self.trajectories, self.trajectories_span.clone()));
+        let (spec, description) = self.method.bind::<M, N, NA>(m, &cx)?;
 
         // Quantities: means (or the default set), then those only histogrammed or correlated.
         let lookup = |name: &Spanned<String>| -> Result<Quantity, FileError> {
@@ -611,7 +429,7 @@ fn nearest(times: &[f64], t: f64) -> usize {
     best
 }
 
-fn unknown_name<'a>(
+pub(crate) fn unknown_name<'a>(
     src: &Source<'_>,
     name: &Spanned<String>,
     what: &str,

@@ -47,6 +47,7 @@ pub mod chart;
 mod integrator;
 pub mod potential;
 pub(crate) mod raw;
+pub(crate) mod spanned;
 pub mod variant;
 
 use integrator::integrator;
@@ -257,6 +258,16 @@ pub(crate) fn toml_error(src: &Source<'_>, e: &toml::de::Error, help: &str) -> F
     let message = toml_message(e);
     match e.span() {
         Some(span) => src.error(span, message, help),
+        None => src.whole_file(message, help),
+    }
+}
+
+/// An error reading a table kept with its places ([`spanned`]) at its place (the whole file when
+/// it has none), with `help`.
+pub(crate) fn spanned_error(src: &Source<'_>, e: &spanned::Error, help: &str) -> FileError {
+    let message = e.message.trim_end().trim_end_matches('.').to_owned();
+    match &e.span {
+        Some(span) => src.error(span.clone(), message, help),
         None => src.whole_file(message, help),
     }
 }

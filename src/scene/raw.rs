@@ -133,7 +133,9 @@ pub(crate) struct RawRun {
 
 #[derive(Clone, Debug, Deserialize)]
 pub(crate) struct EnsembleFile {
-    pub(crate) ensemble: Option<Spanned<RawEnsemble>>,
+    /// Kept with every place: its common keys are read into [`RawEnsemble`] and the method's keys
+    /// into the method's own struct (`crate::ensemble::method`).
+    pub(crate) ensemble: Option<Spanned<super::spanned::Value>>,
     pub(crate) statistics: Option<Spanned<RawStatistics>>,
     pub(crate) initial: Option<Spanned<toml::Value>>,
     pub(crate) run: Option<EnsembleRunKeys>,
@@ -147,33 +149,24 @@ pub(crate) struct EnsembleRunKeys {
     pub(crate) euler_unwrapped: Option<Spanned<toml::Value>>,
 }
 
+/// The keys of `[ensemble]` every method takes (each method's own are in its file of
+/// `src/ensemble/method/`).
 #[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawEnsemble {
-    pub(crate) trajectories: Spanned<i64>,
-    pub(crate) seed: Option<Spanned<i64>>,
-    pub(crate) method: Spanned<String>,
-    pub(crate) temperature: Option<Spanned<f64>>,
-    pub(crate) energy: Option<Spanned<f64>>,
-    pub(crate) energy_unit: Option<Spanned<String>>,
-    pub(crate) angular_momentum: Option<Spanned<f64>>,
-    pub(crate) region: Option<Spanned<RawRegion>>,
-    pub(crate) quanta: Option<Spanned<Vec<i64>>>,
-    pub(crate) mode_energies: Option<Spanned<Vec<f64>>>,
-    pub(crate) j: Option<Spanned<Vec<f64>>>,
-    pub(crate) file: Option<Spanned<String>>,
-    pub(crate) threads: Option<Spanned<i64>>,
-    pub(crate) keep_trajectories: Option<Spanned<i64>>,
-    pub(crate) max_memory_gb: Option<Spanned<f64>>,
-    pub(crate) max_disk_gb: Option<Spanned<f64>>,
-}
-
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawRegion {
-    pub(crate) energy_cap: Option<Spanned<f64>>,
-    #[serde(default)]
-    pub(crate) limits: BTreeMap<Spanned<String>, Spanned<Vec<f64>>>,
+pub struct RawEnsemble {
+    /// `trajectories = ...`.
+    pub trajectories: Spanned<i64>,
+    /// `seed = ...`.
+    pub seed: Option<Spanned<i64>>,
+    /// `method = "..."`.
+    pub method: Spanned<String>,
+    /// `threads = ...`.
+    pub threads: Option<Spanned<i64>>,
+    /// `keep_trajectories = k`.
+    pub keep_trajectories: Option<Spanned<i64>>,
+    /// `max_memory_gb = ...`.
+    pub max_memory_gb: Option<Spanned<f64>>,
+    /// `max_disk_gb = ...`.
+    pub max_disk_gb: Option<Spanned<f64>>,
 }
 
 #[derive(Clone, Debug, Deserialize)]

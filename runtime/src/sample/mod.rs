@@ -24,6 +24,17 @@
 //! The configuration of the first two is drawn by exact rejection sampling
 //! ([`configuration`]), so every state is an independent draw from its trajectory's own stream.
 //!
+//! # Adding a sampler
+//!
+//! An `[ensemble] method` of `rovib ensemble` is one file of the `rovib` crate,
+//! `src/ensemble/method/NAME.rs`: its keys, their checks, its binding to the molecule and the
+//! [`Sampler`] it builds, either one of these or its own type in that file (measured with a toy
+//! `rest` method, every trajectory at the reference geometry at rest, run end to end: one file
+//! changed; the recipe is in that folder's `mod.rs` and in the guide's architecture page). A
+//! sampler meant for this crate's users too goes here, in its own file with its `mod` line
+//! below (and a [`Spec`] variant with its arm in [`sampler`] if `sampler` should build it), and
+//! the method file calls it.
+//!
 //! # Units
 //!
 //! Atomic units: q in bohr and rad, p in ħ/bohr or ħ, J in ħ, energies in hartree; temperatures
