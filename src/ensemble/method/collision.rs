@@ -6,7 +6,7 @@ use std::convert::Infallible;
 
 use serde::Deserialize;
 
-use super::{Binding, Context, Method};
+use super::{Binding, BoundSampler, Context, Method};
 use crate::ensemble::collision_scene::{CollisionScene, parse_collision};
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::FileError;
@@ -47,12 +47,15 @@ impl Method for Collision {
             "run the scene with `rovib ensemble`",
         ))
     }
+}
 
-    fn sampler<'m, M: Molecule<N, NA> + Sync, const N: usize, const NA: usize>(
-        bound: &Infallible,
+/// A collision ensemble is never bound to a sampler ([`Collision::bind`] refuses).
+impl<const N: usize> BoundSampler<N> for Infallible {
+    fn sampler<'m, M: Molecule<N, NA> + Sync, const NA: usize>(
+        &self,
         _m: &'m M,
         _seed: u64,
     ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError> {
-        match *bound {}
+        match *self {}
     }
 }

@@ -11,7 +11,7 @@ use super::{Binding, Context, Method};
 use crate::ensemble::states_file::read_states;
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::FileError;
-use crate::runtime::sample::{SampleError, Sampler, Spec, sampler};
+use crate::runtime::sample::Spec;
 
 /// The file method's keys.
 #[derive(Deserialize)]
@@ -62,18 +62,6 @@ impl Method for File {
             ));
         }
         Ok((Spec::States(states), format!("{trajectories} states from {}", path.display())))
-    }
-
-    fn sampler<'m, M: Molecule<N, NA> + Sync, const N: usize, const NA: usize>(
-        bound: &Spec<N>,
-        m: &'m M,
-        seed: u64,
-    ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError> {
-        sampler(m, bound, seed)
-    }
-
-    fn spec<const N: usize>(bound: &Spec<N>) -> Option<&Spec<N>> {
-        Some(bound)
     }
 
     fn input_file(&self) -> Option<&Path> {

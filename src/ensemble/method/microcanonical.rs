@@ -9,7 +9,7 @@ use toml::Spanned;
 use super::{Binding, Context, Method, RegionKeys, RegionSpec};
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::FileError;
-use crate::runtime::sample::{SampleError, Sampler, Spec, sampler};
+use crate::runtime::sample::Spec;
 
 /// The microcanonical method's keys.
 #[derive(Deserialize)]
@@ -97,17 +97,5 @@ impl Method for Microcanonical {
             region: cx.region(m, r)?,
         };
         Ok((spec, d))
-    }
-
-    fn sampler<'m, M: Molecule<N, NA> + Sync, const N: usize, const NA: usize>(
-        bound: &Spec<N>,
-        m: &'m M,
-        seed: u64,
-    ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError> {
-        sampler(m, bound, seed)
-    }
-
-    fn spec<const N: usize>(bound: &Spec<N>) -> Option<&Spec<N>> {
-        Some(bound)
     }
 }

@@ -7,7 +7,7 @@
 //! the scene's one parse with every place, nested tables included), the function that checks
 //! them ([`Method::read`], each error at its place), the function that binds them to a molecule
 //! ([`Method::bind`], coordinate names to indices, energies against the potential), and the
-//! sampler it builds ([`Method::sampler`], a [`Sampler`] of the runtime). A key that is neither
+//! sampler it builds ([`BoundSampler::sampler`], a [`Sampler`] of the runtime). A key that is neither
 //! one every method takes nor a key of some method is refused at its place as unknown; a key of
 //! another method at its place ("does not apply"); an unknown method at its place with a
 //! did-you-mean.
@@ -46,6 +46,41 @@ use crate::scene::Scene;
 use crate::scene::raw::RawEnsemble;
 use crate::scene::spanned::{self, Value};
 
+/// A method bound to a molecule of `N` coordinates: it builds the sampler. The runtime's
+/// [`Spec`] is one (the built-in samplers); a method with its own sampler binds to its own type.
+pub trait BoundSampler<const N: usize>: Clone + Debug {
+    /// Its sampler for molecule `m` and the ensemble's `seed`.
+    ///
+    /// # Errors
+    ///
+    /// Why it cannot be sampled (the message says what to change).
+    fn sampler<'m, M: Molecule<N, NA> + Sync, const NA: usize>(
+        &self,
+        m: &'m M,
+        seed: u64,
+    ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError>;
+
+    /// The runtime's [`Spec`] it is, if it is one (`[pairs]` reads the sampled region and the
+    /// temperature from it).
+    fn spec(&self) -> Option<&Spec<N>> {
+        None
+    }
+}
+
+impl<const N: usize> BoundSampler<N> for Spec<N> {
+    fn sampler<'m, M: Molecule<N, NA> + Sync, const NA: usize>(
+        &self,
+        m: &'m M,
+        seed: u64,
+    ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError> {
+        crate::runtime::sample::sampler(m, self, seed)
+    }
+
+    fn spec(&self) -> Option<&Spec<N>> {
+        Some(self)
+    }
+}
+
 /// One sampling method of `[ensemble]`: one file of this folder.
 pub trait Method: Clone + Debug + Sized {
     /// Its `method = "..."`.
@@ -58,8 +93,9 @@ pub trait Method: Clone + Debug + Sized {
     type Keys: DeserializeOwned;
 
     /// What [`Method::bind`] makes of it for a molecule of `N` coordinates (the sampler's
-    /// parameters in atomic units).
-    type Bound<const N: usize>: Clone + Debug;
+    /// parameters in atomic units), which builds the sampler ([`BoundSampler`]; the runtime's
+    /// [`Spec`] is one).
+    type Bound<const N: usize>: BoundSampler<N>;
 
     /// Checks its keys, each error at its place (a missing required key at the method's:
     /// [`Context::needs`]), converted to atomic units (energies in hartree, temperatures in
@@ -80,24 +116,6 @@ pub trait Method: Clone + Debug + Sized {
         m: &M,
         cx: &Binding<'_>,
     ) -> Result<(Self::Bound<N>, String), FileError>;
-
-    /// Its sampler for molecule `m` and the ensemble's `seed`.
-    ///
-    /// # Errors
-    ///
-    /// Why the bound method cannot be sampled (the message says what to change).
-    fn sampler<'m, M: Molecule<N, NA> + Sync, const N: usize, const NA: usize>(
-        bound: &Self::Bound<N>,
-        m: &'m M,
-        seed: u64,
-    ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError>;
-
-    /// The runtime's [`Spec`] it was bound to, if it is one (`[pairs]` reads the sampled region
-    /// and the temperature from it).
-    fn spec<const N: usize>(bound: &Self::Bound<N>) -> Option<&Spec<N>> {
-        let _ = bound;
-        None
-    }
 
     /// The temperature of a canonical ensemble, kelvin (the spectrum's detailed-balance factor).
     fn temperature(&self) -> Option<f64> {
@@ -193,7 +211,7 @@ macro_rules! methods {
         }
 
         impl<const N: usize> BoundMethod<N> {
-            /// Its sampler for molecule `m` and the ensemble's `seed` ([`Method::sampler`]).
+            /// Its sampler for molecule `m` and the ensemble's `seed` ([`BoundSampler::sampler`]).
             ///
             /// # Errors
             ///
@@ -204,14 +222,14 @@ macro_rules! methods {
                 seed: u64,
             ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError> {
                 match self {
-                    $(Self::$variant(b) => <$module::$ty as Method>::sampler::<M, N, NA>(b, m, seed),)*
+                    $(Self::$variant(b) => b.sampler::<M, NA>(m, seed),)*
                 }
             }
 
-            /// The runtime's [`Spec`] it is, if it is one ([`Method::spec`]).
+            /// The runtime's [`Spec`] it is, if it is one ([`BoundSampler::spec`]).
             pub fn spec(&self) -> Option<&Spec<N>> {
                 match self {
-                    $(Self::$variant(b) => <$module::$ty as Method>::spec(b),)*
+                    $(Self::$variant(b) => b.spec(),)*
                 }
             }
         }

@@ -9,7 +9,7 @@ use super::{Binding, Context, Method};
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::FileError;
 use crate::runtime::nalgebra::Vector3;
-use crate::runtime::sample::{ModeEnergies, RotationSampling, SampleError, Sampler, Spec, sampler};
+use crate::runtime::sample::{ModeEnergies, RotationSampling, Spec};
 
 /// The normal-modes method's keys.
 #[derive(Deserialize)]
@@ -111,17 +111,5 @@ impl Method for NormalModes {
             Spec::NormalModes { energies: energies.clone(), rotation: rotation.clone() },
             format!("normal modes, energies {energies:?}, rotation {rotation:?}"),
         ))
-    }
-
-    fn sampler<'m, M: Molecule<N, NA> + Sync, const N: usize, const NA: usize>(
-        bound: &Spec<N>,
-        m: &'m M,
-        seed: u64,
-    ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError> {
-        sampler(m, bound, seed)
-    }
-
-    fn spec<const N: usize>(bound: &Spec<N>) -> Option<&Spec<N>> {
-        Some(bound)
     }
 }

@@ -7,7 +7,7 @@ use toml::Spanned;
 use super::{Binding, Context, Method, RegionKeys, RegionSpec};
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::FileError;
-use crate::runtime::sample::{SampleError, Sampler, Spec, sampler};
+use crate::runtime::sample::Spec;
 
 /// The thermal method's keys.
 #[derive(Deserialize)]
@@ -47,18 +47,6 @@ impl Method for Thermal {
             Spec::Thermal { temperature, region: cx.region(m, &self.region)? },
             format!("thermal (canonical) at {temperature} K"),
         ))
-    }
-
-    fn sampler<'m, M: Molecule<N, NA> + Sync, const N: usize, const NA: usize>(
-        bound: &Spec<N>,
-        m: &'m M,
-        seed: u64,
-    ) -> Result<Box<dyn Sampler<N> + 'm>, SampleError> {
-        sampler(m, bound, seed)
-    }
-
-    fn spec<const N: usize>(bound: &Spec<N>) -> Option<&Spec<N>> {
-        Some(bound)
     }
 
     fn temperature(&self) -> Option<f64> {
