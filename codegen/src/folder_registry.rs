@@ -20,46 +20,55 @@ pub struct Registry<'a> {
     pub example: &'a str,
 }
 
-/// The Rust text declaring the modules of `dir` (by absolute `#[path]`, so the text can be
-/// included from anywhere) and the slice of their constants; headed `@generated`. Fails with the
-/// file and what to change for a file whose name is not a module name or that does not declare
-/// the constant.
-pub fn folder_registry(dir: &Path, r: &Registry<'_>) -> Result<String, String> {
+/// The modules of `dir`: every `NAME.rs` file but `mod.rs`, `(NAME, absolute path)`, in the
+/// order of the names. Fails with the file and what to change for a name that is not in snake
+/// case (lower-case letters, digits and single underscores, starting with a letter), which the
+/// generated code needs as a module name (and, CamelCased, as a type name).
+pub fn folder_modules(dir: &Path, folder: &str) -> Result<Vec<(String, String)>, String> {
     let entries = std::fs::read_dir(dir).map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
     let mut modules = Vec::new();
     for entry in entries {
         let path = entry.map_err(|e| format!("cannot read {}: {e}", dir.display()))?.path();
-        let Some(stem) = path.file_stem().and_then(|s| s.to_str()) else { continue };
-        if path.extension().and_then(|e| e.to_str()) != Some("rs") || stem == "mod" {
+        let Some(stem) = path.file_name().and_then(|n| n.to_str()).and_then(|n| n.strip_suffix(".rs")) else {
+            continue;
+        };
+        if stem == "mod" || !path.is_file() {
             continue;
         }
-        let identifier = stem.chars().next().is_some_and(|c| c.is_ascii_lowercase() || c == '_')
-            && stem.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_');
-        if !identifier {
+        let snake = stem.starts_with(|c: char| c.is_ascii_lowercase())
+            && stem
+                .split('_')
+                .all(|w| !w.is_empty() && w.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit()));
+        if !snake {
             return Err(format!(
-                "{}: every file of {} is a module, and `{stem}` is not a module name; rename it in lower case \
-                 with underscores (e.g. energy_csv.rs)",
-                path.display(),
-                r.folder
-            ));
-        }
-        let text = std::fs::read_to_string(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        if !text.contains(&format!("const {}: {}", r.constant, r.ty)) {
-            return Err(format!(
-                "{}: every file of {} declares `pub(super) const {}: {} = ...;` (see {}); add it, or move the \
-                 file out of {}",
-                path.display(),
-                r.folder,
-                r.constant,
-                r.ty,
-                r.example,
-                r.folder
+                "{}: every file of {folder} is a module, and `{stem}` is not a module name; rename it in snake case \
+                 (lower-case letters, digits and single underscores, starting with a letter), e.g. energy_csv.rs",
+                path.display()
             ));
         }
         let path = path.to_str().ok_or_else(|| format!("{}: the path is not UTF-8", path.display()))?.to_owned();
         modules.push((stem.to_owned(), path));
     }
     modules.sort();
+    Ok(modules)
+}
+
+/// The Rust text declaring the modules of `dir` ([`folder_modules`], by absolute `#[path]`, so
+/// the text can be included from anywhere) and the slice of their constants; headed
+/// `@generated`. Fails with the file and what to change for a file whose name is not a module
+/// name or that does not declare the constant.
+pub fn folder_registry(dir: &Path, r: &Registry<'_>) -> Result<String, String> {
+    let modules = folder_modules(dir, r.folder)?;
+    for (_, path) in &modules {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {path}: {e}"))?;
+        if !text.contains(&format!("const {}: {}", r.constant, r.ty)) {
+            return Err(format!(
+                "{path}: every file of {} declares `pub(super) const {}: {} = ...;` (see {}); add it, or move the \
+                 file out of {}",
+                r.folder, r.constant, r.ty, r.example, r.folder
+            ));
+        }
+    }
     let mut source = format!(
         "// @generated from the files of {}: one module per file, in the order of the files' names.\n\
          // Do not edit; add a file to {} instead.\n\n",
@@ -128,5 +137,10 @@ mod tests {
         let dir = folder("name", &[("Energy-csv.rs", "pub(super) const OUTPUT: Output = x;")]);
         let e = folder_registry(&dir, &OUTPUTS).unwrap_err();
         assert!(e.contains("`Energy-csv` is not a module name"), "{e}");
+        for bad in ["double__underscore.rs", "_leading.rs", "trailing_.rs", "2d.rs"] {
+            let dir = folder("snake", &[(bad, "pub(super) const OUTPUT: Output = x;")]);
+            let e = folder_registry(&dir, &OUTPUTS).unwrap_err();
+            assert!(e.contains("is not a module name"), "{bad}: {e}");
+        }
     }
 }

@@ -325,9 +325,10 @@ pub(crate) fn read(
         };
         return Err(src.error(common.method.span(), format!("unknown ensemble method `{name}`"), help));
     };
+    let shared = keys::<RawEnsemble>();
     for (key, value) in table.get_ref().entries() {
         let key = key.get_ref().as_str();
-        if !takes.contains(&key) && !keys::<RawEnsemble>().contains(&key) {
+        if !takes.contains(&key) && !shared.contains(&key) {
             let its = if takes.is_empty() { "no key of its own".to_owned() } else { takes.join(", ") };
             return Err(src.error(
                 value.span(),
