@@ -47,6 +47,7 @@ pub mod chart;
 mod integrator;
 pub mod potential;
 pub(crate) mod raw;
+mod run_keys;
 pub(crate) mod spanned;
 pub mod variant;
 
@@ -285,40 +286,8 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         toml_error(&src, &e, help)
     })?;
 
-    // Without [units], lengths and angles of coordinates are in each coordinate's declared unit
-    // (`None`); Cartesian positions and velocities in bohr, Euler angles in rad.
-    let length = match &raw.units.length {
-        None => None,
-        Some(_) => Some(unit(
-            &src,
-            raw.units.length.as_ref(),
-            LengthUnit::Bohr,
-            LengthUnit::parse,
-            "length",
-            "\"bohr\", \"angstrom\"",
-        )?),
-    };
-    let angle = match &raw.units.angle {
-        None => None,
-        Some(_) => {
-            Some(unit(&src, raw.units.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?)
-        }
-    };
-    let time = unit(
-        &src,
-        raw.units.time.as_ref(),
-        TimeUnit::Au,
-        |s| match s {
-            "au" => Some(TimeUnit::Au),
-            "fs" => Some(TimeUnit::Fs),
-            "ps" => Some(TimeUnit::Ps),
-            _ => None,
-        },
-        "time",
-        "\"au\", \"fs\", \"ps\"",
-    )?;
+    let (length, angle, time) = units(&src, &raw.units)?;
     let (l, a, t) = (length.map_or(1.0, LengthUnit::in_bohr), angle.map_or(1.0, AngleUnit::in_rad), time.in_au());
-
     let initial = match (&raw.initial, &raw.ensemble) {
         (Some(i), _) => initial(&src, i, l, a, t)?,
         // An ensemble draws its own initial states.
@@ -335,113 +304,15 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
             ));
         }
     };
-    if raw.spectrum.is_some() && raw.ensemble.is_none() {
-        return Err(src.whole_file(
-            "a [spectrum] table without an [ensemble] table",
-            "add [ensemble] (see the README's \"Ensembles\") or remove [spectrum]; `rovib run` writes dipole.csv with \
-             run.outputs = [..., \"dipole\"]",
-        ));
-    }
-    if raw.collision.is_some() && raw.ensemble.is_none() {
-        return Err(src.whole_file(
-            "a [collision] table without an [ensemble] table",
-            "add [ensemble] with method = \"collision\" (see docs/src/howto/collisions.md) or remove [collision]",
-        ));
-    }
-    if raw.pairs.is_some() && raw.ensemble.is_none() {
-        return Err(src.whole_file(
-            "a [pairs] table without an [ensemble] table",
-            "add [ensemble] (pair states classify an ensemble's sampled states) or remove [pairs]",
-        ));
-    }
-    if raw.statistics.is_some() && raw.ensemble.is_none() {
-        return Err(src.whole_file(
-            "a [statistics] table without an [ensemble] table",
-            "add [ensemble] (see docs/src/reference/ensemble.md) or remove [statistics]",
-        ));
-    }
-
+    ensemble_tables_need_ensemble(&src, &raw)?;
     let run = raw.run.get_ref();
-    let t_end = positive(&src, &run.end, "run.end")? * t;
-    let output_interval = match &run.output_interval {
-        Some(dt) => positive(&src, dt, "run.output_interval")? * t,
-        None => t_end / 100.0,
-    };
-    for (x, what, span) in [
-        (t_end, "run.end", run.end.span()),
-        (output_interval, "run.output_interval", run.output_interval.as_ref().map_or(run.end.span(), |d| d.span())),
-    ] {
-        if !x.is_finite() || x == 0.0 {
-            return Err(src.error(
-                span,
-                format!("`{what}` is {} in atomic units of time", Compact(x)),
-                "give a time that is finite and non-zero in atomic units (1 a.u. = 0.0242 fs)",
-            ));
-        }
-    }
-    let max_outputs = run.max_outputs.as_ref().map_or(DEFAULT_MAX_OUTPUTS, |m| *m.get_ref());
-    let outputs_asked = (t_end / output_interval).ceil() + 1.0;
-    if outputs_asked > max_outputs as f64 {
-        return Err(src.error(
-            run.output_interval.as_ref().map_or(run.end.span(), |d| d.span()),
-            format!(
-                "the run asks for {outputs_asked:.3e} output times (end / output_interval + 1), more than {max_outputs}"
-            ),
-            "lengthen run.output_interval, shorten run.end, or raise run.max_outputs if you mean it",
-        ));
-    }
-    let outputs = match &run.outputs {
-        None => Outputs { files: crate::report::Selection::defaults(), summary: true, restart: true },
-        Some(list) => {
-            let mut o = Outputs::NONE;
-            for name in list.get_ref() {
-                match name.get_ref().as_str() {
-                    "summary" => o.summary = true,
-                    "restart" => o.restart = true,
-                    other if o.files.insert(other) => {}
-                    other => {
-                        let names = crate::report::describe_outputs();
-                        return Err(src.error(
-                            name.span(),
-                            format!("unknown output `{other}`"),
-                            match did_you_mean(other, crate::report::output_names()) {
-                                Some(m) => format!("did you mean \"{m}\"? outputs are {names}"),
-                                None => format!("outputs are {names}"),
-                            },
-                        ));
-                    }
-                }
-            }
-            o
-        }
-    };
-
+    let keys = run_keys::read(&src, run, t)?;
     let method = match &raw.integrator {
         None => Method::Dop853(Dop853Options::default()),
-        Some(i) => integrator(&src, i, t, t_end, output_interval)?,
+        Some(i) => integrator(&src, i, t, keys.t_end, keys.output_interval)?,
     };
-
-    // A frozen coordinate has zero velocity; a velocity or momentum given for it would leak
-    // into the others through the metric: refuse it where it is written.
-    if let Initial::Internal { momenta, .. } = &initial {
-        let (given, what) = match momenta {
-            Momenta::P(p) => (p, "p"),
-            Momenta::Qdot(qd) => (qd, "qdot"),
-        };
-        for (name, value) in given {
-            if *value != 0.0 && run.frozen.iter().any(|f| f.get_ref() == name.get_ref()) {
-                return Err(src.error(
-                    name.span(),
-                    format!("`{}` is frozen (run.frozen) but {what} gives it {}", name.get_ref(), Compact(*value)),
-                    format!(
-                        "a frozen coordinate has zero velocity: remove `{}` from {what}, or unfreeze it",
-                        name.get_ref()
-                    ),
-                ));
-            }
-        }
-    }
-
+    no_velocity_for_frozen(&src, &initial, &run.frozen)?;
+    let potential = potential::scene_potential(&src, raw.potential.as_ref())?;
     Ok(Scene {
         path: path.to_owned(),
         text: text.to_owned(),
@@ -451,90 +322,121 @@ pub fn parse_scene(path: &str, text: &str) -> Result<Scene, FileError> {
         initial,
         ensemble: raw.ensemble.is_some(),
         method,
-        t_end,
-        output_interval,
+        t_end: keys.t_end,
+        output_interval: keys.output_interval,
         time_unit: time,
         units: CoordinateScale {
             length: length.map(LengthUnit::in_bohr),
             angle: angle.map(AngleUnit::in_rad),
             time: t,
         },
-        outputs,
+        outputs: keys.outputs,
         frozen: run.frozen.clone(),
-        min_metric_pivot: match &run.min_metric_pivot {
-            Some(x) => {
-                let v = *x.get_ref();
-                // A relative pivot (over the block's scale) lies in (0, 1]; the runtime cannot go
-                // below PIVOT_TOLERANCE (it would raise a smaller threshold silently).
-                if !(PIVOT_TOLERANCE..1.0).contains(&v) {
-                    return Err(src.error(
-                        x.span(),
-                        format!(
-                            "`run.min_metric_pivot` must lie in [{}, 1), got {}",
-                            Compact(PIVOT_TOLERANCE),
-                            Compact(v)
-                        ),
-                        format!(
-                            "a relative pivot below {} cannot be told from a singular matrix, and 1 or more stops \
-                             every run; leave it out for the default {}",
-                            Compact(PIVOT_TOLERANCE),
-                            Compact(DEFAULT_MIN_METRIC_PIVOT)
-                        ),
-                    ));
-                }
-                v
-            }
-            None => DEFAULT_MIN_METRIC_PIVOT,
-        },
-        max_energy_error: match &run.max_energy_error {
-            Some(x) => positive(&src, x, "run.max_energy_error")?,
-            None => DEFAULT_MAX_ENERGY_ERROR,
-        },
+        min_metric_pivot: keys.min_metric_pivot,
+        max_energy_error: keys.max_energy_error,
         euler_unwrapped: run.euler_unwrapped,
         cartesian_fallback: run.cartesian_fallback.unwrap_or(true),
         chart: chart::parse(&src, run.chart.as_ref())?,
-        parameters: match raw.potential.as_ref().and_then(|p| p.parameters.as_ref()) {
-            Some(table) => named_numbers(&src, table, "potential.parameters")?,
-            None => Vec::new(),
-        },
-        library: potential::scene_library(
-            &src,
-            raw.potential.as_ref().and_then(|p| p.library.as_ref()),
-            raw.potential.as_ref().and_then(|p| p.parameters.as_ref()).map(|t| t.span()),
-        )?,
-        grid: potential::scene_grid(
-            &src,
-            raw.potential.as_ref().and_then(|p| p.grid.as_ref()),
-            raw.potential.as_ref().and_then(|p| p.outside.as_ref()),
-            raw.potential.as_ref().and_then(|p| p.library.as_ref()).map(|l| l.span()),
-            raw.potential.as_ref().and_then(|p| p.parameters.as_ref()).map(|t| t.span()),
-        )?,
-        central_differences: crate::surface_gradient::scene_gradient(
-            &src,
-            raw.potential.as_ref().and_then(|p| p.gradient.as_ref()),
-            raw.potential.as_ref().and_then(|p| p.library.as_ref()),
-        )?,
-        stop_outside: match &run.stop_outside {
-            None => Vec::new(),
-            Some(table) => table
-                .get_ref()
-                .iter()
-                .map(|(name, v)| {
-                    let what = format!("run.stop_outside.{}", name.get_ref());
-                    match v.get_ref().as_slice() {
-                        &[low, high] if !low.is_nan() && !high.is_nan() && low < high => {
-                            Ok((name.clone(), [low, high]))
-                        }
-                        _ => Err(src.error(
-                            v.span(),
-                            format!("`{what}` must be [low, high] with low < high"),
-                            "write the interval the coordinate may stay in, e.g. [0.5, 3.0] (inf allowed)",
-                        )),
-                    }
-                })
-                .collect::<Result<_, _>>()?,
-        },
+        parameters: potential.parameters,
+        library: potential.library,
+        grid: potential.grid,
+        central_differences: potential.central_differences,
+        stop_outside: keys.stop_outside,
     })
+}
+
+/// The `[units]` table: length and angle (`None` without the key: each coordinate's declared
+/// unit), time (atomic units by default).
+fn units(
+    src: &Source<'_>,
+    raw: &raw::RawUnits,
+) -> Result<(Option<LengthUnit>, Option<AngleUnit>, TimeUnit), FileError> {
+    // Without [units], lengths and angles of coordinates are in each coordinate's declared unit
+    // (`None`); Cartesian positions and velocities in bohr, Euler angles in rad.
+    let length = match &raw.length {
+        None => None,
+        Some(_) => Some(unit(
+            src,
+            raw.length.as_ref(),
+            LengthUnit::Bohr,
+            LengthUnit::parse,
+            "length",
+            "\"bohr\", \"angstrom\"",
+        )?),
+    };
+    let angle = match &raw.angle {
+        None => None,
+        Some(_) => Some(unit(src, raw.angle.as_ref(), AngleUnit::Rad, AngleUnit::parse, "angle", "\"rad\", \"deg\"")?),
+    };
+    let time = unit(
+        src,
+        raw.time.as_ref(),
+        TimeUnit::Au,
+        |s| match s {
+            "au" => Some(TimeUnit::Au),
+            "fs" => Some(TimeUnit::Fs),
+            "ps" => Some(TimeUnit::Ps),
+            _ => None,
+        },
+        "time",
+        "\"au\", \"fs\", \"ps\"",
+    )?;
+    Ok((length, angle, time))
+}
+
+/// Refuses `[spectrum]`, `[collision]`, `[pairs]` and `[statistics]` without `[ensemble]`.
+fn ensemble_tables_need_ensemble(src: &Source<'_>, raw: &raw::RawScene) -> Result<(), FileError> {
+    if raw.ensemble.is_some() {
+        return Ok(());
+    }
+    let refusal =
+        |table: &str, help: &str| Err(src.whole_file(format!("a [{table}] table without an [ensemble] table"), help));
+    if raw.spectrum.is_some() {
+        return refusal(
+            "spectrum",
+            "add [ensemble] (see the README's \"Ensembles\") or remove [spectrum]; `rovib run` writes dipole.csv with \
+             run.outputs = [..., \"dipole\"]",
+        );
+    }
+    if raw.collision.is_some() {
+        return refusal(
+            "collision",
+            "add [ensemble] with method = \"collision\" (see docs/src/howto/collisions.md) or remove [collision]",
+        );
+    }
+    if raw.pairs.is_some() {
+        return refusal(
+            "pairs",
+            "add [ensemble] (pair states classify an ensemble's sampled states) or remove [pairs]",
+        );
+    }
+    if raw.statistics.is_some() {
+        return refusal("statistics", "add [ensemble] (see docs/src/reference/ensemble.md) or remove [statistics]");
+    }
+    Ok(())
+}
+
+/// A frozen coordinate has zero velocity; a velocity or momentum given for it would leak into the
+/// others through the metric: refuses it where it is written.
+fn no_velocity_for_frozen(src: &Source<'_>, initial: &Initial, frozen: &[Spanned<String>]) -> Result<(), FileError> {
+    let Initial::Internal { momenta, .. } = initial else { return Ok(()) };
+    let (given, what) = match momenta {
+        Momenta::P(p) => (p, "p"),
+        Momenta::Qdot(qd) => (qd, "qdot"),
+    };
+    for (name, value) in given {
+        if *value != 0.0 && frozen.iter().any(|f| f.get_ref() == name.get_ref()) {
+            return Err(src.error(
+                name.span(),
+                format!("`{}` is frozen (run.frozen) but {what} gives it {}", name.get_ref(), Compact(*value)),
+                format!(
+                    "a frozen coordinate has zero velocity: remove `{}` from {what}, or unfreeze it",
+                    name.get_ref()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn unit<U: Copy>(

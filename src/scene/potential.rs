@@ -7,8 +7,45 @@ use std::path::{Path, PathBuf};
 
 use toml::Spanned;
 
+use super::Named;
+use super::raw::RawScenePotential;
 use crate::runtime::diagnostic::{FileError, Source};
 use crate::runtime::grid::Outside;
+
+/// A scene's `[potential]`, checked: what `parse_scene` puts in the scene.
+pub(super) struct ScenePotential {
+    /// `[potential.parameters]`.
+    pub(super) parameters: Vec<Named<f64>>,
+    /// `library`, resolved ([`scene_library`]).
+    pub(super) library: Option<(Spanned<String>, PathBuf)>,
+    /// `grid` and `outside` ([`scene_grid`]).
+    pub(super) grid: Option<SceneGrid>,
+    /// `gradient = "central-differences"` ([`crate::surface_gradient::scene_gradient`]).
+    pub(super) central_differences: bool,
+}
+
+/// Checks every key of `[potential]` (none without the table).
+pub(super) fn scene_potential(src: &Source<'_>, raw: Option<&RawScenePotential>) -> Result<ScenePotential, FileError> {
+    let Some(raw) = raw else {
+        return Ok(ScenePotential { parameters: Vec::new(), library: None, grid: None, central_differences: false });
+    };
+    let parameters_span = raw.parameters.as_ref().map(|t| t.span());
+    Ok(ScenePotential {
+        parameters: match &raw.parameters {
+            Some(table) => super::named_numbers(src, table, "potential.parameters")?,
+            None => Vec::new(),
+        },
+        library: scene_library(src, raw.library.as_ref(), parameters_span.clone())?,
+        grid: scene_grid(
+            src,
+            raw.grid.as_ref(),
+            raw.outside.as_ref(),
+            raw.library.as_ref().map(|l| l.span()),
+            parameters_span,
+        )?,
+        central_differences: crate::surface_gradient::scene_gradient(src, raw.gradient.as_ref(), raw.library.as_ref())?,
+    })
+}
 
 /// The checked `library` key of a scene's `[potential]` (its place, and the path resolved
 /// against the scene file's directory); `parameters` is the place of `[potential.parameters]`,
