@@ -4,7 +4,7 @@
 # prints rustc's CPU time (user + sys) and peak memory (BENCHMARKS.md, "Large molecules,
 # third step"). Needs the runtime built first in the matching profile:
 #
-#   cargo run --release -p rovib-codegen --example cost -- --write /tmp/gen molecules/h2o.toml ...
+#   cargo run --release -p rovib-codegen --features examples --example cost -- --write /tmp/gen molecules/h2o.toml ...
 #   cargo build --release -p rovib-runtime     # for `release`
 #   cargo build -p rovib-runtime               # for `test` (opt-level 1, full debug information)
 #   benches/size/compile_alone.sh /tmp/gen/h2o.rs release|test

@@ -7,7 +7,7 @@
 //   /tmp/ldl_solve_variants
 //
 // `a`: forward by columns (x ← x − x_k L_·k), backward by inner products over columns (the
-// previous version); `b`: both by inner products; `c`: forward by columns, backward by rows
+// version before `b`); `b`: both by inner products; `c`: forward by columns, backward by rows
 // (x ← x − x_k L_k·, kept); `dd`: forward by inner products over rows, backward by rows.
 use std::hint::black_box;
 const D: usize = 54;

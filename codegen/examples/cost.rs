@@ -2,10 +2,10 @@
 //! counts per generated function before and after common-subexpression elimination.
 //!
 //! ```text
-//! cargo run --release -p rovib-codegen --example cost -- molecules/*.toml
-//! cargo run --release -p rovib-codegen --example cost -- --kinetic-jacobian molecules/*.toml
-//! cargo run --release -p rovib-codegen --example cost -- --expanded molecules/*.toml
-//! cargo run --release -p rovib-codegen --example cost -- --write DIR molecules/*.toml
+//! cargo run --release -p rovib-codegen --features examples --example cost -- molecules/*.toml
+//! cargo run --release -p rovib-codegen --features examples --example cost -- --kinetic-jacobian molecules/*.toml
+//! cargo run --release -p rovib-codegen --features examples --example cost -- --expanded molecules/*.toml
+//! cargo run --release -p rovib-codegen --features examples --example cost -- --write DIR molecules/*.toml
 //! ```
 //!
 //! `--kinetic-jacobian` also generates the symbolic `kinetic_jacobian` (off by default, see
@@ -49,7 +49,7 @@ fn main() -> ExitCode {
     paths.retain(|p| p != "--kinetic-jacobian" && p != "--expanded");
     if paths.is_empty() {
         eprintln!(
-            "usage: cost MOLECULE.toml...   (e.g. cargo run --release -p rovib-codegen --example cost -- molecules/*.toml)"
+            "usage: cost MOLECULE.toml...   (e.g. cargo run --release -p rovib-codegen --features examples --example cost -- molecules/*.toml)"
         );
         return ExitCode::FAILURE;
     }

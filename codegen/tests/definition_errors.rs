@@ -486,8 +486,8 @@ fn coordinate_ranges() {
     assert_eq!(e.message, "reference value -2.05 of `r2` is outside its range [0.0, inf] bohr");
 }
 
-/// Issue 11, item 16: a label with a newline (or a comma, a space, a quote) broke `rovib list`
-/// and the comma-separated lists of messages; labels are one short word.
+/// A label with a newline (or a comma, a space, a quote) would break `rovib list` and the
+/// comma-separated lists of messages: labels are one short word.
 #[test]
 fn atom_labels_are_one_short_word() {
     for (label, shown) in [("H\\n1", "'\\n'"), ("H 1", "' '"), ("H,1", "','"), ("H\\t1", "'\\t'"), ("H\\\"1", "'\"'")] {

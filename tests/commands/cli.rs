@@ -42,8 +42,8 @@ fn list_names_every_molecule_with_atoms_and_coordinates() {
     assert_eq!(text.matches("at run time").count(), 1, "{text}");
 }
 
-/// What the build used to print as a cargo warning for the shipped linear molecules (CO2, HCN)
-/// is a note of `rovib list`, once, under the molecule; a bent molecule has none.
+/// That the shipped linear molecules (CO2, HCN) have a linear reference geometry is a note of
+/// `rovib list` (not a build warning), once, under the molecule; a bent molecule has none.
 #[test]
 fn list_notes_that_a_reference_geometry_is_linear_under_the_molecule() {
     let text = String::from_utf8(rovib(&["list"], None).stdout).unwrap();

@@ -232,7 +232,7 @@ fn frames(path: &Path) -> Vec<Vec<[f64; 3]>> {
         .collect()
 }
 
-/// Issue 11, item 15: `euler = [0, 0, 0]` (θ = 0) was refused at the start though the run
+/// `euler = [0, 0, 0]` (θ = 0, gimbal lock of the Euler angles) is a valid start: the run
 /// integrates a quaternion. It runs, and it is the same motion as the start turned by 90° about
 /// the lab x axis (rotational invariance, independent of how the orientation is stored): the
 /// same q(t) and H(t), and lab positions turned by the same rotation.
@@ -274,8 +274,8 @@ fn a_start_at_theta_zero_runs_and_is_the_turned_motion_of_a_start_at_ninety_degr
     }
 }
 
-/// Issue 11, item 15: a rigid molecule at rest with only a summary, and everything frozen with
-/// J = 0, have nothing to integrate ("dimension must be at least 1" before): they run, and the
+/// A rigid molecule at rest with only a summary, and everything frozen with J = 0, have nothing
+/// to integrate (a system of dimension 0): they run, and the
 /// summary says the energy stayed H(0) = U(q) exactly.
 #[test]
 fn nothing_to_integrate_is_a_valid_run() {
@@ -305,8 +305,8 @@ fn nothing_to_integrate_is_a_valid_run() {
     }
 }
 
-/// Issue 11, item 16: a scene read from /dev/zero grew memory without bound; input files are
-/// read up to a stated size.
+/// A scene read from /dev/zero would grow memory without bound: input files are read up to a
+/// stated size.
 #[test]
 fn an_endless_input_file_is_refused_with_its_size_limit() {
     if !Path::new("/dev/zero").exists() {
@@ -321,8 +321,8 @@ fn an_endless_input_file_is_refused_with_its_size_limit() {
     assert!(String::from_utf8(o.stderr).unwrap().contains("larger than 16777216 bytes"));
 }
 
-/// Issue 11, item 13: `rovib bench` with many output times aborted allocating 10¹⁵ bytes; it
-/// refuses with the numbers before allocating.
+/// `rovib bench` with many output times would need 10¹⁵ bytes: it refuses with the numbers
+/// before allocating.
 #[test]
 fn bench_refuses_a_scene_whose_states_would_not_fit_its_buffers() {
     let d = dir("bench");
@@ -339,7 +339,7 @@ fn bench_refuses_a_scene_whose_states_would_not_fit_its_buffers() {
     assert!(err.contains("1000000001 output times × 13 numbers × 8 bytes") && err.contains("limit of 64 MiB"), "{err}");
 }
 
-/// Issue 11, item 16: a molecule named `""` in a scene said "add molecules/.toml".
+/// A molecule named `""` in a scene is refused as an empty name, not told to "add molecules/.toml".
 #[test]
 fn an_empty_molecule_name_is_not_told_to_add_molecules_dot_toml() {
     let d = dir("noname");

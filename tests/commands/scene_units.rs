@@ -1,5 +1,5 @@
-//! Scene numbers without `[units]`: q in each coordinate's declared unit (they used to be bohr
-//! and rad), and the warning for a start far above the reference energy.
+//! Scene numbers without `[units]`: q in each coordinate's declared unit (not bohr and rad
+//! whatever the definition declares), and the warning for a start far above the reference energy.
 
 use std::path::PathBuf;
 use std::process::Command;

@@ -298,7 +298,7 @@ fn the_energy_guard_fails_trajectories_whose_energy_moves_more_than_allowed() {
     assert!(rows.iter().all(|r| r[column(&header, "n")] == 0.0 && r[column(&header, "H_mean_hartree")].is_nan()));
 }
 
-/// Issue 11, item 14: near H(0) = 0 the guard measures the change against the same absolute
+/// Near H(0) = 0 the guard measures the change against the same absolute
 /// floor as `rovib run` (`output::ENERGY_SCALE_FLOOR`), not against H(0) alone.
 #[test]
 fn the_energy_guard_near_zero_energy_uses_the_absolute_floor_like_rovib_run() {

@@ -1,4 +1,4 @@
-//! Issue 11, items 12, 13, 15 and 16: every setting of a scene is validated by the parser, at its
+//! Every setting of a scene is validated by the parser, at its
 //! place in the file, before any file is touched; numbers in messages are compact; limits on
 //! unbounded work carry their numbers and can be raised.
 
@@ -72,8 +72,8 @@ fn tolerances_outside_what_dop853_can_resolve_are_refused_where_written() {
 
 #[test]
 fn steps_that_overflow_or_exceed_the_run_are_refused_where_written() {
-    // 1e308 fs is infinite in atomic units: it used to fail only in the solver, after the
-    // outputs were truncated.
+    // 1e308 fs is infinite in atomic units: refused by the parser, at its place, not left to the
+    // solver.
     let e = error(&with("method = \"rk4\"\nstep = 1e308"));
     check(&e, INTEGRATOR_LINE + 1, &["`integrator.step` is inf in atomic units"]);
     let e = error(&with("method = \"gauss-legendre\"\nstep = 0.0"));

@@ -274,7 +274,7 @@ fn ch4_labellings_fit_or_are_mirror_images() {
 }
 
 /// NH3 of the wrong handedness (the definition's positions inverted through the centre of mass)
-/// is a mirror image, said as such (it used to say "a is singular").
+/// is a mirror image, said as such (not as "a is singular").
 #[test]
 fn nh3_of_the_wrong_handedness_is_a_mirror_image() {
     let m = Nh3;

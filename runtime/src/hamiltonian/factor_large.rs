@@ -15,8 +15,8 @@
 //! nalgebra's Cholesky below).
 //!
 //! Measured (`benches/size/ldl_variants.rs`, docs/src/history/benchmarks.md "Large molecules, fourth step"): a
-//! 54 × 54 factorization 7.1 µs with the previous version (`L` transposed, row by row with four
-//! partial sums per inner product), 3.4 µs with this one. The previous version was itself
+//! 54 × 54 factorization 7.1 µs with `L` transposed, row by row with four partial sums per inner
+//! product, 3.4 µs with this layout. The transposed layout was itself
 //! about 3 % faster than the small-block version on hexane, but ethane (18 coordinates) was
 //! slower with it than with the unrolled small-block one, hence the threshold; no shipped
 //! molecule reaches it.

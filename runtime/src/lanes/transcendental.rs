@@ -5,7 +5,7 @@
 //!
 //! Called lane by lane, the platform's libm cost about 14 % of a batched water ensemble's
 //! instructions, and a third of the eight-lane ensemble's gain on AVX-512 (docs/src/history/benchmarks.md, "Many
-//! trajectories per core", fourth round). The functions need only `+ − × ÷`, a sign flip and a
+//! trajectories per core"). The functions need only `+ − × ÷`, a sign flip and a
 //! power of two built from its exponent bits, with no fused multiply-add, so the bits do not
 //! depend on the build's target features either.
 //!
