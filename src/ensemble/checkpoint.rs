@@ -237,7 +237,7 @@ fn checked_record<'a>(header: &str, text: &'a str) -> Result<&'a str, String> {
         return Err(format!(
             "the line's sum {sum:016x} does not match its content and the header ({expected:016x}): the line was \
              changed, or copied from another checkpoint; delete this line and every line after it (their blocks \
-             run again), or run without --resume after deleting the file"
+             run again), or start afresh (without `--resume`, `EnsembleOptions::resume`) after deleting the file"
         ));
     }
     Ok(record)
@@ -303,30 +303,41 @@ impl Checkpoint {
             fail(
                 None,
                 format!(
-                    "{e} (the checkpoint of this run is at most {limit} bytes); run without --resume, after \
-                     deleting the file, to start again"
+                    "{e} (the checkpoint of this run is at most {limit} bytes); start afresh (without `--resume`, \
+                     `EnsembleOptions::resume`) after deleting the file"
                 ),
             )
         })?;
         // Only lines ending in '\n' were completely written.
         let complete = text.rfind('\n').map_or(0, |i| i + 1);
         let mut lines = text[..complete].lines();
-        let first = lines.next().ok_or_else(|| fail(Some(1), "no header; run without --resume".into()))?;
-        let found: Header = serde_json::from_str(first)
-            .map_err(|e| fail(Some(1), format!("not a checkpoint header ({e}); run without --resume")))?;
+        let first = lines.next().ok_or_else(|| {
+            fail(Some(1), "no header; start afresh (without `--resume`, `EnsembleOptions::resume`)".into())
+        })?;
+        let found: Header = serde_json::from_str(first).map_err(|e| {
+            fail(
+                Some(1),
+                format!("not a checkpoint header ({e}); start afresh (without `--resume`, `EnsembleOptions::resume`)"),
+            )
+        })?;
         if found.format != header.format {
             return Err(fail(
                 Some(1),
                 format!(
-                    "the checkpoint has format {}, this rovib writes format {}; run without --resume (after deleting \
-                     the file) to start again",
+                    "the checkpoint has format {}, this rovib writes format {}; start afresh (without `--resume`, \
+                     `EnsembleOptions::resume`) after deleting the file",
                     found.format, header.format
                 ),
             ));
         }
         if found == header.clone().with_lanes(found.lanes) && found.lanes != header.lanes {
-            let setting =
-                |lanes: bool| if lanes { "on SIMD lanes (the default)" } else { "one at a time (--no-lanes)" };
+            let setting = |lanes: bool| {
+                if lanes {
+                    "on SIMD lanes (the default)"
+                } else {
+                    "one at a time (`--no-lanes`, `EnsembleOptions::lanes = false`)"
+                }
+            };
             return Err(fail(
                 Some(1),
                 format!(
@@ -334,7 +345,11 @@ impl Checkpoint {
                      to round-off only, so the outputs would not be those of an uninterrupted run; resume {}",
                     setting(found.lanes),
                     setting(header.lanes),
-                    if found.lanes { "without --no-lanes" } else { "with --no-lanes" }
+                    if found.lanes {
+                        "on lanes (without `--no-lanes`)"
+                    } else {
+                        "one at a time (`--no-lanes`, `EnsembleOptions::lanes = false`)"
+                    }
                 ),
             ));
         }
@@ -342,8 +357,8 @@ impl Checkpoint {
             return Err(fail(
                 Some(1),
                 format!(
-                    "the checkpoint is of another run (found {found:?}, expected {header:?}); run without --resume \
-                     or restore the scene and seed it was made with"
+                    "the checkpoint is of another run (found {found:?}, expected {header:?}); start afresh (without `--resume`, \
+                     `EnsembleOptions::resume`) or restore the scene and seed it was made with"
                 ),
             ));
         }
@@ -637,7 +652,7 @@ mod tests {
         assert_eq!(e.path, path);
         let shown = e.to_string();
         assert!(shown.contains(&format!("larger than {} bytes", limit(&header))), "{shown}");
-        assert!(shown.contains("run without --resume"), "{shown}");
+        assert!(shown.contains("start afresh (without `--resume`"), "{shown}");
     }
 
     /// A checkpoint of blocks 0 and 1 whose text is then edited by `edit`; the resume's error.
@@ -697,12 +712,16 @@ mod tests {
         let e = Checkpoint::resume(&path, &other, limit(&other)).err().unwrap();
         assert_eq!(e.line, Some(1));
         let shown = e.to_string();
-        assert!(shown.contains("SIMD lanes (the default)") && shown.contains("one at a time (--no-lanes)"), "{shown}");
-        assert!(shown.contains("resume without --no-lanes"), "{shown}");
+        assert!(
+            shown.contains("SIMD lanes (the default)")
+                && shown.contains("one at a time (`--no-lanes`, `EnsembleOptions::lanes = false`)"),
+            "{shown}"
+        );
+        assert!(shown.contains("resume on lanes (without `--no-lanes`)"), "{shown}");
         let path = dir("no-lanes");
         Checkpoint::create(&path, &other).unwrap();
         let e = Checkpoint::resume(&path, &header, limit(&header)).err().unwrap();
-        assert!(e.to_string().contains("resume with --no-lanes"), "{e}");
+        assert!(e.to_string().contains("resume one at a time (`--no-lanes`"), "{e}");
         assert!(Checkpoint::resume(&path, &other, limit(&other)).is_ok());
     }
 

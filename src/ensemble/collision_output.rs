@@ -85,8 +85,8 @@ where
             .source()
             .error(
                 ensemble.method_span(),
-                "a collision ensemble cannot be resumed (`--resume`): it keeps no checkpoint",
-                "run the scene again without --resume (an interrupted run's final_states.csv keeps the \
+                "a collision ensemble cannot be resumed (`--resume`, `EnsembleOptions::resume`): it keeps no checkpoint",
+                "run the scene again without resuming (an interrupted run's final_states.csv keeps the \
                  trajectories it completed; see docs/src/reference/ensemble.md)",
             )
             .into());

@@ -46,7 +46,7 @@ use crate::runtime::sample::Sampler;
 
 /// The lane type of ensembles on a build without AVX2 (the default, baseline x86-64 with SSE2):
 /// two `f64` lanes, one 128-bit register (1.48× the one-trajectory throughput for water, against
-/// 1.37× with four lanes in two registers; BENCHMARKS.md, "Many trajectories per core").
+/// 1.37× with four lanes in two registers; docs/src/history/benchmarks.md, "Many trajectories per core (SIMD lanes)").
 #[cfg(not(target_feature = "avx2"))]
 pub type Lanes = F64x2;
 /// The lane type of ensembles on an AVX2 build without AVX-512: four `f64` lanes, one 256-bit
@@ -54,7 +54,7 @@ pub type Lanes = F64x2;
 #[cfg(all(target_feature = "avx2", not(target_feature = "avx512f")))]
 pub type Lanes = F64x4;
 /// The lane type of ensembles on an AVX-512 build: eight `f64` lanes, one 512-bit register
-/// (3.1× the one-trajectory throughput for water, against 2.2× with four lanes).
+/// (BENCHMARKS.md, the figures: the lanes' gain at each width).
 #[cfg(target_feature = "avx512f")]
 pub type Lanes = F64x8;
 /// Trajectories per vector.

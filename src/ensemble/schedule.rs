@@ -439,7 +439,7 @@ mod tests {
     /// never recorded and end with the bits of the in-order merge. (Shown able to fail: with the
     /// compaction recording one block fewer as merged than it merged, which a resume would run
     /// and count again, this test fails at the compacted file's `merged` count; with a resume
-    /// that skips a block, at `todo`; BENCHMARKS.md, "Ensembles over MPI".)
+    /// that skips a block, at `todo`; docs/src/history/benchmarks.md, "Ensembles over MPI".)
     #[test]
     fn a_run_killed_after_a_compaction_resumes_to_the_bits_of_the_in_order_merge() {
         use super::super::checkpoint::{Checkpoint, Header};

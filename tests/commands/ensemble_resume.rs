@@ -126,7 +126,7 @@ fn a_panicking_trajectory_stops_the_run_with_its_block_and_the_checkpoint_intact
     let o = ensemble(&scene, &out, &["--resume", "--no-lanes"]);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("checkpoint.jsonl:1:") && err.contains("resume without --no-lanes"), "{err}");
+    assert!(err.contains("checkpoint.jsonl:1:") && err.contains("resume on lanes (without `--no-lanes`)"), "{err}");
     ok(&ensemble(&scene, &out, &["--resume"]));
     assert_same_statistics(&reference, &out);
     assert_eq!(summary(&out)["resumed_trajectories"].as_u64().unwrap(), 64 * recorded as u64);
