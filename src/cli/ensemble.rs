@@ -52,6 +52,9 @@ pub fn describe(report: &EnsembleReport) -> String {
         report.threads,
         report.throughput()
     );
+    for note in report.threads_note.iter().chain(&report.lanes_note) {
+        text.push_str(&format!("note: {note}\n"));
+    }
     for (reason, n) in &o.failed {
         text.push_str(&format!("  {n} failed: {reason}\n"));
     }

@@ -179,10 +179,10 @@ pub struct EnsembleReport {
     pub wall_time: f64,
     /// Worker threads used (by each process).
     pub threads: usize,
-    /// Why fewer threads run than were asked for, if so (also printed, and in summary.json).
+    /// Why fewer threads run than were asked for, if so (also in summary.json; the command prints it).
     pub threads_note: Option<String>,
-    /// Why trajectories run one at a time although lanes were asked for, if so (also printed,
-    /// and in summary.json).
+    /// Why trajectories run one at a time although lanes were asked for, if so (also in
+    /// summary.json; the command prints it).
     pub lanes_note: Option<String>,
     /// Processes (MPI ranks; 1 without MPI).
     pub ranks: usize,
@@ -538,11 +538,6 @@ where
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let asked = options.threads.or(ensemble.threads);
     let (threads, threads_note) = worker_threads(asked, cores, ensemble.trajectories.div_ceil(BLOCK));
-    if let Some(note) = &threads_note
-        && !worker
-    {
-        eprintln!("note: {note}");
-    }
     let lanes_note = (options.lanes && !crate::runtime::hamiltonian::lanes::available(m)).then(|| {
         format!(
             "{} has no lane form here (a potential from a shared library or a grid file, or a large molecule): one trajectory \
@@ -550,11 +545,6 @@ where
             m.name()
         )
     });
-    if let Some(note) = &lanes_note
-        && !worker
-    {
-        eprintln!("note: {note}");
-    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
