@@ -403,7 +403,7 @@ fn co2_passes_within_7e_6_rad_of_linear_in_agreement_with_the_cartesian_propagat
     let a = approach(2e-4, 1e-13, rovib::scene::DEFAULT_MIN_METRIC_PIVOT);
     eprintln!("{APPROACH_HEADER}\n{}", a.row());
     assert!(a.stopped.is_none(), "{:?}", a.stopped);
-    // Measured: δ = 6.9e-6 rad, pivot 1.6e-12, |Δx| = 8.6e-12 bohr, 4 176 evaluations.
+    // STABILITY.md (near linear, the chart cannot switch) gives this run's δ and |Δx|.
     assert!(a.delta < 1e-5 && a.pivot_inertia < 2e-12, "δ = {:e}, pivot {:e}", a.delta, a.pivot_inertia);
     let dx = a.max_position_difference.unwrap();
     assert!(dx < 1e-10, "positions differ by {dx:e} bohr");
@@ -483,7 +483,8 @@ fn co2_closest_approach_sweep_long() {
     // Down to J_x = 2e-4 (relative pivot 1.6e-12) the copy agrees with the Cartesian
     // propagation to ~1e-11 bohr like the production path. Closer to linear π − α loses its
     // digits, the right-hand side becomes a staircase and the error grows by orders of
-    // magnitude (STABILITY.md: to ~3e-4 bohr at J_x = 3e-7), at a cost of millions of steps.
+    // magnitude (docs/src/history/stability.md, its J_x table: 3.1e-4 bohr at J_x = 3e-7), at a
+    // cost of millions of steps.
     let mut errors = Vec::new();
     for j_x in [1e-3, 3e-4, 2e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 3e-7] {
         let a = approach_unthresholded(j_x, 1e-13);
