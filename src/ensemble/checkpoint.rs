@@ -224,6 +224,11 @@ fn line_sum(header: &str, record: &[u8]) -> u64 {
     h.fold(0xcbf2_9ce4_8422_2325_u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3))
 }
 
+/// What to do when a checkpoint cannot be resumed, for the command's and the library's users.
+const AFRESH: &str = "start afresh (without `--resume`, `EnsembleOptions::resume`)";
+/// Trajectories run without lanes, as both users ask for it.
+const ONE_AT_A_TIME: &str = "one at a time (`--no-lanes`, `EnsembleOptions::lanes = false`)";
+
 /// The record of a line written by [`line`], after checking its sum against `header` (the
 /// checkpoint's first line); the error says what is wrong.
 fn checked_record<'a>(header: &str, text: &'a str) -> Result<&'a str, String> {
@@ -237,7 +242,7 @@ fn checked_record<'a>(header: &str, text: &'a str) -> Result<&'a str, String> {
         return Err(format!(
             "the line's sum {sum:016x} does not match its content and the header ({expected:016x}): the line was \
              changed, or copied from another checkpoint; delete this line and every line after it (their blocks \
-             run again), or start afresh (without `--resume`, `EnsembleOptions::resume`) after deleting the file"
+             run again), or {AFRESH} after deleting the file"
         ));
     }
     Ok(record)
@@ -302,42 +307,26 @@ impl Checkpoint {
         let text = crate::runtime::diagnostic::read_text_capped(path, limit).map_err(|e| {
             fail(
                 None,
-                format!(
-                    "{e} (the checkpoint of this run is at most {limit} bytes); start afresh (without `--resume`, \
-                     `EnsembleOptions::resume`) after deleting the file"
-                ),
+                format!("{e} (the checkpoint of this run is at most {limit} bytes); {AFRESH} after deleting the file"),
             )
         })?;
         // Only lines ending in '\n' were completely written.
         let complete = text.rfind('\n').map_or(0, |i| i + 1);
         let mut lines = text[..complete].lines();
-        let first = lines.next().ok_or_else(|| {
-            fail(Some(1), "no header; start afresh (without `--resume`, `EnsembleOptions::resume`)".into())
-        })?;
-        let found: Header = serde_json::from_str(first).map_err(|e| {
-            fail(
-                Some(1),
-                format!("not a checkpoint header ({e}); start afresh (without `--resume`, `EnsembleOptions::resume`)"),
-            )
-        })?;
+        let first = lines.next().ok_or_else(|| fail(Some(1), format!("no header; {AFRESH}")))?;
+        let found: Header = serde_json::from_str(first)
+            .map_err(|e| fail(Some(1), format!("not a checkpoint header ({e}); {AFRESH}")))?;
         if found.format != header.format {
             return Err(fail(
                 Some(1),
                 format!(
-                    "the checkpoint has format {}, this rovib writes format {}; start afresh (without `--resume`, \
-                     `EnsembleOptions::resume`) after deleting the file",
+                    "the checkpoint has format {}, this rovib writes format {}; {AFRESH} after deleting the file",
                     found.format, header.format
                 ),
             ));
         }
         if found == header.clone().with_lanes(found.lanes) && found.lanes != header.lanes {
-            let setting = |lanes: bool| {
-                if lanes {
-                    "on SIMD lanes (the default)"
-                } else {
-                    "one at a time (`--no-lanes`, `EnsembleOptions::lanes = false`)"
-                }
-            };
+            let setting = |lanes: bool| if lanes { "on SIMD lanes (the default)" } else { ONE_AT_A_TIME };
             return Err(fail(
                 Some(1),
                 format!(
@@ -345,11 +334,7 @@ impl Checkpoint {
                      to round-off only, so the outputs would not be those of an uninterrupted run; resume {}",
                     setting(found.lanes),
                     setting(header.lanes),
-                    if found.lanes {
-                        "on lanes (without `--no-lanes`)"
-                    } else {
-                        "one at a time (`--no-lanes`, `EnsembleOptions::lanes = false`)"
-                    }
+                    if found.lanes { "on lanes (without `--no-lanes`)" } else { ONE_AT_A_TIME }
                 ),
             ));
         }
@@ -357,8 +342,8 @@ impl Checkpoint {
             return Err(fail(
                 Some(1),
                 format!(
-                    "the checkpoint is of another run (found {found:?}, expected {header:?}); start afresh (without `--resume`, \
-                     `EnsembleOptions::resume`) or restore the scene and seed it was made with"
+                    "the checkpoint is of another run (found {found:?}, expected {header:?}); {AFRESH} \
+                     or restore the scene and seed it was made with"
                 ),
             ));
         }
