@@ -57,3 +57,8 @@ pub struct ReadmeDoctests;
 #[cfg(doctest)]
 #[doc = include_str!("../docs/src/reference/library.md")]
 pub struct GuideLibraryDoctests;
+
+/// The guide's page on outside surfaces: its Rust example, compiled and run likewise.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/src/howto/outside-surfaces.md")]
+pub struct GuideOutsideSurfacesDoctests;
