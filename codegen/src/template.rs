@@ -306,6 +306,41 @@ fn kinematics_impl(
     centre_of_mass_wrappers: TokenStream,
     stats: &mut Vec<FunctionStats>,
 ) -> TokenStream {
+    let (def, n, na) = (parts.def, &parts.n, &parts.na);
+    let functions = parts.emit(&kinematics_specs(parts, cartesian), stats);
+    let lanes = if parts.lanes() { parts.lane_functions().0 } else { quote!() };
+    let (atoms, coordinates) = (atom_table(def), coordinate_table(def));
+    let (name, path) = (&def.name, &def.path);
+    quote! {
+        fn name(&self) -> &'static str {
+            #name
+        }
+
+        fn source(&self) -> &'static str {
+            #path
+        }
+
+        fn atoms(&self) -> [Atom; #na] {
+            [#(#atoms),*]
+        }
+
+        fn coordinates(&self) -> [Coordinate; #n] {
+            [#(#coordinates),*]
+        }
+
+        #(#functions)*
+
+        #lanes
+
+        #centre_of_mass_wrappers
+    }
+}
+
+/// The generated functions of `impl Kinematics`, in the order they are emitted: the positions
+/// and their Jacobian, the kinetic matrices (not for a large molecule), ∂T/∂q, both at once (not
+/// for a large molecule), the internal coordinates of Cartesian positions when the molecule has
+/// a Cartesian chart, and the symbolic kinetic Jacobian on request.
+fn kinematics_specs(parts: &Parts, cartesian: Option<&CartesianExprs>) -> Vec<FunctionSpec> {
     let (def, e, n, na, q_ty) = (parts.def, parts.e, &parts.n, &parts.na, &parts.q_ty);
     let nc = e.n;
     let mut specs = vec![
@@ -413,51 +448,40 @@ fn kinematics_impl(
             barrier: None,
         });
     }
-    let functions = parts.emit(&specs, stats);
-    let lanes = if parts.lanes() { parts.lane_functions().0 } else { quote!() };
+    specs
+}
 
-    let atoms = def.atoms.iter().map(|a| {
-        let (label, element) = (&a.label, &a.element);
-        let (mass_da, mass) = (float(a.mass_da), float(a.mass_da * DALTON_IN_ELECTRON_MASSES));
-        quote!(Atom { label: #label, element: #element, mass_da: #mass_da, mass: #mass })
-    });
-    let coordinates = def.coordinates.iter().map(|c| {
-        let name = &c.name;
-        let unit = unit_tokens(c.unit);
-        let reference = match c.reference {
-            Some(r) => {
-                let r = float(r * c.unit.in_atomic_units());
-                quote!(Some(#r))
-            }
-            None => quote!(None),
-        };
-        let (low, high) = (bound(c.range.0 * c.unit.in_atomic_units()), bound(c.range.1 * c.unit.in_atomic_units()));
-        quote!(Coordinate { name: #name, unit: #unit, reference: #reference, range: (#low, #high) })
-    });
-    let (name, path) = (&def.name, &def.path);
-    quote! {
-        fn name(&self) -> &'static str {
-            #name
-        }
+/// The `Atom` entries of `atoms()`: label, element, mass in Da and in electron masses.
+fn atom_table(def: &Definition) -> Vec<TokenStream> {
+    def.atoms
+        .iter()
+        .map(|a| {
+            let (label, element) = (&a.label, &a.element);
+            let (mass_da, mass) = (float(a.mass_da), float(a.mass_da * DALTON_IN_ELECTRON_MASSES));
+            quote!(Atom { label: #label, element: #element, mass_da: #mass_da, mass: #mass })
+        })
+        .collect()
+}
 
-        fn source(&self) -> &'static str {
-            #path
-        }
-
-        fn atoms(&self) -> [Atom; #na] {
-            [#(#atoms),*]
-        }
-
-        fn coordinates(&self) -> [Coordinate; #n] {
-            [#(#coordinates),*]
-        }
-
-        #(#functions)*
-
-        #lanes
-
-        #centre_of_mass_wrappers
-    }
+/// The `Coordinate` entries of `coordinates()`: name, unit, reference and range in atomic units.
+fn coordinate_table(def: &Definition) -> Vec<TokenStream> {
+    def.coordinates
+        .iter()
+        .map(|c| {
+            let name = &c.name;
+            let unit = unit_tokens(c.unit);
+            let reference = match c.reference {
+                Some(r) => {
+                    let r = float(r * c.unit.in_atomic_units());
+                    quote!(Some(#r))
+                }
+                None => quote!(None),
+            };
+            let (low, high) =
+                (bound(c.range.0 * c.unit.in_atomic_units()), bound(c.range.1 * c.unit.in_atomic_units()));
+            quote!(Coordinate { name: #name, unit: #unit, reference: #reference, range: (#low, #high) })
+        })
+        .collect()
 }
 
 /// For a large molecule (`a` gets its centre-of-mass term at run time): the inherent `*_sparse`
