@@ -338,12 +338,14 @@ impl ModuleGraph {
         }
     }
 
+    /// Adds an edge from `own` to every module that `text` (the file `rel`, module path `path`)
+    /// names through `crate::` or through enough `super::` to leave `own`; names re-exported by
+    /// the crate root are followed to their module. `#[cfg(test)]` items are skipped.
     fn scan(&mut self, own: &str, path: &[String], rel: &Path, text: &str, reexports: &BTreeMap<String, String>) {
         let toks = tokens(text);
         // Inline modules: (brace depth at which the block closes).
         let mut inline: Vec<usize> = Vec::new();
         let mut depth = 0usize;
-        let target = |name: &str| -> Option<String> { reexports.get(name).cloned().or_else(|| Some(name.to_string())) };
         let mut i = 0;
         while i < toks.len() {
             if is_cfg_test(&toks[i..]) {
@@ -368,51 +370,15 @@ impl ModuleGraph {
                 Token::Ident(w) if w == "crate" => {
                     let after_dollar = i > 0 && toks[i - 1].0 == Token::Punct('$');
                     if !after_dollar && toks.get(i + 1).map(|t| &t.0) == Some(&Token::Path) {
-                        match toks.get(i + 2) {
-                            Some((Token::Ident(name), line)) => {
-                                if let Some(t) = target(name) {
-                                    self.add(own, &t, rel, *line);
-                                }
-                            }
-                            Some((Token::Punct('{'), _)) => {
-                                for (name, line) in group_heads(&toks, i + 2) {
-                                    if let Some(t) = target(&name) {
-                                        self.add(own, &t, rel, line);
-                                    }
-                                }
-                            }
-                            _ => {}
-                        }
+                        self.add_heads(own, &toks, i + 2, rel, reexports);
                     }
                 }
                 Token::Ident(w) if w == "super" => {
                     let before_is_path = i > 0 && toks[i - 1].0 == Token::Path;
                     if !before_is_path {
-                        let mut ups = 0;
-                        let mut j = i;
-                        while toks.get(j).map(|t| &t.0) == Some(&Token::Ident("super".into()))
-                            && toks.get(j + 1).map(|t| &t.0) == Some(&Token::Path)
-                        {
-                            ups += 1;
-                            j += 2;
-                        }
-                        let here = path.len() + inline.len();
-                        if ups > 0 && ups >= here {
-                            match toks.get(j) {
-                                Some((Token::Ident(name), line)) => {
-                                    if let Some(t) = target(name) {
-                                        self.add(own, &t, rel, *line);
-                                    }
-                                }
-                                Some((Token::Punct('{'), _)) => {
-                                    for (name, line) in group_heads(&toks, j) {
-                                        if let Some(t) = target(&name) {
-                                            self.add(own, &t, rel, line);
-                                        }
-                                    }
-                                }
-                                _ => {}
-                            }
+                        let (ups, j) = supers(&toks, i);
+                        if ups > 0 && ups >= path.len() + inline.len() {
+                            self.add_heads(own, &toks, j, rel, reexports);
                         }
                         i = j.max(i + 1);
                         continue;
@@ -421,6 +387,28 @@ impl ModuleGraph {
                 _ => {}
             }
             i += 1;
+        }
+    }
+
+    /// The edges from `own` to the module named at `toks[at]`: one name, or each head of a
+    /// `{...}` group; a name the crate root re-exports stands for its module.
+    fn add_heads(
+        &mut self,
+        own: &str,
+        toks: &[(Token, usize)],
+        at: usize,
+        rel: &Path,
+        reexports: &BTreeMap<String, String>,
+    ) {
+        let target = |name: &str| reexports.get(name).cloned().unwrap_or_else(|| name.to_string());
+        match toks.get(at) {
+            Some((Token::Ident(name), line)) => self.add(own, &target(name), rel, *line),
+            Some((Token::Punct('{'), _)) => {
+                for (name, line) in group_heads(toks, at) {
+                    self.add(own, &target(&name), rel, line);
+                }
+            }
+            _ => {}
         }
     }
 
@@ -471,6 +459,18 @@ impl ModuleGraph {
         }
         text
     }
+}
+
+/// How many `super::` start at `toks[i]`, and the index of the token after them.
+fn supers(toks: &[(Token, usize)], i: usize) -> (usize, usize) {
+    let (mut ups, mut j) = (0, i);
+    while toks.get(j).map(|t| &t.0) == Some(&Token::Ident("super".into()))
+        && toks.get(j + 1).map(|t| &t.0) == Some(&Token::Path)
+    {
+        ups += 1;
+        j += 2;
+    }
+    (ups, j)
 }
 
 #[cfg(test)]
