@@ -326,45 +326,7 @@ where
             u_min: f64::INFINITY,
         };
         let finite_box = (0..N).all(|k| this.low[k].is_finite() && this.high[k].is_finite());
-        let mut candidates = Vec::new();
-        // Angles whose box spans a whole period are drawn uniformly.
-        let uniform: [bool; N] = std::array::from_fn(|k| {
-            matches!(molecule.coordinates()[k].unit, CoordinateUnit::Angle(_))
-                && this.high[k] - this.low[k] >= std::f64::consts::TAU - 1e-9
-        });
-        if let Some(f) = hessian {
-            let gaussian: Vec<usize> = (0..N).filter(|&k| !uniform[k]).collect();
-            let sub = DMatrix::from_fn(gaussian.len(), gaussian.len(), |i, j| f[(gaussian[i], gaussian[j])]);
-            if let Some(sub_inv) = sub.cholesky().map(|c| c.inverse()) {
-                for s in [0.5, 0.75, 1.0, 1.5, 2.25, 3.4, 5.0] {
-                    let mut cov = SMatrix::<f64, N, N>::identity();
-                    for (i, &a) in gaussian.iter().enumerate() {
-                        for (j, &b) in gaussian.iter().enumerate() {
-                            cov[(a, b)] = s * kt_eff * sub_inv[(i, j)];
-                        }
-                    }
-                    if let Some(c) = cov.cholesky() {
-                        let l = c.l();
-                        candidates.push(Proposal::Gaussian { centre, l, uniform, box_weight: 0.0, log_box: 0.0 });
-                        if finite_box {
-                            let w = BOX_WEIGHT;
-                            let log_box = w.ln()
-                                + gaussian
-                                    .iter()
-                                    .map(|&k| {
-                                        l[(k, k)].abs().ln() + 0.5 * std::f64::consts::TAU.ln()
-                                            - (this.high[k] - this.low[k]).ln()
-                                    })
-                                    .sum::<f64>();
-                            candidates.push(Proposal::Gaussian { centre, l, uniform, box_weight: w, log_box });
-                        }
-                    }
-                }
-            }
-        }
-        if finite_box {
-            candidates.push(Proposal::Uniform);
-        }
+        let candidates = this.candidates(centre, hessian, kt_eff, finite_box);
         let mut best: Option<(f64, f64, Proposal<N>)> = None;
         let mut u_min = f64::INFINITY;
         if let Some(p) = this.evaluate(&centre, &Vector3::z()) {
@@ -372,64 +334,9 @@ where
         }
         for (i, proposal) in candidates.into_iter().enumerate() {
             this.proposal = proposal.clone();
-            let mut rng = stream(0x005e_ed0f_e4e1_09e5, i as u64);
-            let mut points: Vec<(f64, SVector<f64, N>)> = Vec::with_capacity(SEARCH_POINTS);
-            let mut sum = 0.0;
-            let mut max = f64::NEG_INFINITY;
-            let mut ratios = Vec::with_capacity(SEARCH_POINTS);
-            for _ in 0..SEARCH_POINTS {
-                let (x, q) = this.propose(&mut rng);
-                let j_dir = uniform_direction(&mut rng);
-                let (log_r, u) = match this.evaluate(&q, &j_dir) {
-                    Some((p, log_t)) => (log_t - this.log_proposal(&x), p.u),
-                    None => (f64::NEG_INFINITY, f64::INFINITY),
-                };
-                u_min = u_min.min(u);
-                ratios.push(log_r);
-                max = max.max(log_r);
-                let worst = this.search_objective(&x);
-                points.push((worst, x));
-            }
-            if !max.is_finite() {
-                continue;
-            }
-            // Exploration beyond the proposal's bulk, where the ratio can rise again (a Morse
-            // bond softer than its harmonic proposal): points from the proposal at three times
-            // its width and, in a finite box, uniform in the box.
-            for _ in 0..SEARCH_POINTS {
-                let (mut x, _) = this.propose(&mut rng);
-                if let Proposal::Gaussian { uniform, .. } = &this.proposal {
-                    for k in 0..N {
-                        if !uniform[k] {
-                            x[k] *= 3.0;
-                        }
-                    }
-                }
-                points.push((this.search_objective(&x), x));
-                if finite_box
-                    && let Some(x) = this.x_of(&SVector::from_fn(|k, _| {
-                        this.low[k] + (this.high[k] - this.low[k]) * rng.random::<f64>()
-                    }))
-                {
-                    points.push((this.search_objective(&x), x));
-                }
-            }
-            // The envelope: the largest worst-case ratio found, improved by a pattern search.
-            points.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let mut top = points[0].0.max(max);
-            for (v, x) in points.iter().take(SEARCH_STARTS) {
-                if v.is_finite() {
-                    top = top.max(this.pattern_search(*x, *v));
-                }
-            }
-            for &r in &ratios {
-                if r.is_finite() {
-                    sum += (r - top).exp();
-                }
-            }
-            let acceptance = sum / SEARCH_POINTS as f64 / SAFETY;
+            let Some((acceptance, log_bound)) = this.envelope(i as u64, finite_box, &mut u_min) else { continue };
             if best.as_ref().is_none_or(|b| acceptance > b.0) {
-                best = Some((acceptance, top + SAFETY.ln(), proposal));
+                best = Some((acceptance, log_bound, proposal));
             }
         }
         let Some((acceptance, log_bound, proposal)) = best else {
@@ -454,6 +361,119 @@ where
         this.acceptance = acceptance;
         this.u_min = u_min;
         Ok(this)
+    }
+
+    /// The proposals to try: Gaussians about `centre` of covariance `s·kt_eff·F⁻¹` for s from
+    /// 0.5 to 5 over the coordinates not drawn uniformly (when that part of F is positive
+    /// definite), each also mixed with the uniform box when the box is finite; and the uniform
+    /// box itself. Angles whose box spans a whole period are drawn uniformly.
+    fn candidates(
+        &self,
+        centre: SVector<f64, N>,
+        hessian: Option<SMatrix<f64, N, N>>,
+        kt_eff: f64,
+        finite_box: bool,
+    ) -> Vec<Proposal<N>> {
+        let mut candidates = Vec::new();
+        let uniform: [bool; N] = std::array::from_fn(|k| {
+            matches!(self.molecule.coordinates()[k].unit, CoordinateUnit::Angle(_))
+                && self.high[k] - self.low[k] >= std::f64::consts::TAU - 1e-9
+        });
+        if let Some(f) = hessian {
+            let gaussian: Vec<usize> = (0..N).filter(|&k| !uniform[k]).collect();
+            let sub = DMatrix::from_fn(gaussian.len(), gaussian.len(), |i, j| f[(gaussian[i], gaussian[j])]);
+            if let Some(sub_inv) = sub.cholesky().map(|c| c.inverse()) {
+                for s in [0.5, 0.75, 1.0, 1.5, 2.25, 3.4, 5.0] {
+                    let mut cov = SMatrix::<f64, N, N>::identity();
+                    for (i, &a) in gaussian.iter().enumerate() {
+                        for (j, &b) in gaussian.iter().enumerate() {
+                            cov[(a, b)] = s * kt_eff * sub_inv[(i, j)];
+                        }
+                    }
+                    if let Some(c) = cov.cholesky() {
+                        let l = c.l();
+                        candidates.push(Proposal::Gaussian { centre, l, uniform, box_weight: 0.0, log_box: 0.0 });
+                        if finite_box {
+                            let w = BOX_WEIGHT;
+                            let log_box = w.ln()
+                                + gaussian
+                                    .iter()
+                                    .map(|&k| {
+                                        l[(k, k)].abs().ln() + 0.5 * std::f64::consts::TAU.ln()
+                                            - (self.high[k] - self.low[k]).ln()
+                                    })
+                                    .sum::<f64>();
+                            candidates.push(Proposal::Gaussian { centre, l, uniform, box_weight: w, log_box });
+                        }
+                    }
+                }
+            }
+        }
+        if finite_box {
+            candidates.push(Proposal::Uniform);
+        }
+        candidates
+    }
+
+    /// The current proposal's estimated acceptance and log envelope (with the safety factor),
+    /// from `SEARCH_POINTS` draws of stream `i` and a search for the largest density-to-proposal
+    /// ratio; `None` when no draw had a non-zero density. Lowers `u_min` to the lowest energy met.
+    fn envelope(&self, i: u64, finite_box: bool, u_min: &mut f64) -> Option<(f64, f64)> {
+        let mut rng = stream(0x005e_ed0f_e4e1_09e5, i);
+        let mut points: Vec<(f64, SVector<f64, N>)> = Vec::with_capacity(SEARCH_POINTS);
+        let mut sum = 0.0;
+        let mut max = f64::NEG_INFINITY;
+        let mut ratios = Vec::with_capacity(SEARCH_POINTS);
+        for _ in 0..SEARCH_POINTS {
+            let (x, q) = self.propose(&mut rng);
+            let j_dir = uniform_direction(&mut rng);
+            let (log_r, u) = match self.evaluate(&q, &j_dir) {
+                Some((p, log_t)) => (log_t - self.log_proposal(&x), p.u),
+                None => (f64::NEG_INFINITY, f64::INFINITY),
+            };
+            *u_min = u_min.min(u);
+            ratios.push(log_r);
+            max = max.max(log_r);
+            let worst = self.search_objective(&x);
+            points.push((worst, x));
+        }
+        if !max.is_finite() {
+            return None;
+        }
+        // Exploration beyond the proposal's bulk, where the ratio can rise again (a Morse
+        // bond softer than its harmonic proposal): points from the proposal at three times
+        // its width and, in a finite box, uniform in the box.
+        for _ in 0..SEARCH_POINTS {
+            let (mut x, _) = self.propose(&mut rng);
+            if let Proposal::Gaussian { uniform, .. } = &self.proposal {
+                for k in 0..N {
+                    if !uniform[k] {
+                        x[k] *= 3.0;
+                    }
+                }
+            }
+            points.push((self.search_objective(&x), x));
+            if finite_box
+                && let Some(x) = self
+                    .x_of(&SVector::from_fn(|k, _| self.low[k] + (self.high[k] - self.low[k]) * rng.random::<f64>()))
+            {
+                points.push((self.search_objective(&x), x));
+            }
+        }
+        // The envelope: the largest worst-case ratio found, improved by a pattern search.
+        points.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut top = points[0].0.max(max);
+        for (v, x) in points.iter().take(SEARCH_STARTS) {
+            if v.is_finite() {
+                top = top.max(self.pattern_search(*x, *v));
+            }
+        }
+        for &r in &ratios {
+            if r.is_finite() {
+                sum += (r - top).exp();
+            }
+        }
+        Some((sum / SEARCH_POINTS as f64 / SAFETY, top + SAFETY.ln()))
     }
 
     /// A proposal: the proposal coordinates x (z for a Gaussian, q for uniform) and q.
