@@ -27,10 +27,12 @@
 //! Built for the default target (baseline x86-64: SSE2, no AVX, no FMA) unless RUSTFLAGS say
 //! otherwise; the program prints which vector features the build has.
 
+mod common;
+use common::thread_cpu;
+
 use std::hint::black_box;
 use std::ops::ControlFlow;
 
-use nix::time::{ClockId, clock_gettime};
 use rovib::molecules::H2o;
 use rovib::runtime::hamiltonian::PhaseState;
 use rovib::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
@@ -41,11 +43,6 @@ use rovib::runtime::nalgebra::{SVector, UnitQuaternion, Vector3};
 use rovib::scene::parse_scene;
 use rovib::start::initial_state;
 use rovib_testkit::Rng;
-
-fn cpu() -> f64 {
-    let t = clock_gettime(ClockId::CLOCK_THREAD_CPUTIME_ID).expect("thread CPU clock");
-    t.tv_sec() as f64 + t.tv_nsec() as f64 * 1e-9
-}
 
 const DIM: usize = 13;
 
@@ -78,7 +75,7 @@ fn rhs_f64(starts: &[Vec<f64>], iters: usize) -> f64 {
     let m = H2o;
     let mut system = ReducedSystem::new(&m, Reduction::none(), &template());
     let mut d = vec![0.0; DIM];
-    let t0 = cpu();
+    let t0 = thread_cpu();
     for s in starts {
         let mut y = s.clone();
         for _ in 0..iters {
@@ -89,14 +86,14 @@ fn rhs_f64(starts: &[Vec<f64>], iters: usize) -> f64 {
         }
         black_box(&y);
     }
-    (cpu() - t0) * 1e9 / (starts.len() * iters) as f64
+    (thread_cpu() - t0) * 1e9 / (starts.len() * iters) as f64
 }
 
 /// ns per trajectory-evaluation of the production right-hand side at `T`, chained.
 fn rhs_lanes<T: Real>(starts: &[Vec<f64>], iters: usize) -> f64 {
     let m = H2o;
     let mut d = vec![T::splat(0.0); DIM];
-    let t0 = cpu();
+    let t0 = thread_cpu();
     for group in starts.chunks_exact(T::LANES) {
         let mut y: Vec<T> = (0..DIM)
             .map(|i| {
@@ -116,7 +113,7 @@ fn rhs_lanes<T: Real>(starts: &[Vec<f64>], iters: usize) -> f64 {
         }
         black_box(&y);
     }
-    (cpu() - t0) * 1e9 / (starts.len() * iters) as f64
+    (thread_cpu() - t0) * 1e9 / (starts.len() * iters) as f64
 }
 
 const T_END: f64 = 1e4;
@@ -132,7 +129,7 @@ fn ensemble_scalar(starts: &[Vec<f64>]) -> (f64, f64) {
     let mut system = ReducedSystem::new(&m, Reduction::none(), &template());
     let mut solver = Dop853::new(DIM, options()).unwrap();
     let mut evals = 0;
-    let t0 = cpu();
+    let t0 = thread_cpu();
     for y0 in starts {
         let mut sink = 0.0;
         let mut observer = |_t: f64, y: &[f64]| {
@@ -143,7 +140,7 @@ fn ensemble_scalar(starts: &[Vec<f64>]) -> (f64, f64) {
         black_box(sink);
         evals += stats.rhs_evals;
     }
-    ((cpu() - t0) * 1e3 / starts.len() as f64, evals as f64 / starts.len() as f64)
+    ((thread_cpu() - t0) * 1e3 / starts.len() as f64, evals as f64 / starts.len() as f64)
 }
 
 struct Feed<'a> {
@@ -192,10 +189,10 @@ fn ensemble_lanes_run<T: Real>(starts: &[Vec<f64>], checksum: bool) -> (f64, u64
     let m = H2o;
     let mut solver = Dop853Lanes::<T>::new(DIM, options()).unwrap();
     let mut feed = Feed { starts, next: 0, sink: 0.0, checksum, xor: 0, evals: 0 };
-    let t0 = cpu();
+    let t0 = thread_cpu();
     solver.integrate(&mut ProductionLanes::new(&m, 1e-12), 0.0, T_END, INTERVAL, &mut feed).unwrap();
     black_box(feed.sink);
-    ((cpu() - t0) * 1e3 / starts.len() as f64, feed.xor)
+    ((thread_cpu() - t0) * 1e3 / starts.len() as f64, feed.xor)
 }
 
 /// `scenes/h2o_1e4au.toml`'s initial state in the production layout.
@@ -218,7 +215,7 @@ fn one_trajectory(y0: &[f64], reps: usize) -> (f64, u64) {
     let options = Dop853Options { rtol: 1e-10, atol: 1e-10, ..Default::default() };
     let mut solver = Dop853::new(DIM, options).unwrap();
     let mut evals = 0;
-    let t0 = cpu();
+    let t0 = thread_cpu();
     for _ in 0..reps {
         let mut sink = 0.0;
         let mut observer = |_t: f64, y: &[f64]| {
@@ -228,7 +225,7 @@ fn one_trajectory(y0: &[f64], reps: usize) -> (f64, u64) {
         evals = solver.integrate(&mut system, 0.0, y0, T_END, INTERVAL, &mut observer).expect("a valid run").rhs_evals;
         black_box(sink);
     }
-    ((cpu() - t0) * 1e3 / reps as f64, evals)
+    ((thread_cpu() - t0) * 1e3 / reps as f64, evals)
 }
 
 fn median(v: &mut [f64]) -> f64 {

@@ -8,16 +8,13 @@
 //! cargo run --release --features examples --example transcendental_cost -- 7
 //! ```
 
+mod common;
+use common::thread_cpu;
+
 use std::hint::black_box;
 
-use nix::time::{ClockId, clock_gettime};
 use rovib::runtime::lanes::{F64x2, F64x4, F64x8, Real};
 use rovib::runtime::transcendental;
-
-fn cpu() -> f64 {
-    let t = clock_gettime(ClockId::CLOCK_THREAD_CPUTIME_ID).expect("thread CPU clock");
-    t.tv_sec() as f64 + t.tv_nsec() as f64 * 1e-9
-}
 
 const ITERS: usize = 2_000_000;
 
@@ -27,14 +24,14 @@ fn chained<T: Real>(f: impl Fn(T) -> T) -> f64 {
     for l in 0..T::LANES {
         x.set_lane(l, 0.3 + 0.1 * l as f64);
     }
-    let t0 = cpu();
+    let t0 = thread_cpu();
     for _ in 0..ITERS {
         let y = f(x);
         // Keeps the chain (x depends on y) and the argument bounded.
         x = T::splat(0.5) * x + T::splat(1e-3) * y;
     }
     black_box(x);
-    (cpu() - t0) * 1e9 / (ITERS * T::LANES) as f64
+    (thread_cpu() - t0) * 1e9 / (ITERS * T::LANES) as f64
 }
 
 fn median(v: &mut [f64]) -> f64 {
