@@ -23,9 +23,8 @@ mod summary;
 mod tables;
 
 use super::EnsembleReport;
-use super::plot::Panel;
 #[cfg(feature = "svg")]
-use super::plot::svg;
+use super::plot::{Panel, svg};
 use super::runner::Plan;
 use super::scene::EnsembleScene;
 use crate::error::Error;
@@ -187,7 +186,11 @@ pub fn write_all<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     if let Some(census) = &report.pair_states {
         files.extend(super::pair_states::write(plan, census, &report.outcome.pair_states, (tu, ts), dir)?);
     }
+    // The plots need the `svg` feature; the CSV files above hold the same figures.
+    #[cfg(feature = "svg")]
     write_plots(dir, tables::mean_panels(plan, report, time), hist_panels, &mut files)?;
+    #[cfg(not(feature = "svg"))]
+    let _ = hist_panels;
     let summary = summary::summary_json(m, scene, ensemble, plan, report, spectrum.as_ref());
     files.push(write_summary(dir, &summary)?);
     Ok(files)
@@ -204,11 +207,9 @@ fn write_lines(dir: &Path, name: &str, lines: &[String], files: &mut Vec<PathBuf
     Ok(())
 }
 
-/// Writes ensemble.svg (the means) and histograms.svg and adds their paths to `files`. The
-/// plots need the `svg` feature; the CSV files hold the same figures.
-#[cfg_attr(not(feature = "svg"), allow(unused_variables, clippy::unnecessary_wraps))]
+/// Writes ensemble.svg (the means) and histograms.svg and adds their paths to `files`.
+#[cfg(feature = "svg")]
 fn write_plots(dir: &Path, means: Vec<Panel>, histograms: Vec<Panel>, files: &mut Vec<PathBuf>) -> Result<(), Error> {
-    #[cfg(feature = "svg")]
     for (name, panels) in [("ensemble.svg", means), ("histograms.svg", histograms)] {
         let path = dir.join(name);
         std::fs::write(&path, svg(&panels)).map_err(|e| Error::io("cannot write", &path, e))?;

@@ -108,6 +108,7 @@ pub(super) fn correlations_csv<M: Molecule<N, NA>, const N: usize, const NA: usi
 }
 
 /// A panel per mean: ⟨quantity⟩ ± standard error against time.
+#[cfg(feature = "svg")]
 pub(super) fn mean_panels<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     report: &EnsembleReport,

@@ -356,7 +356,7 @@ fn open_kept<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     pass: usize,
 ) -> Result<(Option<TrajectoryCsv>, Option<DipoleCsv>), String> {
     let csv = match &plan.keep {
-        Some((k, dir)) if index % k == 0 && pass == 0 => {
+        Some((k, dir)) if index.is_multiple_of(*k) && pass == 0 => {
             let dir = dir.join(index.to_string());
             let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
             let csv = std::fs::create_dir_all(&dir)
