@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use thiserror::Error as ThisError;
 
-use crate::runtime::diagnostic::FileError;
+use crate::runtime::diagnostic::{FileError, ReadError};
 
 /// A failure of a library call.
 #[derive(Debug, ThisError)]
@@ -64,6 +64,13 @@ pub enum Error {
 impl From<FileError> for Error {
     fn from(e: FileError) -> Self {
         Error::File(e)
+    }
+}
+
+/// An input that cannot be read is one line naming it (a [`Error::Message`]).
+impl From<ReadError> for Error {
+    fn from(e: ReadError) -> Self {
+        Error::Message(e.to_string())
     }
 }
 

@@ -142,7 +142,7 @@ impl Restart {
                  be continued",
             ));
         }
-        let text = crate::runtime::diagnostic::read_text_capped(&path, MAX_RESTART_BYTES).map_err(Error::Message)?;
+        let text = crate::runtime::diagnostic::read_text_capped(&path, MAX_RESTART_BYTES)?;
         let restart: Restart = serde_json::from_str(&text)
             .map_err(|e| Error::unusable(&path, format!(" is not a rovib restart file: {e}")))?;
         if restart.format != FORMAT {

@@ -4,9 +4,10 @@
 //! runner start here.
 
 use std::fmt;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use crate::runtime::diagnostic::{Compact, FileError, MAX_INPUT_BYTES, Source, read_text_capped};
+use crate::runtime::diagnostic::{Compact, FileError, MAX_INPUT_BYTES, ReadError, Source, read_text_capped};
 use crate::runtime::frames::{FitOptions, FrameError, LabState, body_of_lab_exact, from_lab_body};
 use crate::runtime::hamiltonian::{
     BodyState, PhaseState, ReducedSystem, Reduction, ReductionError, RotationPart, euler_momenta_from_angular_momentum,
@@ -15,7 +16,7 @@ use crate::runtime::hamiltonian::{
 use crate::runtime::integrate::OdeSystem;
 use crate::runtime::nalgebra::{SMatrix, SVector, Vector3};
 use crate::runtime::{KineticMatrices, Molecule};
-use crate::scene::{Initial, InitialAngularMomentum, Momenta, Scene, parse_scene};
+use crate::scene::{Initial, InitialAngularMomentum, Momenta, Named, Scene, parse_scene};
 
 /// Why a scene cannot start a run.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -52,11 +53,17 @@ impl From<FileError> for StartError {
     }
 }
 
+impl From<ReadError> for StartError {
+    fn from(e: ReadError) -> Self {
+        StartError::Message(e.to_string())
+    }
+}
+
 /// Reads and parses the scene at `path` and creates its output directory: `out_dir`, or by
 /// default `out/SCENE_NAME` followed by `default_subdir` (`rovib run` uses none, `rovib bench`
 /// `bench`).
 pub fn load_scene(path: &Path, out_dir: Option<&Path>, default_subdir: &str) -> Result<(Scene, PathBuf), StartError> {
-    let text = read_text_capped(path, MAX_INPUT_BYTES).map_err(StartError::Message)?;
+    let text = read_text_capped(path, MAX_INPUT_BYTES)?;
     let scene = parse_scene(&path.display().to_string(), &text)?;
     let out_dir = match out_dir {
         Some(d) => d.to_owned(),
@@ -110,109 +117,12 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     scene: &Scene,
 ) -> Result<Start<N>, FileError> {
     let src = scene.source();
-    let coords = m.coordinates();
-    let coord_names: Vec<&str> = coords.iter().map(|c| c.name).collect();
-    let index = |name: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
-        find_name(
-            &src,
-            &coord_names,
-            name,
-            || format!("{} has no coordinate `{}` (in {what})", m.name(), name.get_ref()),
-            |known| {
-                if known.is_empty() {
-                    format!("{} is rigid: remove {what}", m.name())
-                } else {
-                    format!("the coordinates of {} are {}", m.name(), known.join(", "))
-                }
-            },
-        )
-    };
     match &scene.initial {
         Initial::Internal { q, momenta, euler, rotation } => {
-            let mut qv = SVector::<f64, N>::zeros();
-            let mut given = [false; N];
-            for (name, value) in q {
-                let k = index(name, "q")?;
-                qv[k] = scene.units.coordinate_to_au(coords[k].unit, *value);
-                given[k] = true;
-                // Outside its range a coordinate describes a mirror image or no geometry at all
-                // (a negative bond length); only the start is checked, a run may leave it.
-                if !coords[k].contains(qv[k]) {
-                    let per_au = 1.0 / scene.units.coordinate_to_au(coords[k].unit, 1.0);
-                    let (low, high) = (coords[k].range.0 * per_au, coords[k].range.1 * per_au);
-                    return Err(src.error(
-                        name.span(),
-                        format!("{} = {value} is outside its valid range [{low}, {high}]", coords[k].name),
-                        format!("give {} a value in [{low}, {high}] (the scene's units)", coords[k].name),
-                    ));
-                }
-            }
-            if let Some(k) = (0..N).find(|&k| !given[k]) {
-                let reference = m.reference_geometry().ok_or_else(|| {
-                    src.error(
-                        scene.molecule.span(),
-                        format!(
-                            "the initial q does not give `{}` and {} has no reference geometry",
-                            coords[k].name,
-                            m.name()
-                        ),
-                        format!("give every coordinate in q = {{ ... }}, or add `reference` values to {}", m.source()),
-                    )
-                })?;
-                for k in (0..N).filter(|&k| !given[k]) {
-                    qv[k] = reference[k];
-                }
-            }
+            let coords = Coordinates::of(m, scene, &src);
+            let qv = coords.initial_q(q)?;
             let euler = Vector3::from(*euler);
-            // J from p_e needs W, which the scene parser has checked is defined when p_e ≠ 0.
-            let j_of_pe = |pe: &[f64; 3]| -> Result<Vector3<f64>, FileError> {
-                if *pe == [0.0; 3] {
-                    return Ok(Vector3::zeros());
-                }
-                Ok(w_matrix(&euler).map_err(|e| {
-                    src.whole_file(format!("the initial orientation: {e}"), "give j instead of pe at θ = 0 or π")
-                })? * Vector3::from(*pe))
-            };
-            let (pv, j) = match (momenta, rotation) {
-                (Momenta::P(p), rot) => {
-                    let mut pv = SVector::<f64, N>::zeros();
-                    for (name, value) in p {
-                        pv[index(name, "p")?] = *value;
-                    }
-                    let j = match rot {
-                        InitialAngularMomentum::Pe(pe) => j_of_pe(pe)?,
-                        InitialAngularMomentum::J(j) => Vector3::from(*j),
-                    };
-                    (pv, j)
-                }
-                (Momenta::Qdot(qd), rot) => {
-                    let mut qdot = SVector::<f64, N>::zeros();
-                    for (name, value) in qd {
-                        let k = index(name, "qdot")?;
-                        qdot[k] = scene.units.velocity_to_au(coords[k].unit, *value);
-                    }
-                    // J is given (or follows from p_e); then ω = I⁻¹(J − A q̇) and p = Aᵀω + a q̇.
-                    let j = match rot {
-                        InitialAngularMomentum::J(j) => Vector3::from(*j),
-                        InitialAngularMomentum::Pe(pe) => j_of_pe(pe)?,
-                    };
-                    let mut k = KineticMatrices::<N>::default();
-                    m.kinetic(&qv, &mut k);
-                    let inertia = k.inertia.cholesky().ok_or_else(|| {
-                        src.whole_file(
-                            format!(
-                                "the inertia tensor of {} is singular at the initial geometry q = {:?}",
-                                m.name(),
-                                qv.as_slice()
-                            ),
-                            "start from a geometry where the molecule is not linear",
-                        )
-                    })?;
-                    let omega = inertia.solve(&(j - k.coriolis * qdot));
-                    let (_, pv) = momenta_from_velocities(&k, &omega, &qdot);
-                    (pv, j)
-                }
-            };
+            let (pv, j) = coords.initial_momenta(&qv, &euler, momenta, rotation)?;
             let body = BodyState { q: qv, p: pv, orientation: quaternion_of_euler(&euler), j };
             Ok(Start {
                 body,
@@ -223,79 +133,239 @@ pub fn initial_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             })
         }
         Initial::Lab { positions, velocities, span } => {
-            let atoms = m.atoms();
-            let labels: Vec<&str> = atoms.iter().map(|a| a.label).collect();
-            let atom_index = |label: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
-                find_name(
-                    &src,
-                    &labels,
-                    label,
-                    || format!("{} has no atom `{}` (in {what})", m.name(), label.get_ref()),
-                    |known| format!("the atoms of {} are {}", m.name(), known.join(", ")),
-                )
-            };
-            let mut lab = LabState::<NA> { positions: SMatrix::zeros(), velocities: SMatrix::zeros() };
-            let mut given = [false; NA];
-            for (label, x) in positions {
-                let i = atom_index(label, "positions")?;
-                lab.positions.set_column(i, &Vector3::from(*x));
-                given[i] = true;
-            }
-            let missing: Vec<&str> = (0..NA).filter(|&i| !given[i]).map(|i| atoms[i].label).collect();
-            if !missing.is_empty() {
-                return Err(src.error(
-                    span.clone(),
-                    format!(
-                        "the lab-frame positions do not give atom{} {}",
-                        if missing.len() == 1 { "" } else { "s" },
-                        missing.join(", ")
-                    ),
-                    "give the position of every atom, keyed by its label",
-                ));
-            }
-            for (label, v) in velocities {
-                lab.velocities.set_column(atom_index(label, "velocities")?, &Vector3::from(*v));
-            }
+            let lab = lab_state(m, &src, positions, velocities, span)?;
             // Before the fit: a huge velocity would only make the fit's numbers overflow.
             let com = lab.centre_of_mass(&m.masses());
             check_centre_of_mass(&src, span, com.position, com.velocity, scene.t_end)?;
-            // At a linear geometry the fit's velocity report needs the (singular) metric; a
-            // molecule with closed forms q(x) takes the projections instead (`rovib run` then
-            // starts in the Cartesian chart).
-            let mut lab_start = None;
-            let fitted = match from_lab_body(m, &lab, &FitOptions::default()) {
-                Err(FrameError::SingularMetric { .. }) => {
-                    let near = m.reference_geometry().unwrap_or_else(SVector::zeros);
-                    body_of_lab_exact(m, &lab, &near).map(|(body, com)| {
-                        let mut about = lab;
-                        for i in 0..NA {
-                            about.positions.set_column(i, &(lab.positions.column(i) - com.position));
-                            about.velocities.set_column(i, &(lab.velocities.column(i) - com.velocity));
-                        }
-                        let mut y = vec![0.0; 6 * NA];
-                        about.write_to(&mut y);
-                        lab_start = Some(y);
-                        (body, com, ())
-                    })
-                }
-                other => other.map(|(body, com, _)| (body, com, ())),
-            };
-            let (body, com, _) = fitted.map_err(|e| {
-                src.error(
-                    span.clone(),
-                    format!("the lab-frame positions cannot start a run of {}: {e}", m.name()),
-                    "check the atom positions and their units",
-                )
-            })?;
-            Ok(Start {
-                body,
-                state: body.to_phase(),
-                com_position: com.position,
-                com_velocity: com.velocity,
-                lab_start,
-            })
+            fit_lab_start(m, &src, &lab, span)
         }
     }
+}
+
+/// The molecule's coordinates as an internal-form initial condition names them.
+struct Coordinates<'a, M, const N: usize, const NA: usize> {
+    m: &'a M,
+    scene: &'a Scene,
+    src: &'a Source<'a>,
+    coords: [crate::runtime::Coordinate; N],
+    names: Vec<&'static str>,
+}
+
+impl<'a, M: Molecule<N, NA>, const N: usize, const NA: usize> Coordinates<'a, M, N, NA> {
+    fn of(m: &'a M, scene: &'a Scene, src: &'a Source<'a>) -> Self {
+        let coords = m.coordinates();
+        let names = coords.iter().map(|c| c.name).collect();
+        Coordinates { m, scene, src, coords, names }
+    }
+
+    /// The index of coordinate `name`, given in `what` (`q`, `p` or `qdot`).
+    fn index(&self, name: &toml::Spanned<String>, what: &str) -> Result<usize, FileError> {
+        let m = self.m;
+        find_name(
+            self.src,
+            &self.names,
+            name,
+            || format!("{} has no coordinate `{}` (in {what})", m.name(), name.get_ref()),
+            |known| {
+                if known.is_empty() {
+                    format!("{} is rigid: remove {what}", m.name())
+                } else {
+                    format!("the coordinates of {} are {}", m.name(), known.join(", "))
+                }
+            },
+        )
+    }
+
+    /// q in atomic units: the given values, each within its coordinate's range, and the
+    /// reference geometry's for those not given.
+    fn initial_q(&self, q: &[Named<f64>]) -> Result<SVector<f64, N>, FileError> {
+        let (coords, units) = (&self.coords, &self.scene.units);
+        let mut qv = SVector::<f64, N>::zeros();
+        let mut given = [false; N];
+        for (name, value) in q {
+            let k = self.index(name, "q")?;
+            qv[k] = units.coordinate_to_au(coords[k].unit, *value);
+            given[k] = true;
+            // Outside its range a coordinate describes a mirror image or no geometry at all
+            // (a negative bond length); only the start is checked, a run may leave it.
+            if !coords[k].contains(qv[k]) {
+                let per_au = 1.0 / units.coordinate_to_au(coords[k].unit, 1.0);
+                let (low, high) = (coords[k].range.0 * per_au, coords[k].range.1 * per_au);
+                return Err(self.src.error(
+                    name.span(),
+                    format!("{} = {value} is outside its valid range [{low}, {high}]", coords[k].name),
+                    format!("give {} a value in [{low}, {high}] (the scene's units)", coords[k].name),
+                ));
+            }
+        }
+        if let Some(k) = (0..N).find(|&k| !given[k]) {
+            let m = self.m;
+            let reference = m.reference_geometry().ok_or_else(|| {
+                self.src.error(
+                    self.scene.molecule.span(),
+                    format!(
+                        "the initial q does not give `{}` and {} has no reference geometry",
+                        coords[k].name,
+                        m.name()
+                    ),
+                    format!("give every coordinate in q = {{ ... }}, or add `reference` values to {}", m.source()),
+                )
+            })?;
+            for k in (0..N).filter(|&k| !given[k]) {
+                qv[k] = reference[k];
+            }
+        }
+        Ok(qv)
+    }
+
+    /// p and the body-frame J at `qv`, from the given momenta or velocities and J or p_e.
+    fn initial_momenta(
+        &self,
+        qv: &SVector<f64, N>,
+        euler: &Vector3<f64>,
+        momenta: &Momenta,
+        rotation: &InitialAngularMomentum,
+    ) -> Result<(SVector<f64, N>, Vector3<f64>), FileError> {
+        let j_of = |rot: &InitialAngularMomentum| match rot {
+            InitialAngularMomentum::Pe(pe) => j_of_pe(self.src, euler, pe),
+            InitialAngularMomentum::J(j) => Ok(Vector3::from(*j)),
+        };
+        match momenta {
+            Momenta::P(p) => {
+                let mut pv = SVector::<f64, N>::zeros();
+                for (name, value) in p {
+                    pv[self.index(name, "p")?] = *value;
+                }
+                Ok((pv, j_of(rotation)?))
+            }
+            Momenta::Qdot(qd) => {
+                let mut qdot = SVector::<f64, N>::zeros();
+                for (name, value) in qd {
+                    let k = self.index(name, "qdot")?;
+                    qdot[k] = self.scene.units.velocity_to_au(self.coords[k].unit, *value);
+                }
+                let j = j_of(rotation)?;
+                Ok((self.momenta_of_velocities(qv, &qdot, &j)?, j))
+            }
+        }
+    }
+
+    /// p from q̇ and J: ω = I⁻¹(J − A q̇) and p = Aᵀω + a q̇.
+    fn momenta_of_velocities(
+        &self,
+        qv: &SVector<f64, N>,
+        qdot: &SVector<f64, N>,
+        j: &Vector3<f64>,
+    ) -> Result<SVector<f64, N>, FileError> {
+        let m = self.m;
+        let mut k = KineticMatrices::<N>::default();
+        m.kinetic(qv, &mut k);
+        let inertia = k.inertia.cholesky().ok_or_else(|| {
+            self.src.whole_file(
+                format!(
+                    "the inertia tensor of {} is singular at the initial geometry q = {:?}",
+                    m.name(),
+                    qv.as_slice()
+                ),
+                "start from a geometry where the molecule is not linear",
+            )
+        })?;
+        let omega = inertia.solve(&(j - k.coriolis * qdot));
+        let (_, pv) = momenta_from_velocities(&k, &omega, qdot);
+        Ok(pv)
+    }
+}
+
+/// J from the Euler-angle momenta p_e: W p_e, which the scene parser has checked is defined
+/// when p_e ≠ 0.
+fn j_of_pe(src: &Source<'_>, euler: &Vector3<f64>, pe: &[f64; 3]) -> Result<Vector3<f64>, FileError> {
+    if *pe == [0.0; 3] {
+        return Ok(Vector3::zeros());
+    }
+    Ok(w_matrix(euler)
+        .map_err(|e| src.whole_file(format!("the initial orientation: {e}"), "give j instead of pe at θ = 0 or π"))?
+        * Vector3::from(*pe))
+}
+
+/// The lab-frame positions (every atom's) and velocities, keyed by atom label.
+fn lab_state<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    src: &Source<'_>,
+    positions: &[Named<[f64; 3]>],
+    velocities: &[Named<[f64; 3]>],
+    span: &Range<usize>,
+) -> Result<LabState<NA>, FileError> {
+    let atoms = m.atoms();
+    let labels: Vec<&str> = atoms.iter().map(|a| a.label).collect();
+    let atom_index = |label: &toml::Spanned<String>, what: &str| -> Result<usize, FileError> {
+        find_name(
+            src,
+            &labels,
+            label,
+            || format!("{} has no atom `{}` (in {what})", m.name(), label.get_ref()),
+            |known| format!("the atoms of {} are {}", m.name(), known.join(", ")),
+        )
+    };
+    let mut lab = LabState::<NA> { positions: SMatrix::zeros(), velocities: SMatrix::zeros() };
+    let mut given = [false; NA];
+    for (label, x) in positions {
+        let i = atom_index(label, "positions")?;
+        lab.positions.set_column(i, &Vector3::from(*x));
+        given[i] = true;
+    }
+    let missing: Vec<&str> = (0..NA).filter(|&i| !given[i]).map(|i| atoms[i].label).collect();
+    if !missing.is_empty() {
+        return Err(src.error(
+            span.clone(),
+            format!(
+                "the lab-frame positions do not give atom{} {}",
+                if missing.len() == 1 { "" } else { "s" },
+                missing.join(", ")
+            ),
+            "give the position of every atom, keyed by its label",
+        ));
+    }
+    for (label, v) in velocities {
+        lab.velocities.set_column(atom_index(label, "velocities")?, &Vector3::from(*v));
+    }
+    Ok(lab)
+}
+
+/// The start fitted to a lab-frame state. At a linear geometry the fit's velocity report needs
+/// the (singular) metric; a molecule with closed forms q(x) takes the projections instead
+/// (`rovib run` then starts in the Cartesian chart).
+fn fit_lab_start<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    src: &Source<'_>,
+    lab: &LabState<NA>,
+    span: &Range<usize>,
+) -> Result<Start<N>, FileError> {
+    let mut lab_start = None;
+    let fitted = match from_lab_body(m, lab, &FitOptions::default()) {
+        Err(FrameError::SingularMetric { .. }) => {
+            let near = m.reference_geometry().unwrap_or_else(SVector::zeros);
+            body_of_lab_exact(m, lab, &near).map(|(body, com)| {
+                let mut about = *lab;
+                for i in 0..NA {
+                    about.positions.set_column(i, &(lab.positions.column(i) - com.position));
+                    about.velocities.set_column(i, &(lab.velocities.column(i) - com.velocity));
+                }
+                let mut y = vec![0.0; 6 * NA];
+                about.write_to(&mut y);
+                lab_start = Some(y);
+                (body, com, ())
+            })
+        }
+        other => other.map(|(body, com, _)| (body, com, ())),
+    };
+    let (body, com, _) = fitted.map_err(|e| {
+        src.error(
+            span.clone(),
+            format!("the lab-frame positions cannot start a run of {}: {e}", m.name()),
+            "check the atom positions and their units",
+        )
+    })?;
+    Ok(Start { body, state: body.to_phase(), com_position: com.position, com_velocity: com.velocity, lab_start })
 }
 
 /// The speed of light in atomic units (bohr per ħ/E_h): 1/α = 137.036.
@@ -310,7 +380,7 @@ pub const MAX_LAB_DISTANCE: f64 = 1e9;
 /// write `inf` or hundreds of digits into lab.xyz.
 fn check_centre_of_mass(
     src: &Source<'_>,
-    span: &std::ops::Range<usize>,
+    span: &Range<usize>,
     position: Vector3<f64>,
     velocity: Vector3<f64>,
     t_end: f64,

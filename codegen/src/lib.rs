@@ -336,12 +336,12 @@ pub fn generate_dirs(
         let display = format!("{display_dir}/{file_name}");
         let text = match rovib_base::input::read_text_capped(input, rovib_base::input::MAX_INPUT_BYTES) {
             Ok(t) => t,
-            Err(message) => {
+            Err(e) => {
                 errors.push(DefinitionError {
                     path: display,
                     line: 0,
                     column: 0,
-                    message,
+                    message: e.to_string(),
                     help: "a definition is readable UTF-8 text of at most 16 MiB".into(),
                     source_line: None,
                 });

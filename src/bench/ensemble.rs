@@ -88,8 +88,7 @@ impl<const N: usize> Sampler<N> for Spread<N> {
 /// Runs the ensemble benchmark of the scene at `path` (which has `[ensemble]`
 /// and no `[statistics]`) with `trajectories` trajectories (default the scene's).
 pub fn bench(path: &Path, out_dir: Option<&Path>, trajectories: Option<u64>) -> Result<EnsembleBenchReport, Error> {
-    let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)
-        .map_err(Error::Message)?;
+    let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)?;
     let name = path.display().to_string();
     let scene = parse_scene(&name, &text)?;
     if !scene.ensemble || text.lines().any(|l| l.trim_start().starts_with("[statistics]")) {

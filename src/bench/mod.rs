@@ -29,7 +29,7 @@ use crate::output::{OutputFile, energy_scale};
 use crate::plot::{Panel, Series, svg};
 use crate::runtime::diagnostic::Compact;
 use crate::runtime::hamiltonian::fast::ReducedSystem;
-use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4Options, Stats, solve};
+use crate::runtime::integrate::{Dop853Options, GaussLegendreOptions, Method, Rk4Options, SolveError, Stats, solve};
 use crate::runtime::nalgebra::SMatrix;
 use crate::runtime::{Molecule, MoleculeVisitor};
 use crate::scene::Scene;
@@ -43,7 +43,7 @@ pub struct Trial {
     /// The tolerance (DOP853) or the step in a.u. (fixed-step methods).
     pub parameter: f64,
     /// `Ok` or the reason the run failed.
-    pub status: Result<(), String>,
+    pub status: Result<(), TrialError>,
     /// Best wall time, s.
     pub wall_time: f64,
     /// Work counters of one run.
@@ -52,6 +52,22 @@ pub struct Trial {
     pub final_error: f64,
     /// max |H(t) − H(0)| / max(|H(0)|, 1e-3 hartree) at output times.
     pub energy_error: f64,
+}
+
+/// Why a run of the diagram failed: what the integrator said, and when.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{detail}")]
+pub struct TrialError {
+    /// When the run stopped, a.u., if the integrator says.
+    pub time: Option<f64>,
+    /// The integrator's message.
+    pub detail: String,
+}
+
+impl<E: std::error::Error> From<SolveError<E>> for TrialError {
+    fn from(e: SolveError<E>) -> Self {
+        TrialError { time: e.time(), detail: e.to_string() }
+    }
 }
 
 /// The result of a benchmark.
@@ -124,7 +140,7 @@ impl MoleculeVisitor for Bench<'_> {
         let outputs = check_buffer(scene, y0.len())?;
 
         // One timed run: the states at output times, the work counters, the best wall time.
-        let run = |method: &Method| -> (Result<Vec<f64>, String>, Stats, f64) {
+        let run = |method: &Method| -> (Result<Vec<f64>, TrialError>, Stats, f64) {
             let mut best = f64::INFINITY;
             let mut spent = 0.0;
             let mut repeats = 0;
@@ -142,7 +158,7 @@ impl MoleculeVisitor for Bench<'_> {
                 spent += wall;
                 repeats += 1;
                 match result {
-                    Err(e) => return (Err(e.to_string()), Stats::default(), wall),
+                    Err(e) => return (Err(e.into()), Stats::default(), wall),
                     Ok(stats) if spent >= 0.2 || repeats >= 10 => return (Ok(states), stats, best),
                     Ok(_) => {}
                 }
@@ -241,7 +257,7 @@ fn write_csv(dir: &Path, trials: &[Trial]) -> Result<PathBuf, Error> {
         let unit = if t.method == "dop853" { "rtol=atol" } else { "step_au" };
         let status = match &t.status {
             Ok(()) => "ok".to_owned(),
-            Err(e) => format!("\"failed: {}\"", e.replace('"', "'")),
+            Err(e) => format!("\"failed: {}\"", e.to_string().replace('"', "'")),
         };
         f.line(&format!(
             "{},{:e},{unit},{status},{:e},{},{},{},{:e},{:e}",
@@ -386,4 +402,19 @@ fn write_markdown(
     f.line(&s)?;
     f.flush()?;
     Ok(f.path().to_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failed_trial_says_what_the_integrator_said() {
+        let e = TrialError::from(SolveError::<std::fmt::Error>::TooManySteps { t: 2.5, y: vec![0.0], max_steps: 10 });
+        assert_eq!(e.time, Some(2.5));
+        assert_eq!(
+            e.to_string(),
+            SolveError::<std::fmt::Error>::TooManySteps { t: 2.5, y: vec![0.0], max_steps: 10 }.to_string()
+        );
+    }
 }

@@ -282,9 +282,9 @@ pub fn eval(molecule: &str, state_path: Option<&Path>) -> Result<String, Error> 
         None => None,
         Some(path) => {
             let text = if path.as_os_str() == "-" {
-                read_capped(std::io::stdin(), "the state from stdin", MAX_INPUT_BYTES).map_err(Error::Message)?
+                read_capped(std::io::stdin(), "the state from stdin", MAX_INPUT_BYTES)?
             } else {
-                read_text_capped(path, MAX_INPUT_BYTES).map_err(Error::Message)?
+                read_text_capped(path, MAX_INPUT_BYTES)?
             };
             Some(serde_json::from_str(&text).map_err(|e| Error::context(format!("invalid {file}"), e))?)
         }

@@ -226,8 +226,7 @@ impl EnsembleReport {
 
 /// Reads and parses a scene file (which may have `[ensemble]`).
 pub fn load_scene(path: &Path) -> Result<Scene, Error> {
-    let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)
-        .map_err(Error::Message)?;
+    let text = crate::runtime::diagnostic::read_text_capped(path, crate::runtime::diagnostic::MAX_INPUT_BYTES)?;
     Ok(parse_scene(&path.display().to_string(), &text)?)
 }
 
@@ -498,14 +497,94 @@ where
     }
     let worker = matches!(link, Link::Worker(_));
     // One run per folder, held until the last output is written (the other ranks write nothing).
-    let _lock = if worker {
-        None
-    } else {
-        std::fs::create_dir_all(&options.out_dir)
-            .map_err(|e| Error::context(format!("cannot create {}", options.out_dir.display()), e))?;
-        Some(crate::dir_lock::DirLock::acquire(&options.out_dir)?)
+    let _lock = if worker { None } else { Some(lock_out_dir(&options.out_dir)?) };
+    let plan = make_plan(m, scene, ensemble, &bound, options, reduction, chart)?;
+    // `[pairs] max_energy`: the scene's sampler restricted to H_rel < E_max.
+    let restricted = plan.pairs.as_ref().and_then(|p| {
+        p.max_energy.map(|e| pair_states::RestrictedSampler(pair_states::Restricted::new(sampler, m, p, e)))
+    });
+    let sampler: &dyn Sampler<N> = match &restricted {
+        Some(r) => r,
+        None => sampler,
     };
-    let plan = Plan {
+    let threads = Threads::of(m, ensemble, options);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.threads)
+        .build()
+        .map_err(|e| Error::context("cannot start the worker threads", e))?;
+    let n = ensemble.trajectories;
+    let tally = Tally::default();
+    let run = |b: u64| -> BlockResult {
+        caught(b, n, || run_block(&plan, sampler, block_range(b, n), &options.stop, &tally))
+    };
+    let work = Work { threads: threads.threads, pool: &pool, run: &run, stop: &options.stop, progress: &tally };
+
+    let empty = Outcome::new(Accumulators::new(&plan));
+    let identity = Identity { header: run_header(scene, ensemble, options), layout: Layout::of(&empty.statistics) };
+    let remote = match link {
+        Link::Worker(w) => {
+            w.serve(&work, &identity)?;
+            return Ok(None);
+        }
+        Link::Root(r) => {
+            r.expect(identity);
+            Some(r)
+        }
+        Link::Alone => None,
+    };
+    let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options, &empty)?;
+    // From here on the folder is this run's: nothing of an earlier run stays, and the summary
+    // says "running" until it says how the run ended.
+    let failed = |error: &str| fail_run(options, scene, m.name(), n, error);
+    output::remove_stale_outputs(&options.out_dir, options.resume)?;
+    output::write_running(&options.out_dir, scene, m.name(), n, options.resume)?;
+    let mut collector = Collector::new(n, empty, resumed, checkpoint, ranks);
+    tally.done.fetch_add(collector.resumed(), Ordering::Relaxed);
+    let begin = Instant::now();
+    let result = coordinate(&work, &mut collector, remote, &mut || progress(tally.progress(n)));
+    let wall_time = begin.elapsed().as_secs_f64();
+    if let Err(e) = result {
+        return Err(failed(&stopped_message(options, &e)));
+    }
+    let resumed = collector.resumed();
+    let (total, blocks_by_rank, checkpoint) =
+        collector.finish().map_err(|e| failed(&format!("the ensemble stopped: {e}")))?;
+    let ran = Ran { total, blocks_by_rank, resumed, wall_time, ranks };
+    let census = (sampler, restricted.as_ref().map(|r| &r.0));
+    let mut report = assemble_report(m, &plan, ensemble, options, census, description, threads, ran);
+    report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)
+        .map_err(|e| failed(&format!("the ensemble ran, but its outputs could not be written: {e}")))?;
+    if let Some(c) = checkpoint
+        && report.status != Status::Interrupted
+    {
+        // Every trajectory ran and the outputs are written: the checkpoint has served.
+        std::fs::remove_file(c.path())
+            .map_err(|e| Error::context(format!("cannot remove {}", c.path().display()), e))?;
+    }
+    Ok(Some(report))
+}
+
+/// Creates the output folder and takes its lock: one run per folder.
+fn lock_out_dir(dir: &Path) -> Result<crate::dir_lock::DirLock, Error> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::context(format!("cannot create {}", dir.display()), e))?;
+    crate::dir_lock::DirLock::acquire(dir)
+}
+
+/// The plan every block runs: the scene's run settings, the bound quantities, the stop
+/// conditions and the pair states bound to `m`.
+fn make_plan<'m, M, const N: usize, const NA: usize>(
+    m: &'m M,
+    scene: &Scene,
+    ensemble: &EnsembleScene,
+    bound: &Bound<N>,
+    options: &EnsembleOptions,
+    reduction: crate::runtime::hamiltonian::Reduction<N>,
+    chart: RunChart,
+) -> Result<Plan<'m, M, N, NA>, Error>
+where
+    M: Molecule<N, NA> + Sync,
+{
+    Ok(Plan {
         molecule: m,
         reduction,
         method: scene.method,
@@ -526,82 +605,89 @@ where
         stops: crate::start::stop_conditions(m, scene)?,
         spectrum: ensemble.spectrum.settings.clone(),
         pairs: ensemble.pairs.as_ref().map(|p| p.bind(m, scene, bound.spec.spec())).transpose()?,
-    };
-    // `[pairs] max_energy`: the scene's sampler restricted to H_rel < E_max.
-    let restricted = plan.pairs.as_ref().and_then(|p| {
-        p.max_energy.map(|e| pair_states::RestrictedSampler(pair_states::Restricted::new(sampler, m, p, e)))
-    });
-    let sampler: &dyn Sampler<N> = match &restricted {
-        Some(r) => r,
-        None => sampler,
-    };
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let asked = options.threads.or(ensemble.threads);
-    let (threads, threads_note) = worker_threads(asked, cores, ensemble.trajectories.div_ceil(BLOCK));
-    let lanes_note = (options.lanes && !crate::runtime::hamiltonian::lanes::available(m)).then(|| {
-        format!(
-            "{} has no lane form here (a potential from a shared library or a grid file, or a large molecule): one trajectory \
-             at a time on each thread",
-            m.name()
-        )
-    });
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::context("cannot start the worker threads", e))?;
-    let n = ensemble.trajectories;
-    let tally = Tally::default();
-    let run = |b: u64| -> BlockResult {
-        caught(b, n, || run_block(&plan, sampler, block_range(b, n), &options.stop, &tally))
-    };
-    let work = Work { threads, pool: &pool, run: &run, stop: &options.stop, progress: &tally };
+    })
+}
 
-    let empty = Outcome::new(Accumulators::new(&plan));
-    let identity = Identity { header: run_header(scene, ensemble, options), layout: Layout::of(&empty.statistics) };
-    let remote = match link {
-        Link::Worker(w) => {
-            w.serve(&work, &identity)?;
-            return Ok(None);
-        }
-        Link::Root(r) => {
-            r.expect(identity);
-            Some(r)
-        }
-        Link::Alone => None,
-    };
-    let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options, &empty)?;
-    // From here on the folder is this run's: nothing of an earlier run stays, and the summary
-    // says "running" until it says how the run ended.
-    let dir = &options.out_dir;
-    let failed = |error: &str| {
-        let checkpoint = options.checkpoint.then(|| dir.join(CHECKPOINT_FILE));
-        // The error itself is what matters; a summary that cannot be written is mentioned.
-        match output::write_failed(dir, scene, m.name(), n, error, checkpoint.as_deref()) {
-            Ok(_) => Error::Message(error.to_owned()),
-            Err(e) => Error::Message(format!("{error}; also {e} (summary.json may still say \"running\")")),
-        }
-    };
-    output::remove_stale_outputs(dir, options.resume)?;
-    output::write_running(dir, scene, m.name(), n, options.resume)?;
-    let mut collector = Collector::new(n, empty, resumed, checkpoint, ranks);
-    tally.done.fetch_add(collector.resumed(), Ordering::Relaxed);
-    let begin = Instant::now();
-    let result = coordinate(&work, &mut collector, remote, &mut || progress(tally.progress(n)));
-    let wall_time = begin.elapsed().as_secs_f64();
-    if let Err(e) = result {
-        let kept = if options.checkpoint {
+/// The worker threads of a run, and why fewer run than were asked for or why trajectories run
+/// one at a time although lanes were asked for, if so.
+struct Threads {
+    threads: usize,
+    threads_note: Option<String>,
+    lanes_note: Option<String>,
+}
+
+impl Threads {
+    fn of<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+        m: &M,
+        ensemble: &EnsembleScene,
+        options: &EnsembleOptions,
+    ) -> Self {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let asked = options.threads.or(ensemble.threads);
+        let (threads, threads_note) = worker_threads(asked, cores, ensemble.trajectories.div_ceil(BLOCK));
+        let lanes_note = (options.lanes && !crate::runtime::hamiltonian::lanes::available(m)).then(|| {
             format!(
-                "; the blocks that finished are in {} (fix the cause, then continue it: `rovib ensemble --resume` or `EnsembleOptions::resume`)",
-                options.out_dir.join(CHECKPOINT_FILE).display()
+                "{} has no lane form here (a potential from a shared library or a grid file, or a large molecule): one trajectory \
+                 at a time on each thread",
+                m.name()
             )
-        } else {
-            String::new()
-        };
-        return Err(failed(&format!("the ensemble stopped: {e}{kept}")));
+        });
+        Threads { threads, threads_note, lanes_note }
     }
-    let resumed = collector.resumed();
-    let (total, blocks_by_rank, checkpoint) =
-        collector.finish().map_err(|e| failed(&format!("the ensemble stopped: {e}")))?;
+}
+
+/// The error of a run that stopped after it took the folder: `error`, with summary.json saying
+/// "failed" (or, if that cannot be written, the error says so).
+fn fail_run(options: &EnsembleOptions, scene: &Scene, molecule: &str, n: u64, error: &str) -> Error {
+    let dir = &options.out_dir;
+    let checkpoint = options.checkpoint.then(|| dir.join(CHECKPOINT_FILE));
+    // The error itself is what matters; a summary that cannot be written is mentioned.
+    match output::write_failed(dir, scene, molecule, n, error, checkpoint.as_deref()) {
+        Ok(_) => Error::Message(error.to_owned()),
+        Err(e) => Error::Message(format!("{error}; also {e} (summary.json may still say \"running\")")),
+    }
+}
+
+/// Why the blocks stopped, and where the finished ones are kept if there is a checkpoint.
+fn stopped_message(options: &EnsembleOptions, e: &impl std::fmt::Display) -> String {
+    let kept = if options.checkpoint {
+        format!(
+            "; the blocks that finished are in {} (fix the cause, then continue it: `rovib ensemble --resume` or `EnsembleOptions::resume`)",
+            options.out_dir.join(CHECKPOINT_FILE).display()
+        )
+    } else {
+        String::new()
+    };
+    format!("the ensemble stopped: {e}{kept}")
+}
+
+/// What the blocks of a run added up to.
+struct Ran {
+    total: Outcome,
+    blocks_by_rank: Vec<u64>,
+    resumed: u64,
+    wall_time: f64,
+    ranks: usize,
+}
+
+/// The report of a finished run (its files not yet written). `census` is the sampler and, with
+/// `[pairs] max_energy`, its restriction, for the census of the sampled states.
+fn assemble_report<M, const N: usize, const NA: usize>(
+    m: &M,
+    plan: &Plan<'_, M, N, NA>,
+    ensemble: &EnsembleScene,
+    options: &EnsembleOptions,
+    census: (&dyn Sampler<N>, Option<&pair_states::Restricted<'_, M, N>>),
+    description: &str,
+    threads: Threads,
+    ran: Ran,
+) -> EnsembleReport
+where
+    M: Molecule<N, NA> + Sync,
+{
+    let (sampler, restricted) = census;
+    let n = ensemble.trajectories;
+    let total = ran.total;
     let status = if options.stop.load(Ordering::Relaxed) && total.interrupted > 0 {
         Status::Interrupted
     } else if total.completed == 0 && total.failed_count() > 0 {
@@ -609,39 +695,26 @@ where
     } else {
         Status::Completed
     };
-    let mut report = EnsembleReport {
+    EnsembleReport {
         status,
         requested: n,
         outcome: total,
         times: plan.times.clone(),
         quantities: plan.quantities[..plan.n_means].iter().map(|q| q.name(m)).collect(),
         units: plan.quantities[..plan.n_means].iter().map(|q| q.unit(m)).collect(),
-        wall_time,
-        threads,
-        threads_note,
-        lanes_note,
-        ranks,
-        blocks_by_rank,
-        resumed,
+        wall_time: ran.wall_time,
+        threads: threads.threads,
+        threads_note: threads.threads_note,
+        lanes_note: threads.lanes_note,
+        ranks: ran.ranks,
+        blocks_by_rank: ran.blocks_by_rank,
+        resumed: ran.resumed,
         seed: ensemble.seed,
         sampler: description.to_owned(),
-        phase_space: spectrum::dipole_correlated(&plan).then(|| pair::phase_space(m, sampler, n)),
-        pair_states: plan
-            .pairs
-            .as_ref()
-            .map(|p| pair_states::census(m, p, sampler, restricted.as_ref().map(|r| &r.0), n)),
+        phase_space: spectrum::dipole_correlated(plan).then(|| pair::phase_space(m, sampler, n)),
+        pair_states: plan.pairs.as_ref().map(|p| pair_states::census(m, p, sampler, restricted, n)),
         files: Vec::new(),
-    };
-    report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)
-        .map_err(|e| failed(&format!("the ensemble ran, but its outputs could not be written: {e}")))?;
-    if let Some(c) = checkpoint
-        && status != Status::Interrupted
-    {
-        // Every trajectory ran and the outputs are written: the checkpoint has served.
-        std::fs::remove_file(c.path())
-            .map_err(|e| Error::context(format!("cannot remove {}", c.path().display()), e))?;
     }
-    Ok(Some(report))
 }
 
 /// What identifies this run in its checkpoint and to the other MPI ranks: the hash of the

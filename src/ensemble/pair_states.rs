@@ -50,6 +50,7 @@ use toml::Spanned;
 use super::quantity::Quantity;
 use super::runner::Plan;
 use crate::output::OutputFile;
+use crate::runtime::HamiltonianError;
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::FileError;
 use crate::runtime::ensemble::Moments;
@@ -284,15 +285,35 @@ impl PairScene {
 // ---------------------------------------------------------------------------------------------
 // Classification.
 
+/// Why a state's relative motion cannot be classified.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ClassifyError {
+    /// The velocities are not defined: the metric cannot be factored at the state's geometry.
+    #[error(transparent)]
+    Metric(#[from] HamiltonianError),
+    /// The energy or angular momentum of the relative motion is not finite.
+    #[error("the energy of relative motion is not finite ({energy}, |L| = {angular_momentum})")]
+    NonFinite {
+        /// The energy of relative motion, hartree.
+        energy: f64,
+        /// |L| of the relative motion, ħ.
+        angular_momentum: f64,
+    },
+}
+
 impl PairStates {
     /// The relative motion and class of `s`; an error when the velocities are not defined.
-    pub fn classify<M, const N: usize, const NA: usize>(&self, m: &M, s: &BodyState<N>) -> Result<Relative, String>
+    pub fn classify<M, const N: usize, const NA: usize>(
+        &self,
+        m: &M,
+        s: &BodyState<N>,
+    ) -> Result<Relative, ClassifyError>
     where
         M: Molecule<N, NA> + ?Sized,
     {
         let mut kin = KineticMatrices::default();
         m.kinetic(&s.q, &mut kin);
-        let (omega, qdot) = MetricFactor::new(&kin, &s.q).map_err(|e| e.to_string())?.solve(&s.j, &s.p);
+        let (omega, qdot) = MetricFactor::new(&kin, &s.q)?.solve(&s.j, &s.p);
         let mut x = SMatrix::<f64, 3, NA>::zeros();
         m.positions(&s.q, &mut x);
         let mut dx = [SMatrix::<f64, 3, NA>::zeros(); N];
@@ -326,7 +347,7 @@ impl PairStates {
         let limit = at(self.far);
         let energy = 0.5 * mu * v.norm_squared() + m.potential(&s.q) - limit;
         if !(energy.is_finite() && l.is_finite()) {
-            return Err(format!("the energy of relative motion is not finite ({energy}, |L| = {l})"));
+            return Err(ClassifyError::NonFinite { energy, angular_momentum: l });
         }
         let d0 = s.q[self.distance];
         let class = if energy < 0.0 {
@@ -747,4 +768,15 @@ pub fn summary(pairs: &PairStates, census: &Census, acc: &ClassCorrelations) -> 
         "correlations_unclassified": acc.unclassified,
         "kT_hartree": pairs.temperature.map(|t| BOLTZMANN * t),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_non_finite_relative_motion_says_its_numbers() {
+        let e = ClassifyError::NonFinite { energy: f64::INFINITY, angular_momentum: 2.5 };
+        assert_eq!(e.to_string(), "the energy of relative motion is not finite (inf, |L| = 2.5)");
+    }
 }

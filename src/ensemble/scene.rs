@@ -14,7 +14,7 @@ use super::quantity::Quantity;
 use crate::runtime::Molecule;
 use crate::runtime::diagnostic::{FileError, Source};
 use crate::scene::Scene;
-use crate::scene::raw::{EnsembleRunKeys, RawEnsemble};
+use crate::scene::raw::{EnsembleRunKeys, RawEnsemble, RawHistogram, RawStatistics};
 
 /// The seed of an ensemble whose scene gives none.
 pub const DEFAULT_SEED: u64 = 0;
@@ -122,126 +122,23 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
             "write the number of trajectories to run, e.g. trajectories = 1000",
         ));
     }
-    let seed = match &e.seed {
-        Some(s) if *s.get_ref() < 0 => {
-            return Err(src.error(
-                s.span(),
-                format!("`ensemble.seed` must be a non-negative integer, got {}", s.get_ref()),
-                "write a seed from 0 to 9223372036854775807",
-            ));
-        }
-        Some(s) => *s.get_ref() as u64,
-        None => DEFAULT_SEED,
-    };
-    let count = |x: &Option<Spanned<i64>>, what: &str, help: &str| -> Result<Option<u64>, FileError> {
-        match x {
-            Some(v) if *v.get_ref() < 1 => {
-                Err(src.error(v.span(), format!("`ensemble.{what}` must be at least 1, got {}", v.get_ref()), help))
-            }
-            Some(v) => Ok(Some(*v.get_ref() as u64)),
-            None => Ok(None),
-        }
-    };
-    let threads = count(&e.threads, "threads", "remove it to use every core, or give the number of worker threads")?
-        .map(|t| t as usize);
-    let keep_trajectories =
-        count(&e.keep_trajectories, "keep_trajectories", "write k to keep the trajectory of every k-th trajectory")?;
-
-    let cap = |x: &Option<Spanned<f64>>, what: &str, default: f64| -> Result<(f64, Option<Range<usize>>), FileError> {
-        match x {
-            Some(v) if !(v.get_ref().is_finite() && *v.get_ref() > 0.0) => Err(src.error(
-                v.span(),
-                format!("`ensemble.{what}` must be a positive finite number of GB, got {}", v.get_ref()),
-                format!("leave it out for the default {default} GB, or give the most the ensemble may use"),
-            )),
-            Some(v) => Ok((*v.get_ref(), Some(v.span()))),
-            None => Ok((default, None)),
-        }
-    };
-    let max_memory_gb = cap(&e.max_memory_gb, "max_memory_gb", super::resources::DEFAULT_MAX_MEMORY_GB)?;
-    let max_disk_gb = cap(&e.max_disk_gb, "max_disk_gb", super::resources::DEFAULT_MAX_DISK_GB)?;
-
-    // Every trajectory keeps its observations at all output times until it ends.
-    let n_times = scene.t_end / scene.output_interval;
-    if n_times.is_nan() || n_times > MAX_OUTPUT_TIMES as f64 {
-        return Err(src.whole_file(
-            format!("run.end / run.output_interval = {n_times:.3e} output times, more than the {MAX_OUTPUT_TIMES} an ensemble allows"),
-            "raise run.output_interval (the statistics' time grid) or shorten run.end",
-        ));
-    }
+    let seed = parse_seed(&src, e.seed.as_ref())?;
+    let threads =
+        parse_count(&src, &e.threads, "threads", "remove it to use every core, or give the number of worker threads")?
+            .map(|t| t as usize);
+    let keep_trajectories = parse_count(
+        &src,
+        &e.keep_trajectories,
+        "keep_trajectories",
+        "write k to keep the trajectory of every k-th trajectory",
+    )?;
+    let max_memory_gb = parse_cap(&src, &e.max_memory_gb, "max_memory_gb", super::resources::DEFAULT_MAX_MEMORY_GB)?;
+    let max_disk_gb = parse_cap(&src, &e.max_disk_gb, "max_disk_gb", super::resources::DEFAULT_MAX_DISK_GB)?;
+    check_output_times(scene, &src)?;
     let method = method::read(scene, &src, &e, &table)?;
-
     let statistics = match raw.statistics {
         None => StatisticsSpec { means: None, histograms: Vec::new(), correlations: Vec::new() },
-        Some(s) => {
-            let s = s.into_inner();
-            let mut histograms = Vec::new();
-            for h in &s.histograms {
-                let h = h.get_ref();
-                let bins = *h.bins.get_ref();
-                if bins > MAX_BINS as i64 {
-                    return Err(src.error(
-                        h.bins.span(),
-                        format!("a histogram of {bins} bins is more than the {MAX_BINS} allowed"),
-                        "use fewer bins",
-                    ));
-                }
-                if bins < 1 {
-                    return Err(src.error(
-                        h.bins.span(),
-                        format!("a histogram needs at least one bin, got {bins}"),
-                        "write bins = 50, for example",
-                    ));
-                }
-                let r = h.range.get_ref();
-                if r.len() != 2 || !r.iter().all(|x| x.is_finite()) || r[0] >= r[1] {
-                    return Err(src.error(
-                        h.range.span(),
-                        "a histogram's range must be two finite numbers [low, high] with low < high",
-                        "write range = [low, high] in the quantity's atomic unit (bohr, rad, hartree, hbar)",
-                    ));
-                }
-                if !histogram_range_is_representable([r[0], r[1]], bins as usize) {
-                    return Err(src.error(
-                        h.range.span(),
-                        format!(
-                            "the histogram range [{}, {}] in {bins} bins has a width or bin width that is not a \
-                             finite, resolvable number",
-                            r[0], r[1]
-                        ),
-                        "give a range whose width (high − low) is finite and whose bins are wider than the rounding \
-                         of numbers of its size, e.g. range = [0, 10]",
-                    ));
-                }
-                let times = match &h.times {
-                    None => vec![0.0],
-                    Some(t) => {
-                        let mut times = Vec::new();
-                        for &x in t.get_ref() {
-                            if !(x.is_finite() && (0.0..=scene.t_end / scene.units.time * (1.0 + 1e-12)).contains(&x)) {
-                                return Err(src.error(
-                                    t.span(),
-                                    format!(
-                                        "histogram time {x} is outside the run, 0 to run.end = {}",
-                                        scene.t_end / scene.units.time
-                                    ),
-                                    "write times between 0 and run.end, in the scene's time unit",
-                                ));
-                            }
-                            times.push(x * scene.units.time);
-                        }
-                        times
-                    }
-                };
-                histograms.push(HistogramSpec {
-                    quantity: h.quantity.clone(),
-                    bins: bins as usize,
-                    range: [r[0], r[1]],
-                    times,
-                });
-            }
-            StatisticsSpec { means: s.means, histograms, correlations: s.correlations }
-        }
+        Some(s) => parse_statistics(scene, &src, s.into_inner())?,
     };
     Ok(EnsembleScene {
         trajectories: trajectories as u64,
@@ -258,6 +155,128 @@ pub fn parse_ensemble(scene: &Scene) -> Result<EnsembleScene, FileError> {
         method_span: e.method.span(),
         trajectories_span: e.trajectories.span(),
     })
+}
+
+/// `ensemble.seed`: a non-negative integer, [`DEFAULT_SEED`] if not given.
+fn parse_seed(src: &Source<'_>, seed: Option<&Spanned<i64>>) -> Result<u64, FileError> {
+    match seed {
+        Some(s) if *s.get_ref() < 0 => Err(src.error(
+            s.span(),
+            format!("`ensemble.seed` must be a non-negative integer, got {}", s.get_ref()),
+            "write a seed from 0 to 9223372036854775807",
+        )),
+        Some(s) => Ok(*s.get_ref() as u64),
+        None => Ok(DEFAULT_SEED),
+    }
+}
+
+/// An optional count of at least 1 (`ensemble.{what}`), `help` saying what to write instead.
+fn parse_count(src: &Source<'_>, x: &Option<Spanned<i64>>, what: &str, help: &str) -> Result<Option<u64>, FileError> {
+    match x {
+        Some(v) if *v.get_ref() < 1 => {
+            Err(src.error(v.span(), format!("`ensemble.{what}` must be at least 1, got {}", v.get_ref()), help))
+        }
+        Some(v) => Ok(Some(*v.get_ref() as u64)),
+        None => Ok(None),
+    }
+}
+
+/// An optional cap in GB (`ensemble.{what}`, positive and finite) with its place, else `default`.
+fn parse_cap(
+    src: &Source<'_>,
+    x: &Option<Spanned<f64>>,
+    what: &str,
+    default: f64,
+) -> Result<(f64, Option<Range<usize>>), FileError> {
+    match x {
+        Some(v) if !(v.get_ref().is_finite() && *v.get_ref() > 0.0) => Err(src.error(
+            v.span(),
+            format!("`ensemble.{what}` must be a positive finite number of GB, got {}", v.get_ref()),
+            format!("leave it out for the default {default} GB, or give the most the ensemble may use"),
+        )),
+        Some(v) => Ok((*v.get_ref(), Some(v.span()))),
+        None => Ok((default, None)),
+    }
+}
+
+/// Refuses more than [`MAX_OUTPUT_TIMES`] output times: every trajectory keeps its observations
+/// at all of them until it ends.
+fn check_output_times(scene: &Scene, src: &Source<'_>) -> Result<(), FileError> {
+    let n_times = scene.t_end / scene.output_interval;
+    if n_times.is_nan() || n_times > MAX_OUTPUT_TIMES as f64 {
+        return Err(src.whole_file(
+            format!("run.end / run.output_interval = {n_times:.3e} output times, more than the {MAX_OUTPUT_TIMES} an ensemble allows"),
+            "raise run.output_interval (the statistics' time grid) or shorten run.end",
+        ));
+    }
+    Ok(())
+}
+
+/// The `[statistics]` table: its histograms checked and their times in atomic units.
+fn parse_statistics(scene: &Scene, src: &Source<'_>, s: RawStatistics) -> Result<StatisticsSpec, FileError> {
+    let histograms = s.histograms.iter().map(|h| parse_histogram(scene, src, h.get_ref())).collect::<Result<_, _>>()?;
+    Ok(StatisticsSpec { means: s.means, histograms, correlations: s.correlations })
+}
+
+/// One `[[statistics.histograms]]`: its bins, range and times checked.
+fn parse_histogram(scene: &Scene, src: &Source<'_>, h: &RawHistogram) -> Result<HistogramSpec, FileError> {
+    let bins = *h.bins.get_ref();
+    if bins > MAX_BINS as i64 {
+        return Err(src.error(
+            h.bins.span(),
+            format!("a histogram of {bins} bins is more than the {MAX_BINS} allowed"),
+            "use fewer bins",
+        ));
+    }
+    if bins < 1 {
+        return Err(src.error(
+            h.bins.span(),
+            format!("a histogram needs at least one bin, got {bins}"),
+            "write bins = 50, for example",
+        ));
+    }
+    let r = h.range.get_ref();
+    if r.len() != 2 || !r.iter().all(|x| x.is_finite()) || r[0] >= r[1] {
+        return Err(src.error(
+            h.range.span(),
+            "a histogram's range must be two finite numbers [low, high] with low < high",
+            "write range = [low, high] in the quantity's atomic unit (bohr, rad, hartree, hbar)",
+        ));
+    }
+    if !histogram_range_is_representable([r[0], r[1]], bins as usize) {
+        return Err(src.error(
+            h.range.span(),
+            format!(
+                "the histogram range [{}, {}] in {bins} bins has a width or bin width that is not a \
+                 finite, resolvable number",
+                r[0], r[1]
+            ),
+            "give a range whose width (high − low) is finite and whose bins are wider than the rounding \
+             of numbers of its size, e.g. range = [0, 10]",
+        ));
+    }
+    let times = match &h.times {
+        None => vec![0.0],
+        Some(t) => histogram_times(scene, src, t)?,
+    };
+    Ok(HistogramSpec { quantity: h.quantity.clone(), bins: bins as usize, range: [r[0], r[1]], times })
+}
+
+/// A histogram's times (scene's time unit) in atomic units, each within the run.
+fn histogram_times(scene: &Scene, src: &Source<'_>, t: &Spanned<Vec<f64>>) -> Result<Vec<f64>, FileError> {
+    let end = scene.t_end / scene.units.time;
+    let mut times = Vec::new();
+    for &x in t.get_ref() {
+        if !(x.is_finite() && (0.0..=end * (1.0 + 1e-12)).contains(&x)) {
+            return Err(src.error(
+                t.span(),
+                format!("histogram time {x} is outside the run, 0 to run.end = {end}"),
+                "write times between 0 and run.end, in the scene's time unit",
+            ));
+        }
+        times.push(x * scene.units.time);
+    }
+    Ok(times)
 }
 
 /// `[initial]`, `run.outputs` and `run.euler_unwrapped` describe one trajectory and its files;

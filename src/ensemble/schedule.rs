@@ -16,11 +16,47 @@ use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
-use super::checkpoint::{Checkpoint, CheckpointError, Header, Identity, Resumed};
-use super::runner::{BLOCK, Outcome, Tally};
+use serde::{Deserialize, Serialize};
 
-/// A block's outcome, or the message of the panic that ended it.
-pub type BlockResult = Result<Outcome, String>;
+use super::checkpoint::{Checkpoint, CheckpointError, Header, Identity, Resumed};
+use super::runner::{BLOCK, MergeError, Outcome, Tally};
+
+/// A block's outcome, or the panic that ended it.
+pub type BlockResult = Result<Outcome, BlockPanic>;
+
+/// A block that has no outcome: one of its trajectories panicked.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
+#[error("a trajectory of block {block} (trajectories {}..{}) panicked: {message}", trajectories.start, trajectories.end)]
+pub struct BlockPanic {
+    /// The block.
+    pub block: u64,
+    /// Its trajectory indices.
+    pub trajectories: Range<u64>,
+    /// The panic's message.
+    pub message: String,
+}
+
+/// Why an ensemble's run of blocks failed (the first failure is reported).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RunError {
+    /// A trajectory panicked.
+    #[error(transparent)]
+    Panicked(#[from] BlockPanic),
+    /// A block's outcome does not merge into the total (another run's layout).
+    #[error("block {block} cannot be merged: {source}")]
+    Merge {
+        /// The block.
+        block: u64,
+        /// What differs.
+        source: MergeError,
+    },
+    /// The checkpoint cannot be written.
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    /// Another process (an MPI rank) failed, or its messages could not be read.
+    #[error("{0}")]
+    Remote(String),
+}
 
 /// Blocks recorded in the checkpoint between two compactions of it.
 pub const COMPACT_EVERY: usize = 256;
@@ -30,16 +66,15 @@ pub fn block_range(b: u64, n: u64) -> Range<u64> {
     b * BLOCK..((b + 1) * BLOCK).min(n)
 }
 
-/// Runs block `block` with `run`, turning a panic into a message naming the block.
+/// Runs block `block` with `run`, turning a panic into an error naming the block.
 pub fn caught(block: u64, n: u64, run: impl FnOnce() -> Outcome) -> BlockResult {
     catch_unwind(AssertUnwindSafe(run)).map_err(|payload| {
-        let what = payload
+        let message = payload
             .downcast_ref::<&str>()
             .map(|s| (*s).to_owned())
             .or_else(|| payload.downcast_ref::<String>().cloned())
             .unwrap_or_else(|| "a panic without a message".to_owned());
-        let r = block_range(block, n);
-        format!("a trajectory of block {block} (trajectories {}..{}) panicked: {what}", r.start, r.end)
+        BlockPanic { block, trajectories: block_range(block, n), message }
     })
 }
 
@@ -105,7 +140,7 @@ pub struct Collector {
     checkpoint: Option<(Checkpoint, Header)>,
     since_compaction: usize,
     tainted: bool,
-    error: Option<String>,
+    error: Option<RunError>,
     by_rank: Vec<u64>,
     resumed: u64,
 }
@@ -162,18 +197,18 @@ impl Collector {
                 }
                 self.batch.push((block, o));
             }
-            Err(message) => self.fail(message),
+            Err(panic) => self.fail(panic),
         }
     }
 
     /// Records a failure of the run (the first one is reported).
-    pub fn fail(&mut self, message: String) {
-        self.error.get_or_insert(message);
+    pub fn fail(&mut self, error: impl Into<RunError>) {
+        self.error.get_or_insert(error.into());
     }
 
     /// The failure of the run, if any.
-    pub fn error(&self) -> Option<&str> {
-        self.error.as_deref()
+    pub fn error(&self) -> Option<&RunError> {
+        self.error.as_ref()
     }
 
     /// Whether a block cut short by an interrupt arrived.
@@ -217,8 +252,8 @@ impl Collector {
             return;
         }
         while let Some(o) = self.pending.remove(&self.next) {
-            if let Err(e) = self.total.merge(&o) {
-                self.fail(format!("block {} cannot be merged: {e}", self.next));
+            if let Err(source) = self.total.merge(&o) {
+                self.fail(RunError::Merge { block: self.next, source });
                 return;
             }
             self.next += 1;
@@ -227,10 +262,10 @@ impl Collector {
 
     /// The ensemble's outcome: every block in block order; blocks that never ran (an
     /// interrupt) count as interrupted. Also the blocks each process ran, and the checkpoint.
-    pub fn finish(mut self) -> Result<(Outcome, Vec<u64>, Option<Checkpoint>), String> {
+    pub fn finish(mut self) -> Result<(Outcome, Vec<u64>, Option<Checkpoint>), RunError> {
         for b in self.next..self.n_blocks {
             match self.pending.remove(&b) {
-                Some(o) => self.total.merge(&o).map_err(|e| format!("block {b} cannot be merged: {e}"))?,
+                Some(o) => self.total.merge(&o).map_err(|source| RunError::Merge { block: b, source })?,
                 None => {
                     let r = block_range(b, self.n);
                     self.total.interrupted += r.end - r.start;
@@ -269,7 +304,7 @@ pub fn coordinate(
     collector: &mut Collector,
     mut remote: Option<&mut dyn Remote>,
     report: &mut dyn FnMut(),
-) -> Result<(), String> {
+) -> Result<(), RunError> {
     let dispatcher = Mutex::new(Dispatcher::new(collector.todo()));
     let lock = || dispatcher.lock().unwrap_or_else(PoisonError::into_inner);
     let (tx, rx) = mpsc::channel::<(u64, BlockResult)>();
@@ -304,7 +339,7 @@ pub fn coordinate(
                 };
                 match r.poll(d, work.stop, &mut sink) {
                     Ok(any) => busy |= any,
-                    Err(e) => collector.fail(e),
+                    Err(e) => collector.fail(RunError::Remote(e)),
                 }
             }
             if !local_done {
@@ -324,7 +359,7 @@ pub fn coordinate(
                 std::thread::sleep(Duration::from_millis(1));
             }
             if let Err(e) = collector.flush() {
-                collector.fail(e.to_string());
+                collector.fail(e);
             }
             report();
             if collector.interrupted() {
@@ -340,7 +375,7 @@ pub fn coordinate(
         }
     });
     match collector.error() {
-        Some(e) => Err(e.to_owned()),
+        Some(e) => Err(e.clone()),
         None => Ok(()),
     }
 }
@@ -387,7 +422,7 @@ mod tests {
         let mut c = Collector::new(2 * BLOCK, with(20), Resumed::default(), None, 1);
         c.add(0, 0, Ok(with(30)));
         c.flush().unwrap();
-        let e = c.error().expect("a block of another layout must fail the run");
+        let e = c.error().expect("a block of another layout must fail the run").to_string();
         assert!(e.contains("block 0 cannot be merged") && e.contains("histogram 0"), "{e}");
         let mut a = with(20);
         assert!(a.merge(&outcome(0)).is_err());
@@ -426,7 +461,10 @@ mod tests {
         let e = caught(1, n, || panic!("boom"));
         c.add(0, 1, e);
         c.flush().unwrap();
-        assert_eq!(c.error(), Some("a trajectory of block 1 (trajectories 64..128) panicked: boom"));
+        assert_eq!(
+            c.error().map(ToString::to_string).as_deref(),
+            Some("a trajectory of block 1 (trajectories 64..128) panicked: boom")
+        );
         let (total, _, _) = c.finish().unwrap();
         assert_eq!(total.completed, 3);
         assert_eq!(total.interrupted, n - 64);
@@ -511,5 +549,18 @@ mod tests {
         stop.store(false, Ordering::Relaxed);
         d.close();
         assert!(d.take(1, &stop).is_empty());
+    }
+
+    #[test]
+    fn run_errors_say_what_failed() {
+        let panic = BlockPanic { block: 2, trajectories: 128..150, message: "boom".into() };
+        assert_eq!(panic.to_string(), "a trajectory of block 2 (trajectories 128..150) panicked: boom");
+        assert_eq!(RunError::from(panic.clone()).to_string(), panic.to_string());
+        let merge = RunError::Merge { block: 3, source: MergeError::HistogramCount { theirs: 1, mine: 2 } };
+        assert_eq!(merge.to_string(), "block 3 cannot be merged: statistics of another layout: 1 histograms against 2");
+        let remote = RunError::Remote("rank 1 could not start: no scene".into());
+        assert_eq!(remote.to_string(), "rank 1 could not start: no scene");
+        let checkpoint = CheckpointError { path: "c.jsonl".into(), line: Some(2), message: "cut".into() };
+        assert_eq!(RunError::from(checkpoint).to_string(), "c.jsonl:2: cut");
     }
 }

@@ -23,6 +23,36 @@ pub struct Lifetimes {
     stopped: Vec<u64>,
 }
 
+/// Why stop counts cannot be merged: they come from another run (read from a process or a
+/// file) or are damaged.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum LifetimesError {
+    /// The counts do not fit their own shape.
+    #[error("stop counts of an inconsistent shape ({times} output times, {conditions} conditions, {counts} counts)")]
+    Inconsistent {
+        /// Output times of the counts.
+        times: usize,
+        /// Stop conditions of the counts.
+        conditions: usize,
+        /// Stop counts held.
+        counts: usize,
+    },
+    /// The counts have another number of output times or stop conditions.
+    #[error(
+        "stop counts of another layout: {times} output times and {conditions} stop conditions against {own_times} and {own_conditions}"
+    )]
+    Layout {
+        /// Output times of the counts merged in.
+        times: usize,
+        /// Their stop conditions.
+        conditions: usize,
+        /// Output times of the counts merged into.
+        own_times: usize,
+        /// Their stop conditions.
+        own_conditions: usize,
+    },
+}
+
 /// Which side of its interval a stopped coordinate was on.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -86,14 +116,13 @@ impl Lifetimes {
 
     /// Adds the counts of `other` (of the same shape, or either empty); counts of another shape
     /// (another run's, read from a process or a file) are an error saying what differs.
-    pub fn merge(&mut self, other: &Lifetimes) -> Result<(), String> {
+    pub fn merge(&mut self, other: &Lifetimes) -> Result<(), LifetimesError> {
         if other.stopped.len() != other.observed.len() * other.conditions * 2 {
-            return Err(format!(
-                "stop counts of an inconsistent shape ({} output times, {} conditions, {} counts)",
-                other.observed.len(),
-                other.conditions,
-                other.stopped.len()
-            ));
+            return Err(LifetimesError::Inconsistent {
+                times: other.observed.len(),
+                conditions: other.conditions,
+                counts: other.stopped.len(),
+            });
         }
         if other.is_empty() {
             return Ok(());
@@ -103,13 +132,12 @@ impl Lifetimes {
             return Ok(());
         }
         if self.observed.len() != other.observed.len() || self.conditions != other.conditions {
-            return Err(format!(
-                "stop counts of another layout: {} output times and {} stop conditions against {} and {}",
-                other.observed.len(),
-                other.conditions,
-                self.observed.len(),
-                self.conditions
-            ));
+            return Err(LifetimesError::Layout {
+                times: other.observed.len(),
+                conditions: other.conditions,
+                own_times: self.observed.len(),
+                own_conditions: self.conditions,
+            });
         }
         for (a, b) in self.observed.iter_mut().zip(&other.observed) {
             *a += b;
@@ -200,11 +228,32 @@ mod tests {
         // Counts of another run's shape are an error, not a panic, and leave the total unchanged.
         let mut other = Lifetimes::default();
         other.add(4, 2, 2, None);
-        let err = merged.merge(&other).unwrap_err();
+        let err = merged.merge(&other).unwrap_err().to_string();
         assert!(err.contains("4 output times and 2 stop conditions against 5 and 2"), "{err}");
         assert_eq!(merged, whole);
         let text = serde_json::to_string(&whole).unwrap();
         assert_eq!(serde_json::from_str::<Lifetimes>(&text).unwrap(), whole);
         assert!(Lifetimes::default().survival(0).0.is_nan());
+    }
+
+    #[test]
+    fn merge_errors_say_what_differs() {
+        let inconsistent = LifetimesError::Inconsistent { times: 3, conditions: 1, counts: 5 };
+        assert_eq!(
+            inconsistent.to_string(),
+            "stop counts of an inconsistent shape (3 output times, 1 conditions, 5 counts)"
+        );
+        let layout = LifetimesError::Layout { times: 4, conditions: 2, own_times: 5, own_conditions: 1 };
+        assert_eq!(
+            layout.to_string(),
+            "stop counts of another layout: 4 output times and 2 stop conditions against 5 and 1"
+        );
+        let mut bad = Lifetimes::default();
+        bad.add(2, 1, 1, None);
+        bad.stopped.pop();
+        assert_eq!(
+            Lifetimes::default().merge(&bad),
+            Err(LifetimesError::Inconsistent { times: 2, conditions: 1, counts: 3 })
+        );
     }
 }

@@ -14,5 +14,5 @@ mod moments;
 
 pub use correlation::{CorrelationWorkspace, autocorrelation_direct};
 pub use histogram::{Histogram, HistogramError};
-pub use lifetimes::{Lifetimes, Side};
+pub use lifetimes::{Lifetimes, LifetimesError, Side};
 pub use moments::Moments;

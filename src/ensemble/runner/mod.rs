@@ -8,8 +8,11 @@
 //! bit-identical whatever the number of threads (or, later, processes) and whatever order the
 //! blocks finish in.
 
+mod merge_error;
+mod scalar;
+
 use std::collections::BTreeMap;
-use std::ops::{ControlFlow, Range};
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
@@ -20,7 +23,7 @@ use crate::output::TrajectoryCsv;
 use crate::runtime::HamiltonianError;
 use crate::runtime::Molecule;
 use crate::runtime::cartesian_system::{CartesianError, CartesianSystem};
-use crate::runtime::charts::{ChartError, ChartIntegrator, ChartObserver, ChartReport, ChartStart, ChartState};
+use crate::runtime::charts::{ChartError, ChartIntegrator, ChartObserver, ChartReport, ChartState};
 use crate::runtime::ensemble::{CorrelationWorkspace, Histogram, Lifetimes, Moments, Side};
 use crate::runtime::frames::body_of_lab_exact;
 use crate::runtime::hamiltonian::fast::BodyState;
@@ -28,8 +31,10 @@ use crate::runtime::hamiltonian::fast::{ReducedSystem, Reduction};
 use crate::runtime::integrate::{InvalidInput, Method, Observer, SolveError, Stats};
 use crate::runtime::nalgebra::Vector3;
 use crate::runtime::rigid_system::RigidError;
-use crate::runtime::sample::Sampler;
 use crate::runtime::surface::Dipole;
+
+pub use self::merge_error::{HistogramShape, MergeError, StatisticsShape};
+pub(super) use self::scalar::run_block_scalar;
 
 /// Trajectories per block: the grain of parallel work and of the fixed merge order.
 pub const BLOCK: u64 = 64;
@@ -304,13 +309,13 @@ impl Accumulators {
     /// Merges `other` (the trajectories after this one's) in. Accumulators of another layout
     /// (another number of times or quantities, another histogram's bins or range: another
     /// scene's) are an error naming the difference, and nothing is merged.
-    pub fn merge(&mut self, other: &Accumulators) -> Result<(), String> {
+    pub fn merge(&mut self, other: &Accumulators) -> Result<(), MergeError> {
         self.same_layout(other)?;
         for (a, b) in self.means.iter_mut().zip(&other.means) {
             a.merge(b);
         }
         for (a, b) in self.histograms.iter_mut().zip(&other.histograms) {
-            a.merge(b).map_err(|e| e.to_string())?;
+            a.merge(b)?;
         }
         for (a, b) in self.correlations.iter_mut().zip(&other.correlations) {
             for (x, y) in a.iter_mut().zip(b) {
@@ -321,30 +326,21 @@ impl Accumulators {
     }
 
     /// Whether `other` has this layout; if not, what differs.
-    pub fn same_layout(&self, other: &Accumulators) -> Result<(), String> {
-        let shape = |a: &Accumulators| {
+    pub fn same_layout(&self, other: &Accumulators) -> Result<(), MergeError> {
+        let shape = |a: &Accumulators| -> StatisticsShape {
             (a.n_times, a.n_means, a.means.len(), a.correlations.iter().map(Vec::len).collect::<Vec<_>>())
         };
         let (mine, theirs) = (shape(self), shape(other));
         if mine != theirs {
-            return Err(format!(
-                "statistics of another layout: (output times, means per time, means, correlation lags) {theirs:?} \
-                 against {mine:?}"
-            ));
+            return Err(MergeError::Shape { theirs, mine });
         }
         if self.histograms.len() != other.histograms.len() {
-            return Err(format!(
-                "statistics of another layout: {} histograms against {}",
-                other.histograms.len(),
-                self.histograms.len()
-            ));
+            return Err(MergeError::HistogramCount { theirs: other.histograms.len(), mine: self.histograms.len() });
         }
         for (i, (a, b)) in self.histograms.iter().zip(&other.histograms).enumerate() {
             let (x, y) = ((a.counts().len(), a.low(), a.high()), (b.counts().len(), b.low(), b.high()));
             if x.0 != y.0 || x.1.to_bits() != y.1.to_bits() || x.2.to_bits() != y.2.to_bits() {
-                return Err(format!(
-                    "statistics of another layout: histogram {i} has (bins, low, high) {y:?} against {x:?}"
-                ));
+                return Err(MergeError::Histogram { index: i, theirs: y, mine: x });
             }
         }
         Ok(())
@@ -419,7 +415,7 @@ impl Outcome {
     /// Merges the outcome of the next block in.
     /// Merges `other` (the trajectories after this one's) in; statistics of another layout are
     /// an error and nothing is merged (see [`Accumulators::merge`]).
-    pub fn merge(&mut self, other: &Outcome) -> Result<(), String> {
+    pub fn merge(&mut self, other: &Outcome) -> Result<(), MergeError> {
         self.statistics.merge(&other.statistics)?;
         self.completed += other.completed;
         for (k, v) in &other.failed {
@@ -720,250 +716,6 @@ impl<M: Molecule<N, NA>, const N: usize, const NA: usize> Watch<'_, '_, M, N, NA
         }
         ControlFlow::Continue(())
     }
-}
-
-/// [`super::run_block`] one trajectory at a time.
-pub(super) fn run_block_scalar<M, const N: usize, const NA: usize>(
-    plan: &Plan<'_, M, N, NA>,
-    sampler: &dyn Sampler<N>,
-    indices: Range<u64>,
-    stop: &AtomicBool,
-    progress: &Tally,
-) -> Outcome
-where
-    M: Molecule<N, NA> + Sync,
-{
-    let mut outcome = Outcome::new(Accumulators::new(plan));
-    let dim = plan.reduction.dim();
-    let switching = plan.switches_charts();
-    let in_cartesian = plan.in_cartesian_chart();
-    let integrated_dim = if in_cartesian { 6 * NA } else { dim };
-    let mut integrator = match Integrator::new(&plan.method, integrated_dim, NA, switching) {
-        Ok(i) => i,
-        Err(e) => {
-            for index in indices {
-                let f =
-                    Failure { index, reason: "invalid integrator settings".into(), time: None, detail: e.to_string() };
-                outcome.fail(f, progress);
-            }
-            return outcome;
-        }
-    };
-    let n_times = plan.times.len();
-    let nq = plan.quantities.len();
-    let needs_potential = plan.quantities.iter().any(Quantity::needs_potential);
-    let needs_dipole = plan.quantities.iter().any(Quantity::needs_dipole);
-    let mut buffer = vec![0.0; n_times * nq];
-    // The pair estimator's backward run (`super::pair`).
-    let mut backward = if plan.spectrum.pair() { vec![0.0; n_times * nq] } else { Vec::new() };
-    let passes = if plan.spectrum.pair() { 2 } else { 1 };
-    let mut y0 = vec![0.0; dim];
-    let lags = plan.correlation_lags();
-    let mut workspace = (!plan.correlations.is_empty()).then(|| CorrelationWorkspace::new(lags));
-    let mut series = vec![0.0; lags];
-    let mut correlation = vec![0.0; lags];
-    let panic_at = panic_hook();
-
-    'trajectories: for index in indices {
-        if stop.load(Ordering::Relaxed) {
-            outcome.interrupted += 1;
-            continue;
-        }
-        if panic_at == Some(index) {
-            panic!("{PANIC_HOOK}={index}: a deliberate panic (test hook)");
-        }
-        let failure =
-            |reason: &str, time: Option<f64>, detail: String| Failure { index, reason: reason.into(), time, detail };
-        let drawn = match sampler.draw(index) {
-            Ok(s) => s,
-            Err(e) => {
-                outcome.fail(failure("sampler", None, e.to_string()), progress);
-                progress.done();
-                continue;
-            }
-        };
-        let finite = drawn.q.iter().chain(drawn.p.iter()).chain(drawn.j.iter()).all(|v| v.is_finite())
-            && drawn.orientation.coords.iter().all(|v| v.is_finite());
-        if !finite {
-            let detail = format!("the drawn state is not finite: {drawn:?}");
-            outcome.fail(failure("invalid initial state", Some(0.0), detail), progress);
-            progress.done();
-            continue;
-        }
-        // The pair estimator's forward run, kept while the backward one runs.
-        let mut forward: Option<(usize, Option<Stop>, Stats, ChartReport)> = None;
-        for pass in 0..passes {
-            // Pass 1 (pair estimator only) runs backward in time: the state with its momenta reversed.
-            let state = if pass == 0 { drawn } else { super::pair::reversed(&drawn) };
-            let failure = |reason: &str, time: Option<f64>, detail: String| {
-                let detail = if pass == 0 { detail } else { format!("backward in time (t is -t): {detail}") };
-                failure(reason, time, detail)
-            };
-            let out = if pass == 0 { &mut buffer } else { &mut backward };
-            // The sampled state is the template: frozen coordinates stay at its values.
-            let mut system =
-                ReducedSystem::from_body(plan.molecule, plan.reduction, &state).with_min_pivot(plan.min_pivot);
-            // A state at a singular geometry starts in the Cartesian chart when the plan switches
-            // (the chart integrator checks it: an `InvalidInput` there is an invalid initial state).
-            if let Err(e) = system.reduce_body(&state, &mut y0)
-                && !switching
-                && !in_cartesian
-            {
-                outcome.fail(failure("invalid initial state", Some(0.0), e.to_string()), progress);
-                break;
-            }
-            let csv = match &plan.keep {
-                Some((k, dir)) if index % k == 0 && pass == 0 => {
-                    let dir = dir.join(index.to_string());
-                    let unit = crate::scene::TimeUnit::of_scale(plan.time_scale).map_or("au", |u| u.name());
-                    match std::fs::create_dir_all(&dir)
-                        .map_err(|e| crate::Error::io("cannot create", &dir, e))
-                        .and_then(|()| TrajectoryCsv::create(&dir, &plan.molecule.coordinates(), unit, false))
-                    {
-                        Ok(c) => Some(c),
-                        Err(e) => {
-                            outcome.fail(failure("output", Some(0.0), e.to_string()), progress);
-                            break;
-                        }
-                    }
-                }
-                _ => None,
-            };
-            // A kept trajectory of a molecule with a dipole surface also writes dipole.csv.
-            let dipole = match (&csv, &plan.keep) {
-                (Some(_), Some((_, dir))) if plan.molecule.has_dipole() => {
-                    match crate::output::DipoleCsv::create(&dir.join(index.to_string())) {
-                        Ok(d) => Some(d),
-                        Err(e) => {
-                            outcome.fail(failure("output", Some(0.0), e.to_string()), progress);
-                            break;
-                        }
-                    }
-                }
-                _ => None,
-            };
-            let mut watch = Watch {
-                system,
-                plan,
-                buffer: out,
-                needs_potential,
-                needs_dipole: needs_dipole || dipole.is_some(),
-                k: 0,
-                initial_energy: 0.0,
-                stop,
-                failure: None,
-                interrupted: false,
-                csv,
-                dipole,
-                cartesian: if switching || in_cartesian { CartesianSystem::new(plan.molecule).ok() } else { None },
-                last_q: state.q,
-                stopped: None,
-            };
-            let mut chart_report = ChartReport::default();
-            let result = match &mut integrator {
-                Integrator::Charts(charts) => charts
-                    .integrate(
-                        &system,
-                        0.0,
-                        ChartStart::Fresh(&state),
-                        plan.t_end,
-                        plan.interval,
-                        &mut watch,
-                        &mut chart_report,
-                    )
-                    .map(|()| chart_report.stats)
-                    .map_err(|e| match e {
-                        // The settings were checked when the integrators were made: what is left is
-                        // a start that neither chart can hold.
-                        SolveError::InvalidInput(why) => ("invalid initial state", why, Some(0.0)),
-                        e => solve_reason(&e, chart_reason),
-                    }),
-                other if in_cartesian => in_cartesian_chart(other, plan, &state, &mut watch),
-                other => other
-                    .integrate(&mut system, &y0, plan.t_end, plan.interval, &mut watch)
-                    .map_err(|e| solve_reason(&e, hamiltonian_reason)),
-            };
-            if let Some(csv) = &mut watch.csv
-                && let Err(e) = csv.flush()
-            {
-                watch.failure.get_or_insert(("output", plan.t_end, e.to_string()));
-            }
-            if let Some(d) = &mut watch.dipole
-                && let Err(e) = d.flush()
-            {
-                watch.failure.get_or_insert(("output", plan.t_end, e.to_string()));
-            }
-            // A kept trajectory's chart switches beside its trajectory.csv.
-            if switching
-                && watch.csv.is_some()
-                && let Some((_, dir)) = &plan.keep
-                && let Err(e) = write_chart_report(&dir.join(index.to_string()), &chart_report, plan.time_scale)
-            {
-                watch.failure.get_or_insert(("output", plan.t_end, e.to_string()));
-            }
-            let (k, interrupted, observed, stopped) = (watch.k, watch.interrupted, watch.failure.take(), watch.stopped);
-            match (result, observed) {
-                (Err((reason, detail, time)), _) => {
-                    outcome.fail(failure(reason, time, detail), progress);
-                    break;
-                }
-                (Ok(_), Some((reason, t, detail))) => {
-                    outcome.fail(failure(reason, Some(t), detail), progress);
-                    break;
-                }
-                (Ok(_), None) if interrupted => {
-                    outcome.interrupted += 1;
-                    continue 'trajectories;
-                }
-                (Ok(_), None) if k != n_times && stopped.is_none() => {
-                    let detail = format!("{k} output times observed, {n_times} expected");
-                    outcome.fail(failure("output", Some(plan.t_end), detail), progress);
-                    break;
-                }
-                (Ok(stats), None) if pass + 1 < passes => forward = Some((k, stopped, stats, chart_report)),
-                (Ok(stats), None) => {
-                    // The backward run's work and chart switches count with the forward run's.
-                    let (k, stopped, stats, chart_report, back) = match forward.take() {
-                        Some((kf, sf, mut total, mut report)) => {
-                            total.steps += stats.steps;
-                            total.rhs_evals += stats.rhs_evals;
-                            report.switches += chart_report.switches;
-                            report.cartesian_time += chart_report.cartesian_time;
-                            report.rigid_time += chart_report.rigid_time;
-                            (kf, sf, total, report, Some(k))
-                        }
-                        None => (k, stopped, stats, chart_report, None),
-                    };
-                    outcome.completed += 1;
-                    outcome.steps += stats.steps;
-                    outcome.rhs_evaluations += stats.rhs_evals;
-                    if switching {
-                        outcome.charts.add(index, &chart_report);
-                    }
-                    outcome.count_lifetime(plan, index, k, stopped);
-                    match back {
-                        Some(kb) => {
-                            fold(plan, &mut outcome.statistics, &buffer, k, None, &mut series, &mut correlation);
-                            super::pair::fold_pair(plan, &mut outcome.statistics, &buffer, k, &backward, kb);
-                            let classes = &mut outcome.pair_states;
-                            super::pair_states::fold(plan, &drawn, classes, &buffer, k, &backward, kb);
-                        }
-                        None => fold(
-                            plan,
-                            &mut outcome.statistics,
-                            &buffer,
-                            k,
-                            workspace.as_mut(),
-                            &mut series,
-                            &mut correlation,
-                        ),
-                    }
-                }
-            }
-        }
-        progress.done();
-    }
-    outcome
 }
 
 /// One trajectory from `state` in the Cartesian chart (`run.chart = "cartesian"`), observed by
