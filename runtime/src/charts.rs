@@ -399,7 +399,12 @@ struct Switching<'m, M: ?Sized, const N: usize, const NA: usize> {
 impl<'m, M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize> Switching<'m, M, N, NA> {
     /// The charts of `system`'s molecule: the internal one, and the Cartesian chart where the
     /// molecule has one, else the rigid chart (neither is an error).
-    fn new(system: &ReducedSystem<'m, M, N, NA>, t0: f64, t_end: f64, interval: f64) -> Result<Self, SolveError<ChartError>> {
+    fn new(
+        system: &ReducedSystem<'m, M, N, NA>,
+        t0: f64,
+        t_end: f64,
+        interval: f64,
+    ) -> Result<Self, SolveError<ChartError>> {
         let m = system.molecule();
         let internal = system.with_min_pivot(SWITCH_PIVOT);
         let (cartesian, rigid) = match CartesianSystem::new(m) {
@@ -450,9 +455,10 @@ impl<'m, M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize> Switching
         let first = match &self.rigid {
             None => ChartState::Cartesian(&y),
             Some(r) => {
-                let body = r.clone().body_of_flat(&y).map_err(|e| {
-                    SolveError::InvalidInput(format!("the start in the rigid chart does not fit: {e}"))
-                })?;
+                let body = r
+                    .clone()
+                    .body_of_flat(&y)
+                    .map_err(|e| SolveError::InvalidInput(format!("the start in the rigid chart does not fit: {e}")))?;
                 self.last_q = body.q;
                 reduce(&self.internal, body, &mut self.buffer).map_err(SolveError::InvalidInput)?;
                 ChartState::Internal(&self.buffer)
@@ -547,7 +553,11 @@ impl<'m, M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize> Switching
     }
 
     /// The switch from the internal chart to the fallback chart at `dop`'s last accepted state.
-    fn leave_internal(&mut self, dop: &Dop853, report: &mut ChartReport) -> Result<(Chart, Next), SolveError<ChartError>> {
+    fn leave_internal(
+        &mut self,
+        dop: &Dop853,
+        report: &mut ChartReport,
+    ) -> Result<(Chart, Next), SolveError<ChartError>> {
         let (t, y, h, stats) = dop.last_accepted();
         add(&mut report.stats, &stats);
         // A failure before the internal segment chose a step (at its start).

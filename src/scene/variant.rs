@@ -15,8 +15,8 @@
 
 use std::ops::Range;
 
-use serde::de::{self, DeserializeOwned, Visitor};
 use serde::Deserializer;
+use serde::de::{self, DeserializeOwned, Visitor};
 use toml::Spanned;
 
 use super::spanned::{self, Value};

@@ -328,7 +328,11 @@ impl Shape {
 
     /// `4 r × 5 theta`: the grid's size by axis.
     fn describe(&self, axes: &[GridAxis]) -> String {
-        axes.iter().enumerate().map(|(b, axis)| format!("{} {}", self.counts[b], axis.name)).collect::<Vec<_>>().join(" × ")
+        axes.iter()
+            .enumerate()
+            .map(|(b, axis)| format!("{} {}", self.counts[b], axis.name))
+            .collect::<Vec<_>>()
+            .join(" × ")
     }
 }
 

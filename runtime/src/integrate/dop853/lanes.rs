@@ -546,8 +546,15 @@ impl<T: Real> Dop853Lanes<T> {
     /// `(x, x_new]`, then ends the trajectory (its observer's break or its last step) or moves
     /// the lane to `x_new` with the next step `h_new` (capped as the scalar solver caps it).
     #[inline]
-    fn serve_and_advance<S, F>(&mut self, system: &mut S, feeder: &mut F, run: &Run, lane: usize, x_new: f64, h_new: f64)
-    where
+    fn serve_and_advance<S, F>(
+        &mut self,
+        system: &mut S,
+        feeder: &mut F,
+        run: &Run,
+        lane: usize,
+        x_new: f64,
+        h_new: f64,
+    ) where
         S: LaneSystem<T> + ?Sized,
         F: LaneFeeder + ?Sized,
     {
