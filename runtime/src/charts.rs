@@ -338,6 +338,8 @@ where
     }
 }
 
+/// The run of [`ChartIntegrator::integrate`]: a first segment in the chart the start is regular
+/// in, then segment after segment, each ending at a switch of chart or at the run's end.
 #[allow(clippy::too_many_arguments)]
 fn run<M, O, const N: usize, const NA: usize>(
     dops: Integrators<'_>,
@@ -354,199 +356,291 @@ where
     O: ChartObserver + ?Sized,
 {
     let Integrators { internal: dop_i, cartesian: dop_c, rigid: dop_r } = dops;
-    let m = system.molecule();
-    let mut internal = system.with_min_pivot(SWITCH_PIVOT);
-    // The Cartesian chart where the molecule has one, else the rigid chart.
-    let (mut cartesian, mut rigid) = match CartesianSystem::new(m) {
-        Ok(c) => (Some(c.with_return_pivot(RETURN_PIVOT)), None),
-        Err(e) => match RigidSystem::new(m) {
-            Some(r) => (None, Some(r.with_return_pivot(RETURN_PIVOT))),
-            None => return Err(SolveError::InvalidInput(e.to_string())),
-        },
-    };
-    let fallback = if rigid.is_some() { Chart::Rigid } else { Chart::Cartesian };
-    let mut buffer = vec![0.0; internal.dim()];
-    let mut served: Option<u64> = None;
-    let mut last_q = SVector::<f64, N>::zeros();
-    let mut entered = t0;
-    let (mut chart, mut next) = match start {
-        ChartStart::Resume(r) => {
-            served = Some(r.outputs_done);
-            (Chart::Internal, Next::Point(r.clone()))
+    let mut run = Switching::new(system, t0, t_end, interval)?;
+    let Some((mut chart, mut next)) = run.first_segment(start, observer, report)? else { return Ok(()) };
+    loop {
+        report.last_chart = Some(chart);
+        let after = match chart {
+            Chart::Internal => run.internal_segment(dop_i, &next, observer, report)?,
+            Chart::Cartesian => run.cartesian_segment(dop_c, &next, observer, report)?,
+            Chart::Rigid => run.rigid_segment(dop_r, *dop_i.options(), &next, observer, report)?,
+        };
+        match after {
+            None => return Ok(()),
+            Some((c, n)) => (chart, next) = (c, n),
         }
-        ChartStart::FreshCartesian(y) if y.len() != 6 * NA => {
+    }
+}
+
+/// A run with chart switching ([`run`]): the systems of the charts, the run's times, and what
+/// carries over from segment to segment.
+struct Switching<'m, M: ?Sized, const N: usize, const NA: usize> {
+    /// The internal chart, with the switch threshold as its smallest pivot.
+    internal: ReducedSystem<'m, M, N, NA>,
+    /// The Cartesian chart, where the molecule has one.
+    cartesian: Option<CartesianSystem<'m, M, N, NA>>,
+    /// The rigid chart, where the molecule has no Cartesian one.
+    rigid: Option<RigidSystem<'m, M, N, NA>>,
+    /// Which of the two it has: the chart near singular geometries of the internal one.
+    fallback: Chart,
+    t0: f64,
+    t_end: f64,
+    interval: f64,
+    /// An internal-chart state: the rigid chart's start converted.
+    buffer: Vec<f64>,
+    /// The number of the last output served (`None` before the one at `t0`).
+    served: Option<u64>,
+    /// The last internal configuration known, where a conversion to the internal chart starts.
+    last_q: SVector<f64, N>,
+    /// When the run last entered the fallback chart.
+    entered: f64,
+}
+
+impl<'m, M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize> Switching<'m, M, N, NA> {
+    /// The charts of `system`'s molecule: the internal one, and the Cartesian chart where the
+    /// molecule has one, else the rigid chart (neither is an error).
+    fn new(
+        system: &ReducedSystem<'m, M, N, NA>,
+        t0: f64,
+        t_end: f64,
+        interval: f64,
+    ) -> Result<Self, SolveError<ChartError>> {
+        let m = system.molecule();
+        let internal = system.with_min_pivot(SWITCH_PIVOT);
+        let (cartesian, rigid) = match CartesianSystem::new(m) {
+            Ok(c) => (Some(c.with_return_pivot(RETURN_PIVOT)), None),
+            Err(e) => match RigidSystem::new(m) {
+                Some(r) => (None, Some(r.with_return_pivot(RETURN_PIVOT))),
+                None => return Err(SolveError::InvalidInput(e.to_string())),
+            },
+        };
+        let fallback = if rigid.is_some() { Chart::Rigid } else { Chart::Cartesian };
+        let buffer = vec![0.0; internal.dim()];
+        Ok(Self {
+            internal,
+            cartesian,
+            rigid,
+            fallback,
+            t0,
+            t_end,
+            interval,
+            buffer,
+            served: None,
+            last_q: SVector::zeros(),
+            entered: t0,
+        })
+    }
+
+    /// The first segment's chart and start; `None` when the run ends at its start (a fallback
+    /// start serves the output at `t0` here).
+    fn first_segment<O: ChartObserver + ?Sized>(
+        &mut self,
+        start: ChartStart<'_, N>,
+        observer: &mut O,
+        report: &mut ChartReport,
+    ) -> Result<Option<(Chart, Next)>, SolveError<ChartError>> {
+        let y = match start {
+            ChartStart::Resume(r) => {
+                self.served = Some(r.outputs_done);
+                return Ok(Some((Chart::Internal, Next::Point(r.clone()))));
+            }
+            ChartStart::Fresh(body) => match self.fresh(body)? {
+                (true, y) => return Ok(Some((Chart::Internal, Next::Fresh(y)))),
+                (false, y) => y,
+            },
+            ChartStart::FreshCartesian(y) => self.fresh_cartesian(y)?,
+        };
+        report.last_chart = Some(self.fallback);
+        self.served = Some(0);
+        let first = match &self.rigid {
+            None => ChartState::Cartesian(&y),
+            Some(r) => {
+                let body = r
+                    .clone()
+                    .body_of_flat(&y)
+                    .map_err(|e| SolveError::InvalidInput(format!("the start in the rigid chart does not fit: {e}")))?;
+                self.last_q = body.q;
+                reduce(&self.internal, body, &mut self.buffer).map_err(SolveError::InvalidInput)?;
+                ChartState::Internal(&self.buffer)
+            }
+        };
+        if observer.observe(self.t0, first).is_break() || self.t_end <= self.t0 {
+            return Ok(None);
+        }
+        let h = self.interval.min(self.t_end - self.t0) * 1e-3;
+        let point = Dop853Resume { t: self.t0, y, h, fac_old: 1e-4, reject: false, outputs_done: 0 };
+        Ok(Some((self.fallback, Next::Point(point))))
+    }
+
+    /// A fresh start from `body`: whether the internal chart is regular there, and the start
+    /// in the internal chart if it is, else in the fallback chart.
+    fn fresh(&mut self, body: &BodyState<N>) -> Result<(bool, Vec<f64>), SolveError<ChartError>> {
+        self.last_q = body.q;
+        let internal = &mut self.internal;
+        let mut y = vec![0.0; internal.dim()];
+        let mut dy = vec![0.0; internal.dim()];
+        if internal.reduce_body(body, &mut y).is_ok() && internal.rhs(self.t0, &y, &mut dy).is_ok() {
+            return Ok((true, y));
+        }
+        let y = if let Some(r) = &mut self.rigid {
+            let mut yr = vec![0.0; r.dim()];
+            r.flat_of_body(body, &mut yr).map_err(|reason| {
+                SolveError::InvalidInput(format!(
+                    "the start is singular for internal coordinates and cannot be put in the rigid chart: {reason}"
+                ))
+            })?;
+            r.set_near(&body.q);
+            yr
+        } else {
+            to_cartesian(self.internal.molecule(), body).map_err(|reason| {
+                SolveError::InvalidInput(format!(
+                    "the start is singular for internal coordinates and cannot be put in the Cartesian chart: {reason}"
+                ))
+            })?
+        };
+        Ok((false, y))
+    }
+
+    /// A fresh start from the Cartesian flat state `y`, in the fallback chart.
+    fn fresh_cartesian(&mut self, y: &[f64]) -> Result<Vec<f64>, SolveError<ChartError>> {
+        if y.len() != 6 * NA {
             return Err(SolveError::InvalidInput(format!(
                 "a Cartesian start of {} components, expected {}",
                 y.len(),
                 6 * NA
             )));
         }
-        ChartStart::Fresh(_) | ChartStart::FreshCartesian(_) => {
-            let (regular, y, cartesian_y) = match start {
-                ChartStart::Fresh(body) => {
-                    last_q = body.q;
-                    let mut y = vec![0.0; internal.dim()];
-                    let mut dy = vec![0.0; internal.dim()];
-                    let regular = internal.reduce_body(body, &mut y).is_ok() && internal.rhs(t0, &y, &mut dy).is_ok();
-                    let cartesian_y = if regular {
-                        Vec::new()
-                    } else if let Some(r) = &mut rigid {
-                        let mut yr = vec![0.0; r.dim()];
-                        r.flat_of_body(body, &mut yr).map_err(|reason| {
-                            SolveError::InvalidInput(format!(
-                                "the start is singular for internal coordinates and cannot be put in the rigid \
-                                 chart: {reason}"
-                            ))
-                        })?;
-                        r.set_near(&body.q);
-                        yr
-                    } else {
-                        to_cartesian(m, body).map_err(|reason| {
-                            SolveError::InvalidInput(format!(
-                                "the start is singular for internal coordinates and cannot be put in the Cartesian \
-                                 chart: {reason}"
-                            ))
-                        })?
-                    };
-                    (regular, y, cartesian_y)
-                }
-                ChartStart::FreshCartesian(y) => {
-                    let lab = CartesianSystem::<M, N, NA>::lab(y);
-                    if let Some(r) = &rigid {
-                        let mut yr = vec![0.0; r.dim()];
-                        r.layout().flat(r.masses(), &lab, &mut yr);
-                        (false, Vec::new(), yr)
-                    } else {
-                        if let Ok((body, _)) = body_of_lab_exact(m, &lab, &last_q) {
-                            last_q = body.q;
-                        }
-                        (false, Vec::new(), y.to_vec())
-                    }
-                }
-                ChartStart::Resume(_) => unreachable!("matched above"),
-            };
-            if regular {
-                (Chart::Internal, Next::Fresh(y))
-            } else {
-                let y = cartesian_y;
-                report.last_chart = Some(fallback);
-                served = Some(0);
-                let first = match &rigid {
-                    None => ChartState::Cartesian(&y),
-                    Some(r) => {
-                        let body = r.clone().body_of_flat(&y).map_err(|e| {
-                            SolveError::InvalidInput(format!("the start in the rigid chart does not fit: {e}"))
-                        })?;
-                        last_q = body.q;
-                        reduce(&internal, body, &mut buffer).map_err(SolveError::InvalidInput)?;
-                        ChartState::Internal(&buffer)
-                    }
-                };
-                if observer.observe(t0, first).is_break() || t_end <= t0 {
-                    return Ok(());
-                }
-                let h = interval.min(t_end - t0) * 1e-3;
-                (fallback, Next::Point(Dop853Resume { t: t0, y, h, fac_old: 1e-4, reject: false, outputs_done: 0 }))
+        let lab = CartesianSystem::<M, N, NA>::lab(y);
+        if let Some(r) = &self.rigid {
+            let mut yr = vec![0.0; r.dim()];
+            r.layout().flat(r.masses(), &lab, &mut yr);
+            return Ok(yr);
+        }
+        if let Ok((body, _)) = body_of_lab_exact(self.internal.molecule(), &lab, &self.last_q) {
+            self.last_q = body.q;
+        }
+        Ok(y.to_vec())
+    }
+
+    /// A segment in the internal chart from `next`: the run's end (`None`), or the switch to the
+    /// fallback chart at the last accepted state when the metric's pivot fell below
+    /// [`SWITCH_PIVOT`].
+    fn internal_segment<O: ChartObserver + ?Sized>(
+        &mut self,
+        dop: &mut Dop853,
+        next: &Next,
+        observer: &mut O,
+        report: &mut ChartReport,
+    ) -> Result<Option<(Chart, Next)>, SolveError<ChartError>> {
+        let (t0, t_end, interval) = (self.t0, self.t_end, self.interval);
+        let mut out = Served { observer, served: &mut self.served, chart: Chart::Internal };
+        let result = match next {
+            Next::Fresh(y) => dop.integrate_resumable(&mut self.internal, t0, y, t_end, interval, &mut out),
+            Next::Point(p) => dop.resume(&mut self.internal, t0, p, t_end, interval, &mut out),
+        };
+        match result {
+            Ok((stats, resume)) => {
+                add(&mut report.stats, &stats);
+                report.resume = resume;
+                Ok(None)
+            }
+            Err(SolveError::Rhs { source, .. }) if is_switch(&source) => self.leave_internal(dop, report).map(Some),
+            Err(e) => {
+                add(&mut report.stats, &dop.last_accepted().3);
+                Err(map_error(e, ChartError::Internal))
             }
         }
-    };
-    loop {
-        report.last_chart = Some(chart);
-        let mut out = Served { observer: &mut *observer, served: &mut served, chart };
-        match chart {
-            Chart::Internal => {
-                let result = match &next {
-                    Next::Fresh(y) => dop_i.integrate_resumable(&mut internal, t0, y, t_end, interval, &mut out),
-                    Next::Point(p) => dop_i.resume(&mut internal, t0, p, t_end, interval, &mut out),
-                };
-                match result {
-                    Ok((stats, resume)) => {
-                        add(&mut report.stats, &stats);
-                        report.resume = resume;
-                        return Ok(());
-                    }
-                    Err(SolveError::Rhs { source, .. }) if is_switch(&source) => {
-                        let (t, y, h, stats) = dop_i.last_accepted();
-                        add(&mut report.stats, &stats);
-                        // A failure before the internal segment chose a step (at its start).
-                        let h = if h.is_finite() && h > 0.0 { h } else { interval.min(t_end - t) * 1e-3 };
-                        let fail = |reason: String| SolveError::Rhs {
-                            t,
-                            y: y.to_vec(),
-                            source: ChartError::Switch { from: Chart::Internal, t, reason },
-                        };
-                        let body = internal.expand_body(y).map_err(|e| fail(e.to_string()))?;
-                        last_q = body.q;
-                        let yc = match (&mut cartesian, &mut rigid) {
-                            (Some(cartesian), _) => {
-                                let yc = to_cartesian(m, &body).map_err(fail)?;
-                                // The Cartesian segment takes at least the step the internal one failed in.
-                                cartesian.check_after(t + h);
-                                yc
-                            }
-                            (None, Some(r)) => {
-                                let mut yr = vec![0.0; r.dim()];
-                                r.flat_of_body(&body, &mut yr).map_err(fail)?;
-                                r.set_near(&body.q);
-                                r.check_after(t + h);
-                                yr
-                            }
-                            (None, None) => unreachable!("a fallback chart was made above"),
-                        };
-                        let outputs_done = served.unwrap_or(0);
-                        next = Next::Point(Dop853Resume { t, y: yc, h, fac_old: 1e-4, reject: false, outputs_done });
-                        chart = fallback;
-                        report.switches += 1;
-                        entered = t;
-                    }
-                    Err(e) => {
-                        add(&mut report.stats, &dop_i.last_accepted().3);
-                        return Err(map_error(e, ChartError::Internal));
-                    }
-                }
+    }
+
+    /// The switch from the internal chart to the fallback chart at `dop`'s last accepted state.
+    fn leave_internal(
+        &mut self,
+        dop: &Dop853,
+        report: &mut ChartReport,
+    ) -> Result<(Chart, Next), SolveError<ChartError>> {
+        let (t, y, h, stats) = dop.last_accepted();
+        add(&mut report.stats, &stats);
+        // A failure before the internal segment chose a step (at its start).
+        let h = if h.is_finite() && h > 0.0 { h } else { self.interval.min(self.t_end - t) * 1e-3 };
+        let fail = |reason: String| SolveError::Rhs {
+            t,
+            y: y.to_vec(),
+            source: ChartError::Switch { from: Chart::Internal, t, reason },
+        };
+        let body = self.internal.expand_body(y).map_err(|e| fail(e.to_string()))?;
+        self.last_q = body.q;
+        let yc = match (&mut self.cartesian, &mut self.rigid) {
+            (Some(cartesian), _) => {
+                let yc = to_cartesian(self.internal.molecule(), &body).map_err(fail)?;
+                // The Cartesian segment takes at least the step the internal one failed in.
+                cartesian.check_after(t + h);
+                yc
             }
-            Chart::Cartesian => {
-                let Next::Point(p) = &next else { unreachable!("a Cartesian segment starts from a point") };
-                let Some(cartesian) = &mut cartesian else { unreachable!("the Cartesian chart is the fallback") };
-                let result = dop_c.resume(cartesian, t0, p, t_end, interval, &mut out);
-                let at = Segment { internal: &internal, served, entered, t_end };
-                match conclude(result, dop_c, cartesian, at, &mut last_q, report)? {
-                    None => return Ok(()),
-                    Some((c, n)) => (chart, next) = (c, n),
-                }
+            (None, Some(r)) => {
+                let mut yr = vec![0.0; r.dim()];
+                r.flat_of_body(&body, &mut yr).map_err(fail)?;
+                r.set_near(&body.q);
+                r.check_after(t + h);
+                yr
             }
-            Chart::Rigid => {
-                let Next::Point(p) = &next else { unreachable!("a rigid segment starts from a point") };
-                let Some(rigid) = &mut rigid else { unreachable!("the rigid chart is the fallback") };
-                if dop_r.as_ref().is_none_or(|d| d.dim() != rigid.dim()) {
-                    *dop_r = Some(
-                        Dop853::new(rigid.dim(), *dop_i.options())
-                            .map_err(|e| SolveError::InvalidInput(e.to_string()))?,
-                    );
-                }
-                let Some(dop_r) = dop_r.as_mut() else { unreachable!("made above") };
-                let mut out = RigidServed {
-                    observer: &mut *observer,
-                    served: &mut served,
-                    rigid: rigid.clone(),
-                    internal: &internal,
-                    buffer: &mut buffer,
-                    failure: None,
-                };
-                out.rigid.set_near(&last_q);
-                let result = dop_r.resume(rigid, t0, p, t_end, interval, &mut out);
-                if let Some((t, reason)) = out.failure.take() {
-                    add(&mut report.stats, &dop_r.last_accepted().3);
-                    let y = dop_r.last_accepted().1.to_vec();
-                    return Err(SolveError::Rhs { t, y, source: ChartError::Switch { from: Chart::Rigid, t, reason } });
-                }
-                let at = Segment { internal: &internal, served, entered, t_end };
-                match conclude(result, dop_r, rigid, at, &mut last_q, report)? {
-                    None => return Ok(()),
-                    Some((c, n)) => (chart, next) = (c, n),
-                }
-            }
+            (None, None) => unreachable!("a fallback chart was made above"),
+        };
+        let outputs_done = self.served.unwrap_or(0);
+        report.switches += 1;
+        self.entered = t;
+        let point = Dop853Resume { t, y: yc, h, fac_old: 1e-4, reject: false, outputs_done };
+        Ok((self.fallback, Next::Point(point)))
+    }
+
+    /// A segment in the Cartesian chart from `next`, to what [`conclude`] decides.
+    fn cartesian_segment<O: ChartObserver + ?Sized>(
+        &mut self,
+        dop: &mut Dop853,
+        next: &Next,
+        observer: &mut O,
+        report: &mut ChartReport,
+    ) -> Result<Option<(Chart, Next)>, SolveError<ChartError>> {
+        let Next::Point(p) = next else { unreachable!("a Cartesian segment starts from a point") };
+        let Some(cartesian) = &mut self.cartesian else { unreachable!("the Cartesian chart is the fallback") };
+        let mut out = Served { observer, served: &mut self.served, chart: Chart::Cartesian };
+        let result = dop.resume(cartesian, self.t0, p, self.t_end, self.interval, &mut out);
+        let at = Segment { internal: &self.internal, served: self.served, entered: self.entered, t_end: self.t_end };
+        conclude(result, dop, cartesian, at, &mut self.last_q, report)
+    }
+
+    /// A segment in the rigid chart from `next` (its integrator made with `options` at its first
+    /// use), its outputs served as internal-chart states, to what [`conclude`] decides.
+    fn rigid_segment<O: ChartObserver + ?Sized>(
+        &mut self,
+        dop: &mut Option<Dop853>,
+        options: Dop853Options,
+        next: &Next,
+        observer: &mut O,
+        report: &mut ChartReport,
+    ) -> Result<Option<(Chart, Next)>, SolveError<ChartError>> {
+        let Next::Point(p) = next else { unreachable!("a rigid segment starts from a point") };
+        let Some(rigid) = &mut self.rigid else { unreachable!("the rigid chart is the fallback") };
+        if dop.as_ref().is_none_or(|d| d.dim() != rigid.dim()) {
+            *dop = Some(Dop853::new(rigid.dim(), options).map_err(|e| SolveError::InvalidInput(e.to_string()))?);
         }
+        let Some(dop) = dop.as_mut() else { unreachable!("made above") };
+        let mut out = RigidServed {
+            observer,
+            served: &mut self.served,
+            rigid: rigid.clone(),
+            internal: &self.internal,
+            buffer: &mut self.buffer,
+            failure: None,
+        };
+        out.rigid.set_near(&self.last_q);
+        let result = dop.resume(rigid, self.t0, p, self.t_end, self.interval, &mut out);
+        if let Some((t, reason)) = out.failure.take() {
+            add(&mut report.stats, &dop.last_accepted().3);
+            let y = dop.last_accepted().1.to_vec();
+            return Err(SolveError::Rhs { t, y, source: ChartError::Switch { from: Chart::Rigid, t, reason } });
+        }
+        let at = Segment { internal: &self.internal, served: self.served, entered: self.entered, t_end: self.t_end };
+        conclude(result, dop, rigid, at, &mut self.last_q, report)
     }
 }
 

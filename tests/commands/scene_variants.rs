@@ -27,10 +27,16 @@ fn a_key_of_another_method_is_refused_at_the_key() {
     let e = error("method = \"dop853\"\nrtol = 1e-9\n  step = 0.1");
     assert_eq!(e.message, "`step` does not apply to the adaptive dop853 method");
     assert_eq!((e.line, e.column), (8, 3), "at the key");
-    assert_eq!(e.help, "remove it, or choose a method it applies to");
+    assert_eq!(e.help, "the gauss-legendre and rk4 methods take `step`: remove it, or choose one of them");
 
     let e = error("method = \"dop853\"\ncompensated = true");
     assert_eq!(e.message, "`compensated` does not apply to the dop853 method");
+    assert_eq!((e.line, e.column), (7, 1));
+    assert_eq!(e.help, "only the gauss-legendre method takes `compensated`: remove it, or choose that method");
+
+    // The first such key in the file is the one reported.
+    let e = error("method = \"dop853\"\nstages = 3\nstep = 0.1");
+    assert_eq!(e.message, "`stages` does not apply to the dop853 method");
     assert_eq!((e.line, e.column), (7, 1));
 
     let e = error("method = \"gauss-legendre\"\nstep = 0.1\nmin_step = 1e-3");
@@ -48,9 +54,14 @@ fn a_key_of_another_method_is_refused_at_the_key() {
 #[test]
 fn a_missing_required_key_is_reported_at_the_method() {
     let e = error("step_ = 0.1\nmethod = \"gauss-legendre\"");
-    // The unknown key comes first, at its place, with the scene reference.
-    assert!(e.message.starts_with("unknown field `step_`, expected one of `method`, `rtol`"), "{}", e.message);
+    // The unknown key comes first, at its place, with the method's keys, a did-you-mean and the
+    // scene reference.
+    assert_eq!(
+        e.message,
+        "unknown field `step_`, expected one of `method`, `step`, `stages`, `compensated`, `max_steps`"
+    );
     assert_eq!((e.line, e.column), (6, 1));
+    assert!(e.help.starts_with("did you mean `step`? "), "{}", e.help);
     assert!(e.help.contains("docs/src/reference/scene.md"), "{}", e.help);
 
     let e = error("stages = 3\nmethod = \"gauss-legendre\"");
@@ -63,11 +74,72 @@ fn a_missing_required_key_is_reported_at_the_method() {
 }
 
 #[test]
+fn an_unknown_key_lists_the_method_s_keys_with_a_did_you_mean() {
+    let e = error("method = \"rk4\"\nstep = 0.1\nmax_step = 10");
+    assert_eq!(e.message, "unknown field `max_step`, expected one of `method`, `step`, `max_steps`");
+    assert_eq!((e.line, e.column), (8, 1), "at the key");
+    assert!(e.help.starts_with("did you mean `max_steps`? docs/src/reference/scene.md"), "{}", e.help);
+
+    // Close to no key of the method but to another method's: that one, with its method.
+    let e = error("method = \"dop853\"\ncompensate = true");
+    assert_eq!(
+        e.message,
+        "unknown field `compensate`, expected one of `method`, `rtol`, `atol`, `min_step`, `max_steps`"
+    );
+    assert!(e.help.starts_with("did you mean `compensated` (a key of the gauss-legendre method)? "), "{}", e.help);
+
+    // Close to nothing: the list and the reference only.
+    let e = error("method = \"dop853\"\ntolerance_of_everything = 1");
+    assert_eq!((e.line, e.column), (7, 1));
+    assert!(e.help.starts_with("docs/src/reference/scene.md"), "{}", e.help);
+}
+
+#[test]
+fn each_method_s_bad_values_are_refused_at_their_places() {
+    // dop853: rtol, atol, min_step.
+    let e = error("method = \"dop853\"\nrtol = 2");
+    assert!(e.message.starts_with("`integrator.rtol` must lie in (10·ε, 1]"), "{}", e.message);
+    assert_eq!((e.line, e.column), (7, 8));
+    let e = error("method = \"dop853\"\natol = 1e-320");
+    assert!(e.message.contains("is subnormal"), "{}", e.message);
+    assert_eq!((e.line, e.column), (7, 8));
+    let e = error("method = \"dop853\"\nmin_step = 5.0");
+    assert!(e.message.starts_with("`integrator.min_step` (5 a.u.) is not shorter than the run"), "{}", e.message);
+    assert_eq!((e.line, e.column), (7, 12));
+    let e = error("method = \"dop853\"\nmax_steps = 0");
+    assert_eq!(e.message, "`integrator.max_steps` is 0");
+    assert_eq!((e.line, e.column), (7, 13));
+
+    // gauss-legendre: stages, step, the step count against max_steps (at max_steps).
+    let e = error("method = \"gauss-legendre\"\nstep = 0.1\nstages = 4");
+    assert_eq!(e.message, "Gauss–Legendre with 4 stages is not available");
+    assert_eq!((e.line, e.column), (8, 10));
+    let e = error("method = \"gauss-legendre\"\nstep = -0.1");
+    assert_eq!(e.message, "`integrator.step` must be a positive finite number, got -0.1");
+    assert_eq!((e.line, e.column), (7, 8));
+    let e = error("method = \"gauss-legendre\"\nstep = 0.1\nmax_steps = 5");
+    assert!(e.message.starts_with("the run needs 100 steps"), "{}", e.message);
+    assert_eq!((e.line, e.column), (8, 13));
+
+    // rk4: the step, needed, and its count against the default limit (at the step).
+    let e = error("method = \"rk4\"\nmax_steps = 5");
+    assert_eq!(e.message, "the rk4 method needs a step");
+    assert_eq!((e.line, e.column), (6, 10));
+    let e = error("method = \"rk4\"\nstep = 1e-9");
+    assert!(e.message.starts_with("the run needs 2000000000 steps"), "{}", e.message);
+    assert_eq!((e.line, e.column), (7, 8));
+}
+
+#[test]
 fn an_unknown_method_gets_a_did_you_mean() {
     let e = error("method = \"rk5\"\nstep = 0.1");
     assert_eq!(e.message, "unknown integrator `rk5`");
     assert_eq!((e.line, e.column), (6, 10));
-    assert!(e.help.starts_with("did you mean \"rk4\"? use \"dop853\""), "{}", e.help);
+    assert_eq!(
+        e.help,
+        "did you mean \"rk4\"? use \"dop853\" (adaptive, tolerances), \"gauss-legendre\" (symplectic, fixed step) \
+         or \"rk4\" (fixed step)"
+    );
 
     let e = error("method = \"gauss\"\nstep = 0.1");
     assert!(!e.help.starts_with("did you mean"), "nothing close: {}", e.help);

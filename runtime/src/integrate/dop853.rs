@@ -8,7 +8,9 @@
 //! algorithm (error norm, step-size factor, rejection rule, initial step) but not its layout.
 //! Stiffness detection is not implemented.
 
-use super::{InvalidInput, Observer, OdeSystem, SolveError, Stats, check_dim, check_run};
+use core::ops::ControlFlow;
+
+use super::{InvalidInput, Observer, OdeSystem, OutputGrid, SolveError, Stats, check_dim, check_run};
 use crate::diagnostic::Compact;
 
 mod lanes;
@@ -404,6 +406,25 @@ pub struct Dop853Resume {
     pub outputs_done: u64,
 }
 
+/// The step-size controller between steps: where the next step starts, the step to try there
+/// and the controller's memory. At the start of a step it is the continuation point
+/// [`Dop853Resume`] records.
+#[derive(Clone, Copy, Debug)]
+struct Control {
+    x: f64,
+    h: f64,
+    fac_old: f64,
+    reject: bool,
+}
+
+impl Control {
+    /// The continuation point at this controller's step, with the state `y` there and the
+    /// outputs served.
+    fn resume(self, y: Vec<f64>, outputs_done: u64) -> Dop853Resume {
+        Dop853Resume { t: self.x, y, h: self.h, fac_old: self.fac_old, reject: self.reject, outputs_done }
+    }
+}
+
 impl Dop853 {
     /// Allocates the workspace for systems of dimension `dim`.
     pub fn new(dim: usize, options: Dop853Options) -> Result<Self, InvalidInput> {
@@ -547,7 +568,6 @@ impl Dop853 {
     {
         let grid = check_run(self.dim(), system.dim(), t0, y0, t_end, output_interval)?;
         let opts = self.options;
-        let n = self.dim();
         let mut stats = Stats::default();
         self.y.copy_from_slice(y0);
         let mut next_output = match from {
@@ -559,6 +579,94 @@ impl Dop853 {
                 1
             }
         };
+        // From the run's origin t0, also when continuing, so that a continued run caps its steps
+        // as the uninterrupted one does.
+        let h_max = opts.max_step.min(t_end - t0);
+        let mut c = self.start(system, t0, from, t_end, h_max, &mut stats)?;
+        let expo1 = 1.0 / 8.0 - opts.beta * 0.2;
+        // The continuation point once the last step has first been shortened, its state in
+        // `y_resume`.
+        let mut shortened: Option<Control> = None;
+        loop {
+            self.check_step(c, stats.steps)?;
+            // Where this step starts, for a continuation from it.
+            let step_start = c;
+            (self.x_accepted, self.h_proposed, self.stats_accepted) = (c.x, c.h, stats);
+            // Stretch a step that would end just short of t_end (as dop853.f does), so no
+            // sliver step follows.
+            let last = c.x + 1.01 * c.h > t_end;
+            if last {
+                if shortened.is_none() && snapshot.is_some() {
+                    shortened = Some(step_start);
+                    self.y_resume.copy_from_slice(&self.y);
+                }
+                c.h = t_end - c.x;
+            }
+            stats.steps += 1;
+            self.trial_step(system, c.x, c.h, &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?;
+            let err = self.error_norm(c.h);
+
+            // Step-size factor of dop853.f: h_new = h / fac with fac = err^expo1 / fac_old^β / SAFETY
+            // clamped to [1/FAC2, 1/FAC1]. A non-finite err is infinite here, which rejects the step
+            // and shrinks it by FAC1.
+            let fac11 = err.powf(expo1);
+            let fac = (fac11 / c.fac_old.powf(opts.beta) / SAFETY).clamp(1.0 / FAC2, 1.0 / FAC1);
+            let mut h_new = c.h / fac;
+            if err <= 1.0 {
+                c.fac_old = err.max(1e-4);
+                stats.accepted += 1;
+                let x_new = if last { t_end } else { c.x + c.h };
+                self.eval_fsal(system, x_new, &mut stats)?;
+                let served = self.serve_outputs(system, c, x_new, &grid, &mut next_output, observer, &mut stats)?;
+                if served.is_break() {
+                    if let Some(out) = snapshot.as_deref_mut() {
+                        // Continue from the shortened step if there was one, else redo this one.
+                        let point = shortened.unwrap_or_else(|| {
+                            self.y_resume.copy_from_slice(&self.y);
+                            step_start
+                        });
+                        *out = Some(point.resume(self.y_resume.clone(), next_output - 1));
+                    }
+                    return Ok(stats);
+                }
+                core::mem::swap(&mut self.y, &mut self.y_new);
+                let n = self.dim();
+                self.k.copy_within(FSAL * n..(FSAL + 1) * n, 0);
+                c.x = x_new;
+                if last {
+                    if let (Some(out), Some(point)) = (snapshot.as_deref_mut(), shortened) {
+                        *out = Some(point.resume(self.y_resume.clone(), next_output - 1));
+                    }
+                    return Ok(stats);
+                }
+                h_new = h_new.min(h_max);
+                if c.reject {
+                    h_new = h_new.min(c.h);
+                }
+                c.reject = false;
+            } else {
+                h_new = c.h / (1.0 / FAC1).min(fac11 / SAFETY);
+                c.reject = true;
+                stats.rejected += 1;
+            }
+            c.h = h_new;
+        }
+    }
+
+    /// The controller at the first step of a run: `f` at the start into stage 0, the step from
+    /// the continuation point `from`, the options or Hairer's `HINIT`. Before the first step is
+    /// accepted the start counts as the last accepted state, so that a failure before it (at the
+    /// start or in the initial step's trial evaluation) reports this run's start, never a
+    /// previous run's point.
+    fn start<S: OdeSystem + ?Sized>(
+        &mut self,
+        system: &mut S,
+        t0: f64,
+        from: Option<&Dop853Resume>,
+        t_end: f64,
+        h_max: f64,
+        stats: &mut Stats,
+    ) -> Result<Control, SolveError<S::Error>> {
         if let Some(r) = from
             && !(r.t >= t0 && r.t < t_end && r.h > 0.0 && r.h.is_finite() && r.fac_old.is_finite())
         {
@@ -567,135 +675,101 @@ impl Dop853 {
                 r.t, r.h
             )));
         }
-
-        let mut x = from.map_or(t0, |r| r.t);
-        // The start is the last accepted state until the first step is accepted, so that a
-        // failure before it (at the start or in the initial step's trial evaluation) reports
-        // this run's start, never a previous run's point.
-        (self.x_accepted, self.h_proposed, self.stats_accepted) = (x, from.map_or(f64::NAN, |r| r.h), stats);
-        eval_into(system, x, &self.y, &mut self.k[..n], &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?;
+        let n = self.dim();
+        let x = from.map_or(t0, |r| r.t);
+        (self.x_accepted, self.h_proposed, self.stats_accepted) = (x, from.map_or(f64::NAN, |r| r.h), *stats);
+        eval_into(system, x, &self.y, &mut self.k[..n], stats).map_err(|(t, source)| self.rhs_error(t, source))?;
         if !self.k[..n].iter().all(|v| v.is_finite()) {
             return Err(self.non_finite(x));
         }
-        // From the run's origin t0, also when continuing, so that a continued run caps its steps
-        // as the uninterrupted one does.
-        let h_max = opts.max_step.min(t_end - t0);
-        let mut h = match (from, opts.initial_step) {
+        let h = match (from, self.options.initial_step) {
             (Some(r), _) => r.h,
             (None, Some(h)) => h.min(h_max),
             (None, None) => {
-                self.initial_step(system, x, h_max, &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?
+                self.initial_step(system, x, h_max, stats).map_err(|(t, source)| self.rhs_error(t, source))?
             }
         };
+        Ok(Control { x, h, fac_old: from.map_or(1e-4, |r| r.fac_old), reject: from.is_some_and(|r| r.reject) })
+    }
 
-        let expo1 = 1.0 / 8.0 - opts.beta * 0.2;
-        let mut fac_old: f64 = from.map_or(1e-4, |r| r.fac_old);
-        let mut reject = from.is_some_and(|r| r.reject);
-        // The continuation point once the last step has first been shortened: (t, h, fac_old,
-        // reject), its state in `y_resume`.
-        let mut shortened: Option<(f64, f64, f64, bool)> = None;
-        loop {
-            if stats.steps >= opts.max_steps {
-                return Err(SolveError::TooManySteps { t: x, max_steps: opts.max_steps, y: self.y.clone() });
-            }
-            if 0.1 * h.abs() <= x.abs() * UROUND || h < opts.min_step || h.is_nan() {
-                return Err(SolveError::StepSizeTooSmall { t: x, h, y: self.y.clone() });
-            }
-            // Where this step starts, for a continuation from it.
-            let step_start = (x, h, fac_old, reject);
-            (self.x_accepted, self.h_proposed, self.stats_accepted) = (x, h, stats);
-            // Stretch a step that would end just short of t_end (as dop853.f does), so no
-            // sliver step follows.
-            let last = x + 1.01 * h > t_end;
-            if last {
-                if shortened.is_none() && snapshot.is_some() {
-                    shortened = Some(step_start);
-                    self.y_resume.copy_from_slice(&self.y);
-                }
-                h = t_end - x;
-            }
-            stats.steps += 1;
-            self.trial_step(system, x, h, &mut stats).map_err(|(t, source)| self.rhs_error(t, source))?;
-            let err = self.error_norm(h);
-
-            // Step-size factor of dop853.f: h_new = h / fac with fac = err^expo1 / fac_old^β / SAFETY
-            // clamped to [1/FAC2, 1/FAC1]. A non-finite err is infinite here, which rejects the step
-            // and shrinks it by FAC1.
-            let fac11 = err.powf(expo1);
-            let fac = (fac11 / fac_old.powf(opts.beta) / SAFETY).clamp(1.0 / FAC2, 1.0 / FAC1);
-            let mut h_new = h / fac;
-            if err <= 1.0 {
-                fac_old = err.max(1e-4);
-                stats.accepted += 1;
-                let x_new = if last { t_end } else { x + h };
-                let fsal = &mut self.k[FSAL * n..(FSAL + 1) * n];
-                eval_into(system, x_new, &self.y_new, fsal, &mut stats).map_err(|(t, source)| SolveError::Rhs {
-                    t,
-                    y: self.y_new.clone(),
-                    source,
-                })?;
-                let fsal = &self.k[FSAL * n..(FSAL + 1) * n];
-                if !fsal.iter().all(|v| v.is_finite()) {
-                    return Err(SolveError::NonFinite { t: x_new, y: self.y_new.clone() });
-                }
-
-                // Serve the output times in (x, x_new].
-                let mut dense_ready = false;
-                while next_output <= grid.count {
-                    let t_out = grid.time(next_output);
-                    if t_out > x_new {
-                        break;
-                    }
-                    let state = if t_out == x_new {
-                        &self.y_new
-                    } else {
-                        if !dense_ready {
-                            self.prepare_dense(system, x, h, &mut stats)?;
-                            dense_ready = true;
-                        }
-                        self.interpolate(x, h, t_out);
-                        &self.y_out
-                    };
-                    next_output += 1;
-                    if observer.observe(t_out, state).is_break() {
-                        if let Some(out) = snapshot.as_deref_mut() {
-                            // Continue from the shortened step if there was one, else redo this one.
-                            let (t, h, fac_old, reject) = match shortened {
-                                Some(s) => s,
-                                None => {
-                                    self.y_resume.copy_from_slice(&self.y);
-                                    step_start
-                                }
-                            };
-                            let y = self.y_resume.clone();
-                            *out = Some(Dop853Resume { t, y, h, fac_old, reject, outputs_done: next_output - 1 });
-                        }
-                        return Ok(stats);
-                    }
-                }
-
-                core::mem::swap(&mut self.y, &mut self.y_new);
-                self.k.copy_within(FSAL * n..(FSAL + 1) * n, 0);
-                x = x_new;
-                if last {
-                    if let (Some(out), Some((t, h, fac_old, reject))) = (snapshot.as_deref_mut(), shortened) {
-                        let y = self.y_resume.clone();
-                        *out = Some(Dop853Resume { t, y, h, fac_old, reject, outputs_done: next_output - 1 });
-                    }
-                    return Ok(stats);
-                }
-                h_new = h_new.min(h_max);
-                if reject {
-                    h_new = h_new.min(h);
-                }
-                reject = false;
-            } else {
-                h_new = h / (1.0 / FAC1).min(fac11 / SAFETY);
-                reject = true;
-                stats.rejected += 1;
-            }
-            h = h_new;
+    /// The checks before a step: the step limit, and a step that is below `min_step` or no
+    /// longer changes `t`.
+    #[inline]
+    fn check_step<E>(&self, c: Control, steps: u64) -> Result<(), SolveError<E>> {
+        let max_steps = self.options.max_steps;
+        if steps >= max_steps {
+            return Err(SolveError::TooManySteps { t: c.x, max_steps, y: self.y.clone() });
         }
+        if 0.1 * c.h.abs() <= c.x.abs() * UROUND || c.h < self.options.min_step || c.h.is_nan() {
+            return Err(SolveError::StepSizeTooSmall { t: c.x, h: c.h, y: self.y.clone() });
+        }
+        Ok(())
+    }
+
+    /// `f(x_new, y_new)` of an accepted step into the FSAL stage (the first stage of the next
+    /// step), which must be finite: a failure carries the accepted state `y_new`.
+    #[inline]
+    fn eval_fsal<S: OdeSystem + ?Sized>(
+        &mut self,
+        system: &mut S,
+        x_new: f64,
+        stats: &mut Stats,
+    ) -> Result<(), SolveError<S::Error>> {
+        let n = self.dim();
+        let fsal = &mut self.k[FSAL * n..(FSAL + 1) * n];
+        eval_into(system, x_new, &self.y_new, fsal, stats).map_err(|(t, source)| SolveError::Rhs {
+            t,
+            y: self.y_new.clone(),
+            source,
+        })?;
+        let fsal = &self.k[FSAL * n..(FSAL + 1) * n];
+        if !fsal.iter().all(|v| v.is_finite()) {
+            return Err(SolveError::NonFinite { t: x_new, y: self.y_new.clone() });
+        }
+        Ok(())
+    }
+
+    /// Hands the observer the output times in `(c.x, x_new]` of the accepted step of size `c.h`
+    /// (the state `y_new` at `x_new`, the dense output inside the step, prepared at the first
+    /// output that needs it), advancing `next_output`; `Break` when the observer stops the run.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn serve_outputs<S, O>(
+        &mut self,
+        system: &mut S,
+        c: Control,
+        x_new: f64,
+        grid: &OutputGrid,
+        next_output: &mut u64,
+        observer: &mut O,
+        stats: &mut Stats,
+    ) -> Result<ControlFlow<()>, SolveError<S::Error>>
+    where
+        S: OdeSystem + ?Sized,
+        O: Observer + ?Sized,
+    {
+        let mut dense_ready = false;
+        while *next_output <= grid.count {
+            let t_out = grid.time(*next_output);
+            if t_out > x_new {
+                break;
+            }
+            let state = if t_out == x_new {
+                &self.y_new
+            } else {
+                if !dense_ready {
+                    self.prepare_dense(system, c.x, c.h, stats)?;
+                    dense_ready = true;
+                }
+                self.interpolate(c.x, c.h, t_out);
+                &self.y_out
+            };
+            *next_output += 1;
+            if observer.observe(t_out, state).is_break() {
+                return Ok(ControlFlow::Break(()));
+            }
+        }
+        Ok(ControlFlow::Continue(()))
     }
 
     /// A [`SolveError::Rhs`] at `t` carrying the last accepted state.

@@ -310,9 +310,45 @@ impl<T: Real> Dop853Lanes<T> {
         S: LaneSystem<T> + ?Sized,
         F: LaneFeeder + ?Sized,
     {
-        let n = self.dim;
+        self.check_lanes(system, feeder, run);
+        let mut running = 0u32;
+        let (mut hv, mut xv) = (T::splat(0.0), T::splat(0.0));
+        for (lane, l) in self.lanes.iter().enumerate() {
+            if l.running {
+                running |= 1 << lane;
+                hv.set_lane(lane, l.h);
+                xv.set_lane(lane, l.x);
+            }
+        }
+        if running == 0 {
+            return;
+        }
+        let mut failed_at = [0.0; 32];
+        let failed = self.trial_step(system, running, xv, hv, &mut failed_at);
+        let mut h_news = [0.0; 32];
+        let mut accepted = self.control(running & !failed, &mut h_news);
+        for lane in lanes_of(failed) {
+            self.finish(system, feeder, run, lane, Err(LaneFailure::Rhs { t: failed_at[lane] }));
+        }
+        let mut x_new = [0.0; 32];
+        accepted = self.eval_fsal(system, feeder, run, accepted, &mut x_new);
+        accepted = self.dense_where_needed(system, feeder, run, accepted, &x_new, xv, hv);
+        self.take_steps(accepted);
+        for lane in lanes_of(accepted) {
+            self.serve_and_advance(system, feeder, run, lane, x_new[lane], h_news[lane]);
+        }
+    }
+
+    /// The checks at the top of the scalar solver's loop, per lane: a lane past `max_steps` or
+    /// with too small a step ends its trajectory and takes the next; a lane that goes on
+    /// shortens a last step to land on `t_end` and counts the step.
+    #[inline]
+    fn check_lanes<S, F>(&mut self, system: &mut S, feeder: &mut F, run: &Run)
+    where
+        S: LaneSystem<T> + ?Sized,
+        F: LaneFeeder + ?Sized,
+    {
         let opts = self.options;
-        // The checks at the top of the scalar solver's loop, per lane.
         for lane in 0..T::LANES {
             while self.lanes[lane].running {
                 let l = &mut self.lanes[lane];
@@ -336,22 +372,23 @@ impl<T: Real> Dop853Lanes<T> {
                 }
             }
         }
-        let mut running = 0u32;
-        let (mut hv, mut xv) = (T::splat(0.0), T::splat(0.0));
-        for (lane, l) in self.lanes.iter().enumerate() {
-            if l.running {
-                running |= 1 << lane;
-                hv.set_lane(lane, l.h);
-                xv.set_lane(lane, l.x);
-            }
-        }
-        if running == 0 {
-            return;
-        }
+    }
 
-        // The twelve stages in lockstep; a lane's first failing stage ends its trajectory.
+    /// The twelve stages of the `running` lanes' steps (from `xv` with steps `hv`) in lockstep,
+    /// leaving the 8th-order solution in `y_new` and `Σ b_i k_i` in `weighted`. Returns the mask
+    /// of lanes whose evaluation failed, with the time of each one's first failing stage in
+    /// `failed_at`.
+    #[inline]
+    fn trial_step<S: LaneSystem<T> + ?Sized>(
+        &mut self,
+        system: &mut S,
+        running: u32,
+        xv: T,
+        hv: T,
+        failed_at: &mut [f64; 32],
+    ) -> u32 {
+        let n = self.dim;
         let mut failed = 0u32;
-        let mut failed_at = [0.0; 32];
         for stage in 1..FSAL {
             combine(&mut self.y_stage, &self.y, &self.k, n, hv, A[stage]);
             let tv = xv + T::splat(C[stage]) * hv;
@@ -366,14 +403,21 @@ impl<T: Real> Dop853Lanes<T> {
         for i in 0..n {
             self.y_new[i] = self.y[i] + hv * self.weighted[i];
         }
+        failed
+    }
+
+    /// Per lane of `lanes` (whose trial steps were evaluated): the error, the step-size factor
+    /// and the decision, as the scalar solver. Writes each lane's proposed next step into
+    /// `h_news`, shrinks a rejected lane's step, and returns the mask of accepted lanes.
+    #[inline]
+    fn control(&mut self, lanes: u32, h_news: &mut [f64; 32]) -> u32 {
+        let n = self.dim;
+        let opts = self.options;
         let (err5, err3) = self.error_sums();
         let y_new_finite = finite_mask(&self.y_new);
-
-        // Per lane: the error, the step-size factor and the decision, as the scalar solver.
         let expo1 = 1.0 / 8.0 - opts.beta * 0.2;
         let mut accepted = 0u32;
-        let mut h_news = [0.0; 32];
-        for lane in lanes_of(running & !failed) {
+        for lane in lanes_of(lanes) {
             self.lanes[lane].stats.rhs_evals += (FSAL - 1) as u64;
             let h = self.lanes[lane].h;
             let (e5, e3) = (err5.lane(lane), err3.lane(lane));
@@ -397,30 +441,65 @@ impl<T: Real> Dop853Lanes<T> {
                 l.stats.rejected += 1;
             }
         }
-        for lane in lanes_of(failed) {
-            self.finish(system, feeder, run, lane, Err(LaneFailure::Rhs { t: failed_at[lane] }));
-        }
+        accepted
+    }
 
-        // f(t + h, y_new): the first stage of the next step, for the lanes that accepted.
-        let mut x_new = [0.0; 32];
-        if accepted != 0 {
-            let mut tv = T::splat(0.0);
-            for lane in lanes_of(accepted) {
-                let l = &self.lanes[lane];
-                x_new[lane] = if l.last { run.t_end } else { l.x + l.h };
-                tv.set_lane(lane, x_new[lane]);
-            }
-            let ok = system.rhs(tv, &self.y_new, &mut self.k[FSAL * n..(FSAL + 1) * n]);
-            for lane in lanes_of(accepted) {
-                self.lanes[lane].stats.rhs_evals += 1;
-                if ok >> lane & 1 == 0 {
-                    accepted &= !(1 << lane);
-                    self.finish(system, feeder, run, lane, Err(LaneFailure::Rhs { t: x_new[lane] }));
-                }
+    /// `f(t + h, y_new)`, the first stage of the next step, for the `accepted` lanes, each at its
+    /// step's end (written into `x_new`). A lane whose evaluation fails ends its trajectory;
+    /// returns the accepted lanes that remain.
+    #[inline]
+    fn eval_fsal<S, F>(
+        &mut self,
+        system: &mut S,
+        feeder: &mut F,
+        run: &Run,
+        mut accepted: u32,
+        x_new: &mut [f64; 32],
+    ) -> u32
+    where
+        S: LaneSystem<T> + ?Sized,
+        F: LaneFeeder + ?Sized,
+    {
+        if accepted == 0 {
+            return accepted;
+        }
+        let n = self.dim;
+        let mut tv = T::splat(0.0);
+        for lane in lanes_of(accepted) {
+            let l = &self.lanes[lane];
+            x_new[lane] = if l.last { run.t_end } else { l.x + l.h };
+            tv.set_lane(lane, x_new[lane]);
+        }
+        let ok = system.rhs(tv, &self.y_new, &mut self.k[FSAL * n..(FSAL + 1) * n]);
+        for lane in lanes_of(accepted) {
+            self.lanes[lane].stats.rhs_evals += 1;
+            if ok >> lane & 1 == 0 {
+                accepted &= !(1 << lane);
+                self.finish(system, feeder, run, lane, Err(LaneFailure::Rhs { t: x_new[lane] }));
             }
         }
+        accepted
+    }
 
-        // The dense output, if a lane has an output time inside its step.
+    /// The dense output of every lane's step (from `xv` with steps `hv`), if an `accepted` lane
+    /// has an output time inside its step (before `x_new`). A lane that needed it and whose
+    /// extra stages failed ends its trajectory; returns the accepted lanes that remain.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn dense_where_needed<S, F>(
+        &mut self,
+        system: &mut S,
+        feeder: &mut F,
+        run: &Run,
+        mut accepted: u32,
+        x_new: &[f64; 32],
+        xv: T,
+        hv: T,
+    ) -> u32
+    where
+        S: LaneSystem<T> + ?Sized,
+        F: LaneFeeder + ?Sized,
+    {
         let mut dense = 0u32;
         for lane in lanes_of(accepted) {
             let l = &self.lanes[lane];
@@ -428,21 +507,27 @@ impl<T: Real> Dop853Lanes<T> {
                 dense |= 1 << lane;
             }
         }
-        if dense != 0 {
-            let ok = self.prepare_dense(system, xv, hv);
-            for lane in lanes_of(dense) {
-                self.lanes[lane].stats.rhs_evals += (STAGES - FSAL - 1) as u64;
-                if ok >> lane & 1 == 0 {
-                    accepted &= !(1 << lane);
-                    let t = self.lanes[lane].x + C[FSAL + 1] * self.lanes[lane].h;
-                    self.finish(system, feeder, run, lane, Err(LaneFailure::Rhs { t }));
-                }
+        if dense == 0 {
+            return accepted;
+        }
+        let ok = self.prepare_dense(system, xv, hv);
+        for lane in lanes_of(dense) {
+            self.lanes[lane].stats.rhs_evals += (STAGES - FSAL - 1) as u64;
+            if ok >> lane & 1 == 0 {
+                accepted &= !(1 << lane);
+                let t = self.lanes[lane].x + C[FSAL + 1] * self.lanes[lane].h;
+                self.finish(system, feeder, run, lane, Err(LaneFailure::Rhs { t }));
             }
         }
+        accepted
+    }
 
-        // The accepted lanes' new state and FSAL stage, all lanes at once when every lane
-        // accepted (the common case), else lane by lane. Nothing below reads a lane's `y` or
-        // stage 0 before a finished lane is restarted (which overwrites both).
+    /// The `accepted` lanes' new state and FSAL stage, all lanes at once when every lane
+    /// accepted (the common case), else lane by lane. Nothing after this reads a lane's `y` or
+    /// stage 0 before a finished lane is restarted (which overwrites both).
+    #[inline]
+    fn take_steps(&mut self, accepted: u32) {
+        let n = self.dim;
         if accepted == T::ALL {
             self.y.copy_from_slice(&self.y_new);
             self.k.copy_within(FSAL * n..(FSAL + 1) * n, 0);
@@ -455,46 +540,62 @@ impl<T: Real> Dop853Lanes<T> {
                 }
             }
         }
-        for lane in lanes_of(accepted) {
-            // Serve the output times in (x, x_new].
-            let mut stopped = false;
-            while self.lanes[lane].next_output <= run.grid.count {
-                let t_out = run.grid.time(self.lanes[lane].next_output);
-                if t_out > x_new[lane] {
-                    break;
+    }
+
+    /// After lane `lane`'s step to `x_new` was accepted: serves the output times in
+    /// `(x, x_new]`, then ends the trajectory (its observer's break or its last step) or moves
+    /// the lane to `x_new` with the next step `h_new` (capped as the scalar solver caps it).
+    #[inline]
+    fn serve_and_advance<S, F>(
+        &mut self,
+        system: &mut S,
+        feeder: &mut F,
+        run: &Run,
+        lane: usize,
+        x_new: f64,
+        h_new: f64,
+    ) where
+        S: LaneSystem<T> + ?Sized,
+        F: LaneFeeder + ?Sized,
+    {
+        let n = self.dim;
+        let mut stopped = false;
+        while self.lanes[lane].next_output <= run.grid.count {
+            let t_out = run.grid.time(self.lanes[lane].next_output);
+            if t_out > x_new {
+                break;
+            }
+            if t_out == x_new {
+                for i in 0..n {
+                    self.y_out[i] = self.y_new[i].lane(lane);
                 }
-                if t_out == x_new[lane] {
-                    for i in 0..n {
-                        self.y_out[i] = self.y_new[i].lane(lane);
-                    }
-                } else {
-                    self.interpolate(lane, t_out);
-                }
-                self.lanes[lane].next_output += 1;
-                if feeder.observe(lane, t_out, &self.y_out).is_break() {
-                    stopped = true;
-                    break;
-                }
+            } else {
+                self.interpolate(lane, t_out);
             }
-            if stopped {
-                let stats = self.lanes[lane].stats;
-                self.finish(system, feeder, run, lane, Ok(stats));
-                continue;
+            self.lanes[lane].next_output += 1;
+            if feeder.observe(lane, t_out, &self.y_out).is_break() {
+                stopped = true;
+                break;
             }
-            let l = &mut self.lanes[lane];
-            l.x = x_new[lane];
-            if l.last {
-                let stats = l.stats;
-                self.finish(system, feeder, run, lane, Ok(stats));
-                continue;
-            }
-            let mut h_new = h_news[lane].min(l.h_max);
-            if l.reject {
-                h_new = h_new.min(l.h);
-            }
-            l.reject = false;
-            l.h = h_new;
         }
+        if stopped {
+            let stats = self.lanes[lane].stats;
+            self.finish(system, feeder, run, lane, Ok(stats));
+            return;
+        }
+        let l = &mut self.lanes[lane];
+        l.x = x_new;
+        if l.last {
+            let stats = l.stats;
+            self.finish(system, feeder, run, lane, Ok(stats));
+            return;
+        }
+        let mut h_new = h_new.min(l.h_max);
+        if l.reject {
+            h_new = h_new.min(l.h);
+        }
+        l.reject = false;
+        l.h = h_new;
     }
 
     /// Sums of the squared scaled 5th- and 3rd-order error estimates over the components, per
