@@ -578,7 +578,7 @@ impl<'m, M: Molecule<N, NA> + ?Sized, const N: usize, const NA: usize> Switching
             }
             (None, Some(r)) => {
                 let mut yr = vec![0.0; r.dim()];
-                r.flat_of_body(&body, &mut yr).map_err(fail)?;
+                r.flat_of_body(&body, &mut yr).map_err(|e| fail(e.to_string()))?;
                 r.set_near(&body.q);
                 r.check_after(t + h);
                 yr

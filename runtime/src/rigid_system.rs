@@ -33,7 +33,7 @@
 
 use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, Vector3};
 
-use crate::frames::{LabState, nearest_rotation, projections};
+use crate::frames::{FrameError, LabState, nearest_rotation, projections};
 use crate::hamiltonian::{BodyState, MetricFactor};
 use crate::integrate::OdeSystem;
 use crate::molecule::{KineticMatrices, Molecule};
@@ -499,9 +499,8 @@ where
 
     /// The flat state of a body-formulation state (centre of mass at rest at the origin), also
     /// at a singular geometry (through the metric's pseudo-inverse).
-    pub fn flat_of_body(&self, body: &BodyState<N>, y: &mut [f64]) -> Result<(), String> {
-        let lab = crate::frames::lab_of_body_any(self.molecule, body, &crate::frames::CentreOfMass::default())
-            .map_err(|e| e.to_string())?;
+    pub fn flat_of_body(&self, body: &BodyState<N>, y: &mut [f64]) -> Result<(), FrameError> {
+        let lab = crate::frames::lab_of_body_any(self.molecule, body, &crate::frames::CentreOfMass::default())?;
         self.layout.flat(&self.masses, &lab, y);
         Ok(())
     }

@@ -34,8 +34,8 @@ use std::ops::Range;
 use std::path::Path;
 use std::sync::OnceLock;
 
-use serde::de::{self, DeserializeOwned, Visitor};
-use serde::{Deserialize, Deserializer};
+use serde::Deserialize;
+use serde::de::{self, DeserializeOwned};
 use toml::Spanned;
 
 use crate::runtime::Molecule;
@@ -45,6 +45,7 @@ use crate::runtime::units::EnergyUnit;
 use crate::scene::Scene;
 use crate::scene::raw::RawEnsemble;
 use crate::scene::spanned::{self, Value};
+use crate::scene::variant::fields;
 
 /// A method bound to a molecule of `N` coordinates: it builds the sampler. The runtime's
 /// [`Spec`] is one (the built-in samplers); a method with its own sampler binds to its own type.
@@ -168,7 +169,7 @@ macro_rules! methods {
 
             /// Every method's name and keys, in the order of [`METHODS`].
             fn every() -> Vec<(&'static str, &'static [&'static str])> {
-                vec![$((<$module::$ty as Method>::NAME, keys::<<$module::$ty as Method>::Keys>())),*]
+                vec![$((<$module::$ty as Method>::NAME, fields::<<$module::$ty as Method>::Keys>())),*]
             }
 
             /// Its `method = "..."`.
@@ -297,7 +298,7 @@ pub(crate) fn refuse_unknown_keys(src: &Source<'_>, table: &Spanned<Value>) -> R
 fn every_key() -> &'static [&'static str] {
     static KEYS: OnceLock<Vec<&'static str>> = OnceLock::new();
     KEYS.get_or_init(|| {
-        let mut all = keys::<RawEnsemble>().to_vec();
+        let mut all = fields::<RawEnsemble>().to_vec();
         for key in MethodSpec::every().into_iter().flat_map(|(_, keys)| keys.iter()) {
             if !all.contains(key) {
                 all.push(key);
@@ -325,7 +326,7 @@ pub(crate) fn read(
         };
         return Err(src.error(common.method.span(), format!("unknown ensemble method `{name}`"), help));
     };
-    let shared = keys::<RawEnsemble>();
+    let shared = fields::<RawEnsemble>();
     for (key, value) in table.get_ref().entries() {
         let key = key.get_ref().as_str();
         if !takes.contains(&key) && !shared.contains(&key) {
@@ -564,56 +565,6 @@ impl<'a> Binding<'a> {
     }
 }
 
-/// The field names of a struct `T` deserializes (its keys), in their order, read from the
-/// deserializer call its derived `Deserialize` makes.
-fn keys<T: DeserializeOwned>() -> &'static [&'static str] {
-    struct Fields;
-
-    #[derive(Debug)]
-    struct Found(Option<&'static [&'static str]>);
-
-    impl std::fmt::Display for Found {
-        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-            f.write_str("not a struct")
-        }
-    }
-
-    impl std::error::Error for Found {}
-
-    impl de::Error for Found {
-        fn custom<D: std::fmt::Display>(_: D) -> Self {
-            Found(None)
-        }
-    }
-
-    impl<'de> Deserializer<'de> for Fields {
-        type Error = Found;
-
-        fn deserialize_any<V: Visitor<'de>>(self, _: V) -> Result<V::Value, Found> {
-            Err(Found(None))
-        }
-
-        fn deserialize_struct<V: Visitor<'de>>(
-            self,
-            _: &'static str,
-            fields: &'static [&'static str],
-            _: V,
-        ) -> Result<V::Value, Found> {
-            Err(Found(Some(fields)))
-        }
-
-        serde::forward_to_deserialize_any! {
-            bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes byte_buf option unit
-            unit_struct newtype_struct seq tuple tuple_struct map enum identifier ignored_any
-        }
-    }
-
-    match T::deserialize(Fields) {
-        Err(Found(Some(fields))) => fields,
-        _ => panic!("{}: a method's keys are a struct with named fields", std::any::type_name::<T>()),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -625,9 +576,9 @@ mod tests {
         for (i, (name, keys)) in every.iter().enumerate() {
             assert!(every[..i].iter().all(|m| m.0 != *name), "two methods are called {name}");
             for key in *keys {
-                assert!(!super::keys::<RawEnsemble>().contains(key), "{name}: `{key}` is a key every method takes");
+                assert!(!fields::<RawEnsemble>().contains(key), "{name}: `{key}` is a key every method takes");
             }
         }
-        assert_eq!(keys::<RegionKeys>(), ["energy_cap", "limits"]);
+        assert_eq!(fields::<RegionKeys>(), ["energy_cap", "limits"]);
     }
 }
