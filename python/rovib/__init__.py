@@ -521,5 +521,7 @@ def ensemble_states(scene: Union[PathLike, str, Dict[str, Any]], n: int) -> Dict
     (n × 3, body frame, ħ), ``H`` and ``U`` (n, hartree); and ``molecule`` and ``description``
     (how the states are drawn, as summary.json's ``sampler``).
     """
+    if int(n) < 0:
+        raise RovibError(f"error: n must be a count of states (0 or more), got {n}")
     path, text = _scene_source(scene)
     return _rovib.sample_scene(path, int(n), text)
