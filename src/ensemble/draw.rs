@@ -4,9 +4,9 @@
 //! [`super::run_ensemble`] does, with the scene's `[potential]`, and the `[pairs] max_energy`
 //! restriction, and draws states `0..count`.
 
+use super::output_times;
 use super::pair_states::{Restricted, RestrictedSampler};
 use super::scene::parse_ensemble;
-use super::output_times;
 use crate::error::Error;
 use crate::molecules;
 use crate::runtime::sample::{Sampler, energy};
@@ -101,9 +101,8 @@ impl Draw<'_> {
             )
         })?;
         let pairs = ensemble.pairs.as_ref().map(|p| p.bind(&m, scene, bound.spec.spec())).transpose()?;
-        let restricted = pairs
-            .as_ref()
-            .and_then(|p| p.max_energy.map(|e| RestrictedSampler(Restricted::new(&*sampler, &m, p, e))));
+        let restricted =
+            pairs.as_ref().and_then(|p| p.max_energy.map(|e| RestrictedSampler(Restricted::new(&*sampler, &m, p, e))));
         let sampler: &dyn Sampler<N> = match &restricted {
             Some(r) => r,
             None => &*sampler,

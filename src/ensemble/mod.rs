@@ -331,7 +331,11 @@ impl Visit<'_, '_> {
         if let MethodSpec::Collision(c) = &self.ensemble.method {
             if self.options.in_memory {
                 let why = "a collision ensemble writes its outputs into a folder: it cannot run in memory";
-                return Err(self.scene.source().error(self.ensemble.method_span(), why, "give it an output folder").into());
+                return Err(self
+                    .scene
+                    .source()
+                    .error(self.ensemble.method_span(), why, "give it an output folder")
+                    .into());
             }
             if !matches!(self.link, Link::Alone) {
                 let why = "a collision ensemble runs in one process: it cannot run under MPI";

@@ -74,7 +74,8 @@ fn an_ensemble_in_memory_gives_the_numbers_of_the_files_bit_for_bit_and_writes_n
     }
 
     // Correlations and spectrum: every column of correlations.csv and spectrum.csv.
-    for (file, table) in [("correlations.csv", &tables.correlations), ("spectrum.csv", tables.spectrum.as_ref().unwrap())]
+    for (file, table) in
+        [("correlations.csv", &tables.correlations), ("spectrum.csv", tables.spectrum.as_ref().unwrap())]
     {
         let (header, cols) = columns(&dir.join(file));
         assert_eq!(header, table.names, "{file}");
