@@ -503,7 +503,8 @@ def sample(
     Returns NumPy arrays: ``q``, ``p`` (n × coordinates; bohr or rad, ħ/bohr or ħ),
     ``orientation`` (n × 4, unit quaternions w, x, y, z, body → lab), ``J`` (n × 3, body frame,
     ħ), ``H`` and ``U`` (n, hartree). A row with ``q``, ``p``, ``orientation`` and ``J`` is a
-    state :func:`to_lab` takes.
+    state :func:`to_lab` takes. The other samplers of a scene's ``[ensemble]`` (normal modes, a
+    states file, ...) draw through :func:`ensemble_states`.
     """
     return _rovib.sample(name, method, int(n), int(seed), temperature, energy, angular_momentum, energy_cap)
 
