@@ -103,6 +103,15 @@ impl Simulation {
         Ok(Self { scene, out_dir: dir.to_owned(), restart: Some(restart) })
     }
 
+    /// [`Simulation::resume`] with a parsed scene (see [`crate::scene::parse_scene`]) in place
+    /// of a scene file: the same checks, the same continuation.
+    pub fn resume_with_scene(dir: &Path, scene: Scene) -> Result<Self, Error> {
+        let restart = Restart::read(dir)?;
+        let stored = parse_scene(&restart.scene_path, &restart.scene_text)?;
+        compatible(&scene, &stored, &restart)?;
+        Ok(Self { scene, out_dir: dir.to_owned(), restart: Some(restart) })
+    }
+
     /// The scene.
     pub fn scene(&self) -> &Scene {
         &self.scene

@@ -3,14 +3,17 @@
 A thin layer over the Rust library (the extension module ``rovib._rovib``): every function runs
 the same code as the ``rovib`` command, so results equal the CLI's. Units are atomic unless
 stated: bohr, rad, electron masses, hartree; masses of atoms in Da; lab-frame positions in Å and
-velocities in Å/fs. Times of runs and ensembles (``Trajectory["t"]``, ``Ensemble.times``) are in
-the scene's time unit (``units.time``: "au", i.e. ħ/E_h ≈ 0.0242 fs, by default; "fs", "ps"),
-named by their ``time_unit``.
+velocities in Å/fs.
+
+One time unit: every time this package returns (``Trajectory["t"]``, ``Ensemble.times``, the lag
+column ``tau_UNIT`` of ``Ensemble.correlations``) is in the scene's time unit, ``units.time``:
+"au" (ħ/E_h = ``AU_TIME_IN_FS`` fs ≈ 0.0242 fs) unless the scene says "fs" or "ps"; each result
+names it as ``time_unit``. Times given to functions are read in that same unit.
+
 Errors raise :class:`RovibError` (a ``ValueError``) with the CLI's message. Ctrl-C during a run
-stops it cleanly and raises ``KeyboardInterrupt``; no signal handler is installed. Without an
-``out_dir`` a single run writes nothing: the scene is passed as text and the records come back
-as NumPy arrays (:func:`run`). Ensembles write their outputs into a folder (a temporary one
-without ``out_dir``), see :func:`run_ensemble`.
+or an ensemble stops it cleanly and raises ``KeyboardInterrupt``; no signal handler is
+installed. Without an ``out_dir`` nothing is written: the scene is passed to the library as text
+and the results come back as NumPy arrays (:func:`run`, :func:`run_ensemble`).
 """
 
 from __future__ import annotations
@@ -18,7 +21,6 @@ from __future__ import annotations
 import csv
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
@@ -42,6 +44,8 @@ __all__ = [
     "sample",
     "with_initial",
     "positions",
+    "ensemble_states",
+    "read_trajectory",
     "BOHR_IN_ANGSTROM",
     "AU_TIME_IN_FS",
 ]
@@ -104,7 +108,7 @@ class Trajectory:
     ``pe_phi``, ``pe_theta``, ``pe_psi`` (ħ), ``Jx``, ``Jy``, ``Jz`` (body frame, ħ), ``H`` (hartree), and with ``run.euler_unwrapped``
     ``euler_phi_unwrapped``, ``euler_psi_unwrapped``. ``units`` maps every column to its unit, in
     file order (from ``trajectory.units.json``). ``out_dir`` holds every file written (lab.xyz,
-    restart.json ...); it is None for a run into a temporary folder (removed after reading).
+    restart.json ...); it is None for a run in memory.
     """
 
     out_dir: Optional[str]
@@ -139,12 +143,22 @@ class Ensemble:
     """A finished ensemble: means and standard errors per output time and quantity.
 
     ``means[k, j]`` and ``stderr[k, j]`` are quantity ``quantities[j]`` (unit ``units[j]``) at
-    ``times[k]``, in the scene's time unit ``time_unit`` (as a trajectory's ``t``); ``summary``
-    is summary.json; ``out_dir`` holds every file written (None for a temporary folder, removed
-    after reading). ``correlations`` holds the columns of correlations.csv (``tau_UNIT`` in the
-    scene's time unit, ``n``, and per correlated quantity its C(τ), standard error and C(τ)/C(0))
-    and ``spectrum`` those of spectrum.csv (``wavenumber_cm-1``, the line shape and, for a thermal
-    ensemble, the cross sections), each as NumPy arrays; empty when the scene asks for none.
+    ``times[k]``, in the scene's time unit ``time_unit`` (as a trajectory's ``t``).
+
+    ``correlations`` holds the columns of correlations.csv as NumPy arrays: ``tau_UNIT`` (the lag,
+    in the scene's time unit), ``n`` (trajectories spanning the lag) and per correlated quantity
+    ``NAME_C_UNIT^2`` (C(τ) in the square of the quantity's atomic unit, e.g. ``(e*bohr)^2``),
+    ``NAME_C_stderr_UNIT^2`` (its standard error) and ``NAME_C_normalised`` (C(τ)/C(0)).
+    ``spectrum`` holds those of spectrum.csv: ``wavenumber_cm-1`` (cm⁻¹),
+    ``lineshape_e2bohr2_per_hartree`` (e²·bohr²/hartree) and, for a thermal ensemble,
+    ``sigma_CORRECTION_cm2`` (the absorption cross section per molecule, cm², under each quantum
+    correction), for a pair ensemble with a pair volume ``alpha_over_rho2_CORRECTION_cm-1_amagat-2``.
+    Both are empty when the scene asks for none.
+
+    Without ``out_dir`` (``out_dir`` None) nothing was written: the arrays come straight from the
+    library, and ``summary`` holds the keys of summary.json that the run's report gives
+    (``status``, ``trajectories``, ``seed``, ``sampler``, ``threads``, ``wall_time_s``,
+    ``time_unit``). With ``out_dir`` every file is there and ``summary`` is summary.json.
     """
 
     out_dir: Optional[str]
@@ -163,32 +177,6 @@ class Ensemble:
         """The mean of ``quantity`` and its standard error at every output time."""
         j = self.quantities.index(quantity)
         return self.means[:, j], self.stderr[:, j]
-
-
-def _scene_path(scene, out_dir: str) -> str:
-    """A scene file for ``scene``: the path itself, or a dict written as TOML to out_dir/scene.toml
-    (kept there, so that error messages point to a file that exists)."""
-    if isinstance(scene, dict):
-        path = os.path.join(out_dir, "scene.toml")
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(_rovib.scene_toml(scene))
-        return path
-    return os.fspath(scene)
-
-
-def _in_out_dir(out_dir: Optional[PathLike], run):
-    """``run(folder)`` in ``out_dir`` (created), or in a temporary folder removed afterwards
-    (whatever happens, Ctrl-C included); a result read from a temporary folder has no
-    ``out_dir`` nor ``files``."""
-    if out_dir is not None:
-        os.makedirs(out_dir, exist_ok=True)
-        return run(os.fspath(out_dir))
-    with tempfile.TemporaryDirectory(prefix="rovib-") as tmp:
-        result = run(tmp)
-        result.out_dir = None
-        if hasattr(result, "files"):
-            result.files = []
-        return result
 
 
 def read_trajectory(out_dir: PathLike) -> Trajectory:
@@ -229,6 +217,17 @@ def _read_json(path: str):
         return None
     with open(path, encoding="utf-8") as f:
         return json.load(f)
+
+
+def _scene_source(scene) -> Tuple[str, Optional[str]]:
+    """The name and TOML text of a scene for the library: a dict (converted to TOML), a TOML text
+    (a str with a line break), or the path of a scene file with no text (the library reads it, as
+    the ``rovib`` command does; relative paths in it resolve from its folder)."""
+    if isinstance(scene, dict):
+        return "<scene dict>", _rovib.scene_toml(scene)
+    if isinstance(scene, str) and "\n" in scene:
+        return "<scene text>", scene
+    return os.fspath(scene), None
 
 
 def _scene_text(scene) -> Tuple[str, str]:
@@ -344,8 +343,8 @@ def run(
     back in memory; a scene whose ``run.outputs`` names "restart" is refused there (with the
     line to change), since a continuation needs restart.json in a folder. With ``out_dir`` the
     run writes its files there exactly as
-    ``rovib run SCENE --out OUT_DIR`` does (a dict scene as ``OUT_DIR/scene.toml``) and they are
-    read back; :func:`resume` continues it. Ctrl-C stops the run at its next output time and
+    ``rovib run SCENE --out OUT_DIR`` does (a dict scene is passed as text, and restart.json
+    keeps it) and they are read back; :func:`resume` continues it. Ctrl-C stops the run at its next output time and
     raises ``KeyboardInterrupt``.
 
     ``potential``: a function ``f(q) -> (U, dU/dq)`` over the molecule's internal coordinates
@@ -360,18 +359,16 @@ def run(
     if potential is not None:
         raise RovibError("error: a Python potential runs in memory only: call run(scene, potential=f) without out_dir")
 
-    def go(out: str) -> Trajectory:
-        path = _scene_path(scene, out)
-        files = [os.fspath(f) for f in _rovib.run_scene(path, out)]
-        if not os.path.exists(os.path.join(out, "trajectory.csv")):
-            raise RovibError(
-                f"error: the run wrote no trajectory.csv into {out} (add \"trajectory\" to the scene's outputs)"
-            )
-        trajectory = read_trajectory(out)
-        trajectory.files = files
-        return trajectory
-
-    return _in_out_dir(out_dir, go)
+    out = os.fspath(out_dir)
+    path, text = _scene_source(scene)
+    files = [os.fspath(f) for f in _rovib.run_scene(path, out, text)]
+    if not os.path.exists(os.path.join(out, "trajectory.csv")):
+        raise RovibError(
+            f"error: the run wrote no trajectory.csv into {out} (add \"trajectory\" to the scene's outputs)"
+        )
+    trajectory = read_trajectory(out)
+    trajectory.files = files
+    return trajectory
 
 
 def resume(out_dir: PathLike, scene: Union[None, PathLike, Dict[str, Any]] = None) -> Trajectory:
@@ -379,55 +376,77 @@ def resume(out_dir: PathLike, scene: Union[None, PathLike, Dict[str, Any]] = Non
     [SCENE]`` does, and reads the whole trajectory (both parts).
 
     Without ``scene`` the run continues to its own scene's end (after an interrupt); a scene (a
-    path, or a dict written to ``OUT_DIR/scene.resume.toml``) may change only ``run.end`` (and
+    path, a TOML text or a dict, passed as text) may change only ``run.end`` (and
     ``max_energy_error``, ``max_outputs``). With DOP853 every row after the first run's last one
     is bit for bit the row of one uninterrupted run (docs/src/howto/restarts.md).
     """
     out = os.fspath(out_dir)
-    path = None
-    if isinstance(scene, dict):
-        path = os.path.join(out, "scene.resume.toml")
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(_rovib.scene_toml(scene))
-    elif scene is not None:
-        path = os.fspath(scene)
-    files = [os.fspath(f) for f in _rovib.resume_scene(out, path)]
+    path, text = (None, None) if scene is None else _scene_source(scene)
+    files = [os.fspath(f) for f in _rovib.resume_scene(out, path, text)]
     trajectory = read_trajectory(out)
     trajectory.files = files
     return trajectory
 
 
 def run_ensemble(
-    scene: Union[PathLike, Dict[str, Any]], out_dir: Optional[PathLike] = None, threads: Optional[int] = None
+    scene: Union[PathLike, str, Dict[str, Any]], out_dir: Optional[PathLike] = None, threads: Optional[int] = None
 ) -> Ensemble:
     """Runs the ensemble of a scene with an ``[ensemble]`` table as ``rovib ensemble`` does.
 
-    ``threads`` overrides the scene's (default: the scene's, else every core); the statistics
-    do not depend on it. Returns the means and standard errors per output time, the times in the
-    scene's time unit (``time_unit``). Without ``out_dir`` the outputs go to a temporary folder,
-    removed once read. Ctrl-C stops the ensemble (no trajectory starts, running ones stop at
-    their next output time) and raises ``KeyboardInterrupt``.
+    ``scene`` is a dict with the keys of a scene file, a scene's TOML text (a str with a line
+    break), or a scene file's path. ``threads`` overrides the scene's (default: the scene's, else
+    every core); the statistics do not depend on it. Returns the means and standard errors per
+    output time, the times in the scene's time unit (``time_unit``), and the correlations and
+    spectrum as NumPy arrays (see :class:`Ensemble` for their columns and units).
+
+    Without ``out_dir`` nothing is written (no folder, checkpoint or file): the results come back
+    from the library in memory, the same numbers, bit for bit, as the files of a run with the
+    same seed; a collision ensemble and ``ensemble.keep_trajectories`` need a folder and are
+    refused there. With ``out_dir`` the ensemble writes every file ``rovib ensemble SCENE --out
+    OUT_DIR`` writes. Ctrl-C stops the ensemble (no trajectory starts, running ones stop at their
+    next output time) and raises ``KeyboardInterrupt``.
     """
-
-    def go(out: str) -> Ensemble:
-        path = _scene_path(scene, out)
-        report = _rovib.run_ensemble_scene(path, out, threads)
+    path, text = _scene_source(scene)
+    threads = None if threads is None else int(threads)
+    if out_dir is None:
+        report = _rovib.run_ensemble_scene(path, None, threads, text)
+        summary = {
+            "status": report["status"],
+            "trajectories": {
+                "requested": report["requested"],
+                "completed": report["completed"],
+                "failed": report["failed_count"],
+                "interrupted_or_not_run": report["interrupted_or_not_run"],
+            },
+            "seed": report["seed"],
+            "sampler": report["sampler"],
+            "threads": report["threads"],
+            "wall_time_s": report["wall_time_s"],
+            "time_unit": report["time_unit"],
+        }
+        correlations = dict(report["correlations"])
+        spectrum = dict(report["spectrum"])
+        out = None
+    else:
+        out = os.fspath(out_dir)
+        os.makedirs(out, exist_ok=True)
+        report = _rovib.run_ensemble_scene(path, out, threads, text)
         summary = _read_json(os.path.join(out, "summary.json")) or {}
-        return Ensemble(
-            out_dir=out,
-            times=report["times"],
-            quantities=list(report["quantities"]),
-            units=list(report["units"]),
-            means=report["means"],
-            stderr=report["stderr"],
-            summary=summary,
-            report=report,
-            time_unit=report["time_unit"],
-            correlations=_read_columns(os.path.join(out, "correlations.csv")),
-            spectrum=_read_columns(os.path.join(out, "spectrum.csv")),
-        )
-
-    return _in_out_dir(out_dir, go)
+        correlations = _read_columns(os.path.join(out, "correlations.csv"))
+        spectrum = _read_columns(os.path.join(out, "spectrum.csv"))
+    return Ensemble(
+        out_dir=out,
+        times=report["times"],
+        quantities=list(report["quantities"]),
+        units=list(report["units"]),
+        means=report["means"],
+        stderr=report["stderr"],
+        summary=summary,
+        report=report,
+        time_unit=report["time_unit"],
+        correlations=correlations,
+        spectrum=spectrum,
+    )
 
 
 def from_lab(name: str, positions, velocities=None, initial_q=None) -> Dict[str, Any]:
@@ -484,6 +503,26 @@ def sample(
     Returns NumPy arrays: ``q``, ``p`` (n × coordinates; bohr or rad, ħ/bohr or ħ),
     ``orientation`` (n × 4, unit quaternions w, x, y, z, body → lab), ``J`` (n × 3, body frame,
     ħ), ``H`` and ``U`` (n, hartree). A row with ``q``, ``p``, ``orientation`` and ``J`` is a
-    state :func:`to_lab` takes.
+    state :func:`to_lab` takes. The other samplers of a scene's ``[ensemble]`` (normal modes, a
+    states file, ...) draw through :func:`ensemble_states`.
     """
     return _rovib.sample(name, method, int(n), int(seed), temperature, energy, angular_momentum, energy_cap)
+
+
+def ensemble_states(scene: Union[PathLike, str, Dict[str, Any]], n: int) -> Dict[str, Any]:
+    """The initial states of trajectories 0 to n − 1 of the ensemble of ``scene`` (a dict, TOML
+    text or path with an ``[ensemble]`` table), drawn by its ``method`` exactly as
+    :func:`run_ensemble` draws them, without running anything: every sampler a scene offers
+    ("thermal", "microcanonical", "normal-modes", "file" with a states file in CSV or XYZ,
+    see the ensemble reference), with its ``region``, the scene's ``[potential]``, and the
+    ``[pairs] max_energy`` restriction. A collision ensemble (two molecules) is refused.
+
+    Returns NumPy arrays as :func:`sample` does: ``q``, ``p`` (n × coordinates; bohr or rad,
+    ħ/bohr or ħ), ``orientation`` (n × 4, unit quaternions w, x, y, z, body → lab), ``J``
+    (n × 3, body frame, ħ), ``H`` and ``U`` (n, hartree); and ``molecule`` and ``description``
+    (how the states are drawn, as summary.json's ``sampler``).
+    """
+    if int(n) < 0:
+        raise RovibError(f"error: n must be a count of states (0 or more), got {n}")
+    path, text = _scene_source(scene)
+    return _rovib.sample_scene(path, int(n), text)

@@ -19,6 +19,8 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 
+use rovib::ensemble::draw::draw_states;
+use rovib::ensemble::tables::Table;
 use rovib::ensemble::{EnsembleOptions, EnsembleReport};
 use rovib::memory::{ExternalPotential, Record, RecordSink, run_in_memory};
 use rovib::runtime::frames::{from_lab_body, to_lab_body};
@@ -387,36 +389,70 @@ fn evaluate<'py>(
     Ok(d)
 }
 
-/// Runs the scene file at `path` into `out_dir` exactly as `rovib run` does; returns the files
-/// written. Ctrl-C stops the run at its next output record and raises `KeyboardInterrupt`.
+/// A scene parsed from `text` (named `path` in messages; relative paths in it resolve from
+/// `path`'s folder), or read from the file `path` when no text is given.
+fn load_scene(path: &str, text: Option<&str>) -> PyResult<rovib::scene::Scene> {
+    match text {
+        Some(text) => rovib::scene::parse_scene(path, text).map_err(|e| lib_error(e.into())),
+        None => rovib::ensemble::load_scene(path.as_ref()).map_err(lib_error),
+    }
+}
+
+/// Runs the scene `text` (named `path`; the file `path` without text) into `out_dir` exactly as
+/// `rovib run` does; returns the files written. Ctrl-C stops the run at its next output record
+/// and raises `KeyboardInterrupt`.
 #[pyfunction]
-fn run_scene(py: Python<'_>, path: PathBuf, out_dir: PathBuf) -> PyResult<Vec<PathBuf>> {
-    let sim = Simulation::load(&path, Some(&out_dir)).map_err(lib_error)?;
+#[pyo3(signature = (path, out_dir, text=None))]
+fn run_scene(py: Python<'_>, path: &str, out_dir: PathBuf, text: Option<&str>) -> PyResult<Vec<PathBuf>> {
+    let sim = match text {
+        Some(_) => Simulation::from_scene(load_scene(path, text)?, out_dir),
+        None => Simulation::load(path.as_ref(), Some(&out_dir)).map_err(lib_error)?,
+    };
     Ok(with_signals(py, |stop, progress| sim.run(stop, progress))?.files)
 }
 
 /// Continues the run in `out_dir` from its restart.json exactly as `rovib run --resume OUT_DIR
-/// [SCENE]` does; returns the files written.
+/// [SCENE]` does, with the scene `text` (named `path`), the file `path`, or neither (the stored
+/// scene); returns the files written.
 #[pyfunction]
-#[pyo3(signature = (out_dir, path=None))]
-fn resume_scene(py: Python<'_>, out_dir: PathBuf, path: Option<PathBuf>) -> PyResult<Vec<PathBuf>> {
-    let sim = Simulation::resume(&out_dir, path.as_deref()).map_err(lib_error)?;
+#[pyo3(signature = (out_dir, path=None, text=None))]
+fn resume_scene(py: Python<'_>, out_dir: PathBuf, path: Option<&str>, text: Option<&str>) -> PyResult<Vec<PathBuf>> {
+    let sim = match (path, text) {
+        (Some(path), Some(_)) => Simulation::resume_with_scene(&out_dir, load_scene(path, text)?),
+        (path, _) => Simulation::resume(&out_dir, path.map(std::path::Path::new)),
+    }
+    .map_err(lib_error)?;
     Ok(with_signals(py, |stop, progress| sim.run(stop, progress))?.files)
 }
 
-/// Runs the ensemble of the scene file at `path` into `out_dir` as `rovib ensemble` does; the
+/// A table of named columns as a dict of NumPy arrays, in column order.
+fn table<'py>(py: Python<'py>, t: &Table) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for (name, column) in t.names.iter().zip(&t.columns) {
+        d.set_item(name, PyArray1::from_slice(py, column))?;
+    }
+    Ok(d)
+}
+
+/// Runs the ensemble of the scene `text` (named `path`; the file `path` without text) as
+/// `rovib ensemble` does: into `out_dir`, or in memory without one (nothing written; the
+/// correlations and spectrum come back as `correlations` and `spectrum`, dicts of arrays). The
 /// output times in the scene's time unit (`time_unit`). Ctrl-C stops it (the trajectories that
 /// finished are in `out_dir`) and raises `KeyboardInterrupt`.
 #[pyfunction]
-#[pyo3(signature = (path, out_dir, threads=None))]
+#[pyo3(signature = (path, out_dir=None, threads=None, text=None))]
 fn run_ensemble_scene<'py>(
     py: Python<'py>,
-    path: PathBuf,
-    out_dir: PathBuf,
+    path: &str,
+    out_dir: Option<PathBuf>,
     threads: Option<usize>,
+    text: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let scene = rovib::ensemble::load_scene(&path).map_err(lib_error)?;
-    let mut options = EnsembleOptions::new(out_dir);
+    let scene = load_scene(path, text)?;
+    let mut options = match out_dir {
+        Some(dir) => EnsembleOptions::new(dir),
+        None => EnsembleOptions::in_memory(),
+    };
     options.threads = threads;
     let report: EnsembleReport = with_signals(py, |stop, progress| {
         // The ensemble polls its own flag; the callback's is forwarded to it.
@@ -458,6 +494,37 @@ fn run_ensemble_scene<'py>(
     d.set_item("sampler", report.sampler.clone())?;
     d.set_item("wall_time_s", report.wall_time)?;
     d.set_item("files", report.files.clone())?;
+    d.set_item("failed_count", report.outcome.failed_count())?;
+    d.set_item("interrupted_or_not_run", report.outcome.interrupted)?;
+    if let Some(tables) = &report.tables {
+        d.set_item("correlations", table(py, &tables.correlations)?)?;
+        match &tables.spectrum {
+            Some(s) => d.set_item("spectrum", table(py, s)?)?,
+            None => d.set_item("spectrum", PyDict::new(py))?,
+        }
+    }
+    Ok(d)
+}
+
+/// The initial states `0..count` of the ensemble of the scene `text` (named `path`; the file
+/// `path` without text), drawn by its `[ensemble]` method as the ensemble draws them: arrays
+/// `q`, `p` (count × N), `orientation` (count × 4, w x y z), `J` (count × 3, body frame), `H`,
+/// `U` (hartree), the `molecule` and the sampler's `description`.
+#[pyfunction]
+#[pyo3(signature = (path, count, text=None))]
+fn sample_scene<'py>(py: Python<'py>, path: &str, count: u64, text: Option<&str>) -> PyResult<Bound<'py, PyDict>> {
+    let scene = load_scene(path, text)?;
+    let drawn = py.detach(|| draw_states(&scene, count)).map_err(lib_error)?;
+    let (k, n) = (count as usize, drawn.coordinates);
+    let d = PyDict::new(py);
+    d.set_item("q", PyArray1::from_vec(py, drawn.q).reshape([k, n])?)?;
+    d.set_item("p", PyArray1::from_vec(py, drawn.p).reshape([k, n])?)?;
+    d.set_item("orientation", PyArray1::from_vec(py, drawn.orientation).reshape([k, 4])?)?;
+    d.set_item("J", PyArray1::from_vec(py, drawn.j).reshape([k, 3])?)?;
+    d.set_item("H", PyArray1::from_vec(py, drawn.h))?;
+    d.set_item("U", PyArray1::from_vec(py, drawn.u))?;
+    d.set_item("molecule", drawn.molecule)?;
+    d.set_item("description", drawn.description)?;
     Ok(d)
 }
 
@@ -870,6 +937,7 @@ fn _rovib(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run_scene, m)?)?;
     m.add_function(wrap_pyfunction!(run_memory, m)?)?;
     m.add_function(wrap_pyfunction!(sample, m)?)?;
+    m.add_function(wrap_pyfunction!(sample_scene, m)?)?;
     m.add_function(wrap_pyfunction!(positions, m)?)?;
     m.add_function(wrap_pyfunction!(resume_scene, m)?)?;
     m.add_function(wrap_pyfunction!(run_ensemble_scene, m)?)?;

@@ -56,6 +56,18 @@ def water_ensemble(n, end_fs):
     return scene
 
 
+@pytest.fixture
+def sigint():
+    """SIGINT handled as in an interactive Python (``default_int_handler``, Ctrl-C raising
+    ``KeyboardInterrupt``) for the test, the earlier handler restored after it. A process whose
+    parent ignored SIGINT (a background job of a non-interactive shell, ``nohup``, some CI
+    runners) inherits SIG_IGN, Python keeps it, and the kernel then discards the signal: no
+    KeyboardInterrupt can arise, whatever the module does."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 def interrupt_after(seconds):
     """SIGINT to this process after ``seconds``, from a timer thread (as Ctrl-C would)."""
     timer = threading.Timer(seconds, lambda: os.kill(os.getpid(), signal.SIGINT))
@@ -63,7 +75,7 @@ def interrupt_after(seconds):
     return timer
 
 
-def test_ctrl_c_during_a_run_raises_keyboard_interrupt_and_the_next_run_works(tmp_path):
+def test_ctrl_c_during_a_run_raises_keyboard_interrupt_and_the_next_run_works(tmp_path, sigint):
     # 900 ps in 9e5 outputs: seconds of work, unless the interrupt ends it first.
     timer = interrupt_after(0.5)
     begin = time.monotonic()
@@ -82,7 +94,7 @@ def test_ctrl_c_during_a_run_raises_keyboard_interrupt_and_the_next_run_works(tm
     assert len(t) == 6
 
 
-def test_ctrl_c_during_an_ensemble_raises_keyboard_interrupt_and_the_next_works(tmp_path):
+def test_ctrl_c_during_an_ensemble_raises_keyboard_interrupt_and_the_next_works(tmp_path, sigint):
     timer = interrupt_after(0.5)
     begin = time.monotonic()
     with pytest.raises(KeyboardInterrupt):
@@ -94,11 +106,21 @@ def test_ctrl_c_during_an_ensemble_raises_keyboard_interrupt_and_the_next_works(
     assert e.report["completed"] == 16
 
 
+def test_ctrl_c_during_an_ensemble_in_memory_raises_keyboard_interrupt(sigint):
+    timer = interrupt_after(0.5)
+    begin = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        rovib.run_ensemble(water_ensemble(200000, 100.0), threads=1)
+    timer.cancel()
+    assert time.monotonic() - begin < 30.0
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 def rovib_temporary_folders():
     return set(glob.glob(os.path.join(tempfile.gettempdir(), "rovib-*")))
 
 
-def test_runs_without_out_dir_leave_no_temporary_folder():
+def test_runs_without_out_dir_leave_no_temporary_folder(sigint):
     before = rovib_temporary_folders()
     t = rovib.run(water(5.0, outputs=IN_MEMORY))
     assert len(t) == 6 and t.out_dir is None

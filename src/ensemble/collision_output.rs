@@ -157,6 +157,7 @@ where
         phase_space: None,
         pair_states: None,
         files,
+        tables: None,
     };
     Ok((ensemble_report, report))
 }

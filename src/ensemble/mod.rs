@@ -27,6 +27,7 @@ pub mod collision_final;
 pub mod collision_output;
 pub mod collision_run;
 pub mod collision_scene;
+pub mod draw;
 pub mod lanes;
 pub mod lifetimes;
 pub mod method;
@@ -45,6 +46,7 @@ pub mod spectrum;
 pub mod spectrum_scene;
 pub mod states_file;
 pub mod states_xyz;
+pub mod tables;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -85,6 +87,9 @@ pub struct EnsembleOptions {
     /// Continue from `out_dir/checkpoint.jsonl` (a run that was killed or interrupted): only the
     /// blocks not recorded there run, and the outputs are those of an uninterrupted run.
     pub resume: bool,
+    /// Write nothing ([`EnsembleOptions::in_memory`]): no folder, lock, checkpoint or file; the
+    /// results come back in [`EnsembleReport::tables`] (`out_dir` is not used).
+    pub in_memory: bool,
 }
 
 impl EnsembleOptions {
@@ -98,7 +103,16 @@ impl EnsembleOptions {
             lanes: true,
             checkpoint: true,
             resume: false,
+            in_memory: false,
         }
+    }
+
+    /// An ensemble run in memory: nothing is written (no output folder, lock, checkpoint or
+    /// file), the statistics come back in the report, correlations and spectrum in
+    /// [`EnsembleReport::tables`]. Threads from the scene, a stop flag of its own. A collision
+    /// ensemble and `ensemble.keep_trajectories` need a folder and are refused.
+    pub fn in_memory() -> Self {
+        Self { checkpoint: false, in_memory: true, ..Self::new(PathBuf::new()) }
     }
 }
 
@@ -201,6 +215,9 @@ pub struct EnsembleReport {
     pub pair_states: Option<pair_states::Census>,
     /// Files written.
     pub files: Vec<PathBuf>,
+    /// The correlations and spectrum of an ensemble run in memory ([`EnsembleOptions::in_memory`]);
+    /// `None` when they were written to files.
+    pub tables: Option<tables::Tables>,
 }
 
 impl EnsembleReport {
@@ -311,6 +328,14 @@ impl Visit<'_, '_> {
         M: Molecule<N, NA> + Sync,
     {
         if let MethodSpec::Collision(c) = &self.ensemble.method {
+            if self.options.in_memory {
+                let why = "a collision ensemble writes its outputs into a folder: it cannot run in memory";
+                return Err(self
+                    .scene
+                    .source()
+                    .error(self.ensemble.method_span(), why, "give it an output folder")
+                    .into());
+            }
             if !matches!(self.link, Link::Alone) {
                 let why = "a collision ensemble runs in one process: it cannot run under MPI";
                 let help = "run it without mpirun (its threads use the cores of one machine), or split the \
@@ -495,9 +520,13 @@ where
                 .into(),
         ));
     }
+    if options.in_memory {
+        refuse_in_memory(ensemble, options)?;
+    }
     let worker = matches!(link, Link::Worker(_));
-    // One run per folder, held until the last output is written (the other ranks write nothing).
-    let _lock = if worker { None } else { Some(lock_out_dir(&options.out_dir)?) };
+    // One run per folder, held until the last output is written (the other ranks, and a run in
+    // memory, write nothing).
+    let _lock = if worker || options.in_memory { None } else { Some(lock_out_dir(&options.out_dir)?) };
     let plan = make_plan(m, scene, ensemble, &bound, options, reduction, chart)?;
     // `[pairs] max_energy`: the scene's sampler restricted to H_rel < E_max.
     let restricted = plan.pairs.as_ref().and_then(|p| {
@@ -532,12 +561,15 @@ where
         }
         Link::Alone => None,
     };
-    let (checkpoint, resumed) = open_checkpoint(scene, ensemble, options, &empty)?;
+    let (checkpoint, resumed) =
+        if options.in_memory { (None, Default::default()) } else { open_checkpoint(scene, ensemble, options, &empty)? };
     // From here on the folder is this run's: nothing of an earlier run stays, and the summary
     // says "running" until it says how the run ended.
     let failed = |error: &str| fail_run(options, scene, m.name(), n, error);
-    output::remove_stale_outputs(&options.out_dir, options.resume)?;
-    output::write_running(&options.out_dir, scene, m.name(), n, options.resume)?;
+    if !options.in_memory {
+        output::remove_stale_outputs(&options.out_dir, options.resume)?;
+        output::write_running(&options.out_dir, scene, m.name(), n, options.resume)?;
+    }
     let mut collector = Collector::new(n, empty, resumed, checkpoint, ranks);
     tally.done.fetch_add(collector.resumed(), Ordering::Relaxed);
     let begin = Instant::now();
@@ -552,6 +584,10 @@ where
     let ran = Ran { total, blocks_by_rank, resumed, wall_time, ranks };
     let census = (sampler, restricted.as_ref().map(|r| &r.0));
     let mut report = assemble_report(m, &plan, ensemble, options, census, description, threads, ran);
+    if options.in_memory {
+        report.tables = Some(tables::tables(m, scene, ensemble, &plan, &report.outcome.statistics));
+        return Ok(Some(report));
+    }
     report.files = output::write_all(m, scene, ensemble, &plan, &report, &options.out_dir)
         .map_err(|e| failed(&format!("the ensemble ran, but its outputs could not be written: {e}")))?;
     if let Some(c) = checkpoint
@@ -562,6 +598,21 @@ where
             .map_err(|e| Error::context(format!("cannot remove {}", c.path().display()), e))?;
     }
     Ok(Some(report))
+}
+
+/// What a run in memory cannot do: keep trajectories (files) or resume (a checkpoint file).
+fn refuse_in_memory(ensemble: &EnsembleScene, options: &EnsembleOptions) -> Result<(), Error> {
+    if ensemble.keep_trajectories.is_some() {
+        return Err(Error::Message(
+            "`ensemble.keep_trajectories` writes trajectories into a folder: an ensemble run in memory cannot keep \
+             them; remove it, or give the ensemble an output folder"
+                .into(),
+        ));
+    }
+    if options.resume {
+        return Err(Error::Message("an ensemble run in memory has no checkpoint to resume from".into()));
+    }
+    Ok(())
 }
 
 /// Creates the output folder and takes its lock: one run per folder.
@@ -637,8 +688,11 @@ impl Threads {
 }
 
 /// The error of a run that stopped after it took the folder: `error`, with summary.json saying
-/// "failed" (or, if that cannot be written, the error says so).
+/// "failed" (or, if that cannot be written, the error says so). In memory, only `error`.
 fn fail_run(options: &EnsembleOptions, scene: &Scene, molecule: &str, n: u64, error: &str) -> Error {
+    if options.in_memory {
+        return Error::Message(error.to_owned());
+    }
     let dir = &options.out_dir;
     let checkpoint = options.checkpoint.then(|| dir.join(CHECKPOINT_FILE));
     // The error itself is what matters; a summary that cannot be written is mentioned.
@@ -714,6 +768,7 @@ where
         phase_space: spectrum::dipole_correlated(plan).then(|| pair::phase_space(m, sampler, n)),
         pair_states: plan.pairs.as_ref().map(|p| pair_states::census(m, p, sampler, restricted, n)),
         files: Vec::new(),
+        tables: None,
     }
 }
 

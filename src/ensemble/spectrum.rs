@@ -64,15 +64,16 @@ pub fn spectrum<M, const N: usize, const NA: usize>(plan: &Plan<'_, M, N, NA>, a
     Some(Spectrum::from_correlation(&c, plan.interval, plan.spectrum.max_wavenumber, PADDING))
 }
 
-/// Writes `spectrum.csv` (wavenumber, line shape and, with a temperature, the cross section
-/// under each quantum correction) and `spectrum.svg`; returns their paths.
-pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+/// The columns of `spectrum.csv`, if the plan has a spectrum: their names and values
+/// (wavenumber in cm⁻¹, the line shape and, with a temperature, the cross section under each
+/// quantum correction; for a pair ensemble with its pair volume, the binary absorption
+/// coefficient under each), with the spectrum they come from.
+pub fn columns<M, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     acc: &Accumulators,
     temperature: Option<f64>,
-    dir: &Path,
-) -> Result<Vec<PathBuf>, Error> {
-    let Some(s) = spectrum(plan, acc) else { return Ok(Vec::new()) };
+) -> Option<(Spectrum, Vec<String>, Vec<Vec<f64>>)> {
+    let s = spectrum(plan, acc)?;
     let mut header = vec!["wavenumber_cm-1".to_owned(), "lineshape_e2bohr2_per_hartree".to_owned()];
     let sigmas: Vec<Vec<f64>> = match temperature {
         Some(t) => QuantumCorrection::ALL.iter().map(|&c| s.cross_section(t, c)).collect(),
@@ -94,6 +95,20 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     for (c, _) in QuantumCorrection::ALL.iter().zip(&binary) {
         header.push(format!("alpha_over_rho2_{}_cm-1_amagat-2", c.name()));
     }
+    let mut columns = vec![s.wavenumber.clone(), s.lineshape.clone()];
+    columns.extend(sigmas);
+    columns.extend(binary);
+    Some((s, header, columns))
+}
+
+/// Writes `spectrum.csv` (the [`columns`]) and `spectrum.svg`; returns their paths.
+pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    plan: &Plan<'_, M, N, NA>,
+    acc: &Accumulators,
+    temperature: Option<f64>,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, Error> {
+    let Some((s, header, columns)) = columns(plan, acc, temperature) else { return Ok(Vec::new()) };
     let mut f = OutputFile::create(dir, "spectrum.csv")?;
     if plan.spectrum.pair() {
         f.line(&format!(
@@ -106,16 +121,16 @@ pub fn write<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     }
     f.line(&header.join(","))?;
     for j in 0..s.wavenumber.len() {
-        let mut row = format!("{:?},{:?}", s.wavenumber[j], s.lineshape[j]);
-        for sigma in sigmas.iter().chain(&binary) {
-            row.push_str(&format!(",{:?}", sigma[j]));
-        }
-        f.line(&row)?;
+        let row: Vec<String> = columns.iter().map(|c| format!("{:?}", c[j])).collect();
+        f.line(&row.join(","))?;
     }
     f.flush()?;
     // The plot needs the `svg` feature; spectrum.csv holds the same figures.
     #[cfg(feature = "svg")]
-    return Ok(vec![f.path().to_owned(), write_svg(&s, &sigmas, temperature, dir)?]);
+    {
+        let sigmas = if temperature.is_some() { QuantumCorrection::ALL.len() } else { 0 };
+        Ok(vec![f.path().to_owned(), write_svg(&s, &columns[2..2 + sigmas], temperature, dir)?])
+    }
     #[cfg(not(feature = "svg"))]
     Ok(vec![f.path().to_owned()])
 }

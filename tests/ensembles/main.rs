@@ -17,6 +17,7 @@ mod ensemble_samplers;
 mod ensemble_scene;
 mod ensemble_stops;
 mod fuzz;
+mod in_memory;
 mod linear_scenes;
 mod pair_ensemble;
 mod pair_lanes;
