@@ -43,18 +43,35 @@ pub fn tables<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     plan: &Plan<'_, M, N, NA>,
     acc: &Accumulators,
 ) -> Tables {
-    let tu = scene.time_unit.name();
-    let ts = scene.time_unit.in_au();
+    let correlations = correlations(m, plan, acc, scene.time_unit.name(), scene.time_unit.in_au());
+    let spectrum = super::spectrum::columns(plan, acc, ensemble.method.temperature())
+        .map(|(_, names, columns)| Table { names, columns });
+    Tables { correlations, spectrum }
+}
+
+/// correlations.csv's columns: each lag (in the time unit `tu`, `ts` a.u. each), the
+/// trajectories covering it and every correlated quantity's C(τ), its standard error and
+/// C(τ)/C(0).
+pub(super) fn correlations<M: Molecule<N, NA>, const N: usize, const NA: usize>(
+    m: &M,
+    plan: &Plan<'_, M, N, NA>,
+    acc: &Accumulators,
+    tu: &str,
+    ts: f64,
+) -> Table {
     let mut names = vec![format!("tau_{tu}"), "n".to_owned()];
     for &qi in &plan.correlations {
         let (name, unit) = (plan.quantities[qi].name(m), plan.quantities[qi].unit(m));
+        // A compound unit is squared as a whole: (e*bohr)^2.
         let unit = if unit.contains(['*', '/']) { format!("({unit})") } else { unit.to_owned() };
         names.push(format!("{name}_C_{unit}^2"));
         names.push(format!("{name}_C_stderr_{unit}^2"));
         names.push(format!("{name}_C_normalised"));
     }
     let mut columns = vec![Vec::new(); names.len()];
-    // As correlations.csv: lags on the uniform grid; the pair estimator's τ from −T to T.
+    // Lags on the uniform grid only (`Plan::correlation_lags`); `n`: the trajectories whose
+    // span covers the lag, which every correlated quantity shares.
+    // The pair estimator keeps τ from −T to T: row i is lag i − (lags − 1), C(0) at lags − 1.
     let zero = plan.correlation_span() - plan.correlation_lags();
     for lag in 0..plan.correlation_span() {
         let t = if lag >= zero { plan.times[lag - zero] } else { -plan.times[zero - lag] };
@@ -67,7 +84,5 @@ pub fn tables<M: Molecule<N, NA>, const N: usize, const NA: usize>(
             columns[4 + 3 * i].push(mean / c0);
         }
     }
-    let spectrum = super::spectrum::columns(plan, acc, ensemble.method.temperature())
-        .map(|(_, names, columns)| Table { names, columns });
-    Tables { correlations: Table { names, columns }, spectrum }
+    Table { names, columns }
 }

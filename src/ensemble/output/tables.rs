@@ -72,35 +72,21 @@ pub(super) fn histograms<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     (lines, panels)
 }
 
-/// correlations.csv: each lag, the trajectories covering it and every correlated quantity's
-/// C(τ), its standard error and C(τ)/C(0).
+/// correlations.csv ([`crate::ensemble::tables::correlations`]): every number with round-trip
+/// precision, `n` as an integer.
 pub(super) fn correlations_csv<M: Molecule<N, NA>, const N: usize, const NA: usize>(
     m: &M,
     plan: &Plan<'_, M, N, NA>,
     acc: &Accumulators,
     (tu, ts): TimeUnit<'_>,
 ) -> Vec<String> {
-    let mut header = vec![format!("tau_{tu}"), "n".to_owned()];
-    for &qi in &plan.correlations {
-        let (name, unit) = (plan.quantities[qi].name(m), plan.quantities[qi].unit(m));
-        // A compound unit is squared as a whole: (e*bohr)^2.
-        let unit = if unit.contains(['*', '/']) { format!("({unit})") } else { unit.to_owned() };
-        header.push(format!("{name}_C_{unit}^2"));
-        header.push(format!("{name}_C_stderr_{unit}^2"));
-        header.push(format!("{name}_C_normalised"));
-    }
-    let mut lines = vec![header.join(",")];
-    // Lags on the uniform grid only (`Plan::correlation_lags`); `n`: the trajectories whose
-    // span covers the lag, which every correlated quantity shares.
-    // The pair estimator keeps τ from −T to T: row i is lag i − (lags − 1), C(0) at lags − 1.
-    let zero = plan.correlation_span() - plan.correlation_lags();
-    for lag in 0..plan.correlation_span() {
-        let t = if lag >= zero { plan.times[lag - zero] } else { -plan.times[zero - lag] };
-        let n = acc.correlations.first().map_or(0, |c| c[lag].count());
-        let mut row = format!("{:?},{n}", t / ts);
-        for c in &acc.correlations {
-            let (mean, c0) = (c[lag].mean(), c[zero].mean());
-            row.push_str(&format!(",{mean:?},{:?},{:?}", c[lag].standard_error(), mean / c0));
+    let table = crate::ensemble::tables::correlations(m, plan, acc, tu, ts);
+    let mut lines = vec![table.names.join(",")];
+    let rows = table.columns.first().map_or(0, Vec::len);
+    for r in 0..rows {
+        let mut row = format!("{:?},{}", table.columns[0][r], table.columns[1][r] as u64);
+        for column in &table.columns[2..] {
+            row.push_str(&format!(",{:?}", column[r]));
         }
         lines.push(row);
     }
