@@ -38,6 +38,7 @@ pub mod progress;
 pub mod report;
 pub mod restart;
 pub mod scene;
+pub mod scene_molecule;
 pub mod simulation;
 pub mod start;
 pub mod surface_gradient;

@@ -13,7 +13,6 @@ use crate::error::Error;
 use crate::external_potential::{External, ExternalPotential};
 use crate::molecules;
 use crate::output::{Conservation, RunSummary, energy_guard, remove_stale_outputs, write_summary};
-use crate::parameters::{WithParameters, scene_parameters};
 use crate::report::{Frame, LabFrame, Needs, Open, Reporter};
 use crate::restart::{Dop853Point, FinalState, Restart};
 use crate::runtime::cartesian_system::CartesianSystem;
@@ -265,18 +264,26 @@ impl MoleculeVisitor for Run<'_> {
     /// With the scene's `[potential] library` the molecule runs on that potential; with its
     /// `[potential.parameters]` on its own with them (the run-time path), else with its
     /// compiled-in constants.
-    fn visit<M: Molecule<N, NA> + Copy, const N: usize, const NA: usize>(self, m: M) -> Self::Output {
+    fn visit<M, const N: usize, const NA: usize>(self, m: M) -> Self::Output
+    where
+        M: Molecule<N, NA> + Copy + Send + Sync + 'static,
+    {
         if let Some(p) = self.potential {
             crate::external_potential::check_external(&m, p)?;
             return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: External(p) });
         }
-        if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {
-            return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: surface });
-        }
-        match scene_parameters(&m, self.scene)? {
-            Some(values) => self.go(WithParameters { molecule: m, values }),
-            None => self.go(m),
-        }
+        crate::scene_molecule::with_scene_molecule(self.scene, m, self)
+    }
+}
+
+impl crate::scene_molecule::SceneMoleculeUser for Run<'_> {
+    type Output = RunReport;
+
+    fn with_molecule<M: Molecule<N, NA> + Sync, const N: usize, const NA: usize>(
+        self,
+        m: M,
+    ) -> Result<RunReport, Error> {
+        self.go(m)
     }
 }
 

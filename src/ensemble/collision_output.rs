@@ -54,17 +54,25 @@ impl MoleculeVisitor for Visit<'_> {
         let MethodSpec::Collision(super::method::collision::Collision(c)) = &self.ensemble.method else {
             return Err(Error::Message("the scene's ensemble method is not \"collision\"".into()));
         };
-        if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {
-            let m = crate::runtime::surface::WithPotential { molecule: m, potential: surface };
-            return run_and_write(&m, self.scene, self.ensemble, c, self.options);
-        }
-        match crate::parameters::scene_parameters(&m, self.scene)? {
-            Some(values) => {
-                let m = crate::parameters::WithParameters { molecule: m, values };
-                run_and_write(&m, self.scene, self.ensemble, c, self.options)
-            }
-            None => run_and_write(&m, self.scene, self.ensemble, c, self.options),
-        }
+        crate::scene_molecule::with_scene_molecule(self.scene, m, Collide { visit: self, collision: c })
+    }
+}
+
+/// The collisions of a visit, run on the scene's molecule.
+struct Collide<'a> {
+    visit: Visit<'a>,
+    collision: &'a CollisionScene,
+}
+
+impl crate::scene_molecule::SceneMoleculeUser for Collide<'_> {
+    type Output = (EnsembleReport, CollisionReport);
+
+    fn with_molecule<M, const N: usize, const NA: usize>(self, m: M) -> Result<Self::Output, Error>
+    where
+        M: Molecule<N, NA> + Sync,
+    {
+        let Visit { scene, ensemble, options } = self.visit;
+        run_and_write(&m, scene, ensemble, self.collision, options)
     }
 }
 

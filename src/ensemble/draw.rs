@@ -64,18 +64,14 @@ impl MoleculeVisitor for Draw<'_> {
     where
         M: Molecule<N, NA> + Copy + Send + Sync + 'static,
     {
-        if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {
-            return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: surface });
-        }
-        match crate::parameters::scene_parameters(&m, self.scene)? {
-            Some(values) => self.go(crate::parameters::WithParameters { molecule: m, values }),
-            None => self.go(m),
-        }
+        crate::scene_molecule::with_scene_molecule(self.scene, m, self)
     }
 }
 
-impl Draw<'_> {
-    fn go<M, const N: usize, const NA: usize>(self, m: M) -> Result<DrawnStates, Error>
+impl crate::scene_molecule::SceneMoleculeUser for Draw<'_> {
+    type Output = DrawnStates;
+
+    fn with_molecule<M, const N: usize, const NA: usize>(self, m: M) -> Result<DrawnStates, Error>
     where
         M: Molecule<N, NA> + Sync,
     {

@@ -312,18 +312,14 @@ impl MoleculeVisitor for Visit<'_, '_> {
     where
         M: Molecule<N, NA> + Copy + Send + Sync + 'static,
     {
-        if let Some(surface) = crate::surfaces::scene_surface(&m, self.scene)? {
-            return self.go(crate::runtime::surface::WithPotential { molecule: m, potential: surface });
-        }
-        match crate::parameters::scene_parameters(&m, self.scene)? {
-            Some(values) => self.go(crate::parameters::WithParameters { molecule: m, values }),
-            None => self.go(m),
-        }
+        crate::scene_molecule::with_scene_molecule(self.scene, m, self)
     }
 }
 
-impl Visit<'_, '_> {
-    fn go<M, const N: usize, const NA: usize>(self, m: M) -> Result<Option<EnsembleReport>, Error>
+impl crate::scene_molecule::SceneMoleculeUser for Visit<'_, '_> {
+    type Output = Option<EnsembleReport>;
+
+    fn with_molecule<M, const N: usize, const NA: usize>(self, m: M) -> Result<Option<EnsembleReport>, Error>
     where
         M: Molecule<N, NA> + Sync,
     {
@@ -379,6 +375,9 @@ pub fn run_with_sampler<M, const N: usize, const NA: usize>(
 where
     M: Molecule<N, NA> + Sync + Clone,
 {
+    // The sampler is over this molecule's coordinates (`N`), so the three cases are written
+    // out here rather than through `scene_molecule::with_scene_molecule`, whose user is
+    // generic in `N`.
     if let Some(surface) = crate::surfaces::scene_surface(m, scene)? {
         let m = crate::runtime::surface::WithPotential { molecule: m.clone(), potential: surface };
         return run_with_sampler_as_given(&m, scene, sampler, description, options);
