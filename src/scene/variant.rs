@@ -8,7 +8,7 @@
 //! key and value with its place), [`VariantTable::read`] reads the tag, the caller selects the
 //! variant by it, and [`VariantTable::keys`] deserializes the rest of the table into that
 //! variant's struct (`#[derive(Deserialize)]`, `#[serde(deny_unknown_fields)]`, one
-//! `Option<Spanned<T>>` field per key) with [`spanned::deserialize`], each value at its place.
+//! `Option<Spanned<T>>` field per key) with `spanned::deserialize`, each value at its place.
 //! Before that it checks every key against the variant's fields ([`fields`]): a key of another
 //! variant is refused at the key, naming the variants that take it; any other unknown key at the
 //! key with a did-you-mean and the variant's keys.
