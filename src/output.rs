@@ -32,10 +32,14 @@ pub use crate::restart::RESTART_FILE;
 /// and only a run that ends well writes `restart.json`), so that no file of an earlier run
 /// remains looking like this run's. Missing files are fine.
 pub fn remove_stale_outputs(dir: &Path, keep: &[&str]) -> Result<(), Error> {
-    for name in crate::report::run_files() {
-        if name != "summary.json" && name != RESTART_FILE && keep.contains(&name) {
-            continue;
-        }
+    let stale = crate::report::run_files()
+        .filter(|name| *name == "summary.json" || *name == RESTART_FILE || !keep.contains(name));
+    remove_earlier_files(dir, stale)
+}
+
+/// Removes the files `names` in `dir` that an earlier run left; a missing file is fine.
+pub fn remove_earlier_files<'a>(dir: &Path, names: impl IntoIterator<Item = &'a str>) -> Result<(), Error> {
+    for name in names {
         let path = dir.join(name);
         match std::fs::remove_file(&path) {
             Ok(()) => {}

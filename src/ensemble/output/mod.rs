@@ -57,7 +57,7 @@ pub const KEPT_FOLDER: &str = "trajectories";
 /// restart.json, …) and, unless `resume` (whose resumed blocks' kept trajectories stay), the
 /// kept trajectories (the numbered folders in `trajectories/`). Missing files are fine.
 pub fn remove_stale_outputs(dir: &Path, resume: bool) -> Result<(), Error> {
-    remove_files(dir, &ENSEMBLE_FILES)?;
+    crate::output::remove_earlier_files(dir, ENSEMBLE_FILES)?;
     crate::output::remove_stale_outputs(dir, &[])?;
     if !resume {
         remove_kept(dir)?;
@@ -76,21 +76,8 @@ pub fn clear_for_run(dir: &Path) -> Result<(), Error> {
              (`rovib ensemble SCENE --out DIR --resume`), delete the file, or choose another output folder",
         ));
     }
-    let files: Vec<&str> = ENSEMBLE_FILES.iter().copied().filter(|&f| f != "summary.json").collect();
-    remove_files(dir, &files)?;
+    crate::output::remove_earlier_files(dir, ENSEMBLE_FILES.into_iter().filter(|&f| f != "summary.json"))?;
     remove_kept(dir)
-}
-
-fn remove_files(dir: &Path, names: &[&str]) -> Result<(), Error> {
-    for name in names {
-        let path = dir.join(name);
-        match std::fs::remove_file(&path) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(Error::io("cannot remove (left by an earlier run)", path, e)),
-        }
-    }
-    Ok(())
 }
 
 /// Removes the numbered folders in `dir/trajectories` (what `keep_trajectories` writes), then
